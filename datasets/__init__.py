@@ -1,0 +1,1 @@
+"""datasets: trajectory readers/writers, cut-in extraction, embedded data, surface fitting."""

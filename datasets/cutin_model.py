@@ -1,0 +1,230 @@
+"""The cut-in parameter vector of DESIGN.md and the kinematics it describes.
+
+One place for the names and the motion model, used by extraction (``datasets``: fit the
+model to measured motion) and by the scenario builder (``sampler``: turn a sampled vector
+into trajectories). Time t = 0 is the start of the cutter's lateral motion.
+
+Lateral model (JARI slides, made concrete in DESIGN.md)::
+
+    yaw_rate(t) = p_y1 sin(pi t / p_t)                 for 0 <= t <= 2 p_t, else 0
+    psi(t)      = p_y1 p_t / pi (1 - cos(pi t / p_t))  for 0 <= t <= 2 p_t, else 0
+
+so the heading peaks at t = p_t with 2 p_y1 p_t / pi and is back to 0 at t = 2 p_t.
+
+Longitudinal model::
+
+    a(t) = p_a1  for p_a2 <= t < p_a2 + p_a3, else 0
+    v(t) = p_v0 + p_a1 (c(t) - c(0)),  c(t) = clip(t - p_a2, 0, p_a3)
+
+so v(0) = p_v0 whatever the sign of p_a2 (a pulse may start before the lateral motion).
+
+Position relative to the cutter's position at t = 0::
+
+    x(t) = int_0^t v(s) cos psi(s) ds,   y(t) = int_0^t v(s) sin psi(s) ds
+
+integrated numerically on a fine grid (``substep`` s, composite trapezoid; the integrand is
+smooth between the pulse edges, which are inserted into the grid, so the error is
+O(substep^2) and below 1e-6 m for the default).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: The parameter vector, in DESIGN.md's order, with units.
+PARAM_NAMES: tuple[str, ...] = ("p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap")
+PARAM_UNITS: dict[str, str] = {
+    "p_y1": "rad/s",
+    "p_t": "s",
+    "p_a1": "m/s^2",
+    "p_a2": "s",
+    "p_a3": "s",
+    "p_v0": "m/s",
+    "dv": "m/s",
+    "gap": "m",
+}
+PARAM_DOCS: dict[str, str] = {
+    "p_y1": "yaw-rate amplitude; + = towards the left",
+    "p_t": "half the lane-change duration",
+    "p_a1": "cutter's longitudinal acceleration during the pulse",
+    "p_a2": "pulse start (relative to the start of the lateral motion)",
+    "p_a3": "pulse duration (>= 0)",
+    "p_v0": "cutter's speed at t = 0",
+    "dv": "v_ego - v_cutter at the crossing moment (> 0: closing)",
+    "gap": "bumper-to-bumper longitudinal gap at the crossing moment",
+}
+
+#: Default lane width in m (German motorway lanes are 3.5-3.75 m; highD's median is ~3.75).
+DEFAULT_LANE_WIDTH = 3.75
+
+
+class CutInParamError(ValueError):
+    """A parameter vector is incomplete or outside what the kinematic model can represent."""
+
+
+@dataclass(frozen=True)
+class CutInParams:
+    """A cut-in parameter vector (DESIGN.md). SI units."""
+
+    p_y1: float
+    p_t: float
+    p_a1: float
+    p_a2: float
+    p_a3: float
+    p_v0: float
+    dv: float
+    gap: float
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, float]) -> CutInParams:
+        missing = [name for name in PARAM_NAMES if name not in values]
+        if missing:
+            raise CutInParamError(f"missing parameter(s): {', '.join(missing)}")
+        out = cls(**{name: float(values[name]) for name in PARAM_NAMES})
+        out.validate()
+        return out
+
+    def as_dict(self) -> dict[str, float]:
+        return {name: float(getattr(self, name)) for name in PARAM_NAMES}
+
+    def validate(self) -> None:
+        for name in PARAM_NAMES:
+            if not np.isfinite(getattr(self, name)):
+                raise CutInParamError(f"{name}: must be finite, got {getattr(self, name)!r}")
+        if self.p_t <= 0:
+            raise CutInParamError(f"p_t: must be > 0 s, got {self.p_t}")
+        if self.p_a3 < 0:
+            raise CutInParamError(f"p_a3: pulse duration must be >= 0 s, got {self.p_a3}")
+
+    @property
+    def ttc(self) -> float:
+        """TTC = gap / dv at the crossing moment when dv > 0, else +inf (s)."""
+        return float(ttc_from_gap_dv(self.gap, self.dv))
+
+
+def ttc_from_gap_dv(gap: ArrayLike, dv: ArrayLike) -> FloatArray:
+    """Vectorised TTC = gap / dv for dv > 0, +inf otherwise (s). Shapes broadcast."""
+    gap_a = np.asarray(gap, dtype=np.float64)
+    dv_a = np.asarray(dv, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(dv_a > 0, gap_a / np.where(dv_a > 0, dv_a, 1.0), np.inf)
+    return np.asarray(out, dtype=np.float64)
+
+
+def yaw_rate(p: CutInParams, t: ArrayLike) -> FloatArray:
+    """psi_dot(t) in rad/s."""
+    t_a = np.asarray(t, dtype=np.float64)
+    inside = (t_a >= 0.0) & (t_a <= 2.0 * p.p_t)
+    return np.where(inside, p.p_y1 * np.sin(np.pi * t_a / p.p_t), 0.0)
+
+
+def heading(p: CutInParams, t: ArrayLike) -> FloatArray:
+    """psi(t) in rad (closed form of the integral of ``yaw_rate`` from 0)."""
+    t_a = np.asarray(t, dtype=np.float64)
+    inside = (t_a >= 0.0) & (t_a <= 2.0 * p.p_t)
+    return np.where(inside, p.p_y1 * p.p_t / np.pi * (1.0 - np.cos(np.pi * t_a / p.p_t)), 0.0)
+
+
+def acceleration(p: CutInParams, t: ArrayLike) -> FloatArray:
+    """a(t) in m/s^2: the rectangular pulse."""
+    t_a = np.asarray(t, dtype=np.float64)
+    return np.where((t_a >= p.p_a2) & (t_a < p.p_a2 + p.p_a3), p.p_a1, 0.0)
+
+
+def speed(p: CutInParams, t: ArrayLike) -> FloatArray:
+    """v(t) in m/s, with v(0) = p_v0."""
+    t_a = np.asarray(t, dtype=np.float64)
+    c = np.clip(t_a - p.p_a2, 0.0, p.p_a3)
+    c0 = np.clip(-p.p_a2, 0.0, p.p_a3)
+    return p.p_v0 + p.p_a1 * (c - c0)
+
+
+@dataclass(frozen=True)
+class CutInMotion:
+    """The cutter's motion relative to its own position at t = 0. Arrays of shape (n,)."""
+
+    t: FloatArray
+    x: FloatArray
+    y: FloatArray
+    psi: FloatArray
+    v: FloatArray
+    a: FloatArray
+    yaw_rate: FloatArray
+
+
+def motion(p: CutInParams, t: ArrayLike, substep: float = 1e-3) -> CutInMotion:
+    """Evaluate the cut-in kinematics at times ``t`` (s, any order, may be negative).
+
+    Parameters
+    ----------
+    p : CutInParams
+    t : array-like of shape (n,)
+    substep : float
+        Integration step in s for x(t), y(t).
+    """
+    t_a = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    if t_a.size == 0:
+        empty = np.zeros(0)
+        return CutInMotion(empty, empty, empty, empty, empty, empty, empty)
+    lo = min(float(t_a.min()), 0.0)
+    hi = max(float(t_a.max()), 0.0)
+    n_sub = max(int(np.ceil((hi - lo) / substep)), 1)
+    edges = [p.p_a2, p.p_a2 + p.p_a3, 0.0, 2.0 * p.p_t]
+    grid = np.unique(np.concatenate([
+        np.linspace(lo, hi, n_sub + 1),
+        [e for e in edges if lo < e < hi],
+    ]))
+    v = speed(p, grid)
+    psi = heading(p, grid)
+    dx = 0.5 * (v[1:] * np.cos(psi[1:]) + v[:-1] * np.cos(psi[:-1])) * np.diff(grid)
+    dy = 0.5 * (v[1:] * np.sin(psi[1:]) + v[:-1] * np.sin(psi[:-1])) * np.diff(grid)
+    x_grid = np.concatenate([[0.0], np.cumsum(dx)])
+    y_grid = np.concatenate([[0.0], np.cumsum(dy)])
+    i0 = int(np.searchsorted(grid, 0.0))
+    x_grid -= x_grid[i0]
+    y_grid -= y_grid[i0]
+    return CutInMotion(
+        t=t_a,
+        x=np.interp(t_a, grid, x_grid),
+        y=np.interp(t_a, grid, y_grid),
+        psi=heading(p, t_a),
+        v=speed(p, t_a),
+        a=acceleration(p, t_a),
+        yaw_rate=yaw_rate(p, t_a),
+    )
+
+
+def lateral_displacement(p: CutInParams, substep: float = 1e-3) -> float:
+    """Total lateral displacement y(2 p_t) in m (signed, + = to the left)."""
+    return float(motion(p, [2.0 * p.p_t], substep=substep).y[0])
+
+
+def crossing_time(p: CutInParams, offset: float, substep: float = 1e-3) -> float:
+    """First t in [0, 2 p_t] at which |y(t)| reaches ``offset`` (m), e.g. half a lane width.
+
+    The cutter starts at a lane centre, so with the ego at the centre of the neighbouring
+    lane the lane marking lies at ``offset = lane_width / 2``. Raises CutInParamError when
+    the lateral motion never gets that far (the vector is not a cut-in).
+    """
+    if offset <= 0:
+        raise CutInParamError(f"offset: must be > 0 m, got {offset}")
+    t = np.linspace(0.0, 2.0 * p.p_t, max(int(np.ceil(2.0 * p.p_t / substep)), 2) + 1)
+    y = np.abs(motion(p, t, substep=substep).y)
+    above = np.flatnonzero(y >= offset)
+    if above.size == 0:
+        raise CutInParamError(
+            f"lateral displacement {y.max():.3f} m never reaches {offset:.3f} m: "
+            "p_y1 * p_t too small for a lane change"
+        )
+    i = int(above[0])
+    if i == 0:
+        return 0.0
+    # linear interpolation between the bracketing grid points
+    frac = (offset - y[i - 1]) / (y[i] - y[i - 1])
+    return float(t[i - 1] + frac * (t[i] - t[i - 1]))

@@ -1,0 +1,1 @@
+"""sampler: GMM scenario model, constraints, constrained sampling, scenario builder."""

@@ -1,0 +1,96 @@
+"""Cut-in kinematics against hand-computed values and closed forms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from datasets.cutin_model import (
+    PARAM_NAMES,
+    CutInParamError,
+    CutInParams,
+    crossing_time,
+    heading,
+    lateral_displacement,
+    motion,
+    speed,
+    ttc_from_gap_dv,
+)
+
+
+def _params(**kw: float) -> CutInParams:
+    base = dict(p_y1=0.05, p_t=2.0, p_a1=0.0, p_a2=0.0, p_a3=0.0, p_v0=20.0, dv=1.0, gap=10.0)
+    base.update(kw)
+    return CutInParams.from_mapping(base)
+
+
+def test_heading_peaks_at_p_t_and_returns_to_zero() -> None:
+    p = _params(p_y1=0.05, p_t=2.0)
+    # psi(p_t) = 2 p_y1 p_t / pi, by hand: 2 * 0.05 * 2 / pi = 0.063662
+    assert heading(p, 2.0) == pytest.approx(0.2 / math.pi, rel=1e-12)
+    assert heading(p, 4.0) == pytest.approx(0.0, abs=1e-15)
+    assert heading(p, -1.0) == 0.0 and heading(p, 5.0) == 0.0
+
+
+def test_speed_pulse_by_hand() -> None:
+    # pulse of -2 m/s^2 from t = 1 s for 1.5 s: v(3) = 20 - 3 = 17
+    p = _params(p_a1=-2.0, p_a2=1.0, p_a3=1.5)
+    assert speed(p, [0.0, 1.0, 2.0, 2.5, 3.0]) == pytest.approx([20, 20, 18, 17, 17])
+    # pulse starting before t = 0 keeps v(0) = p_v0
+    q = _params(p_a1=1.0, p_a2=-1.0, p_a3=2.0)
+    assert speed(q, [-2.0, 0.0, 1.0, 2.0]) == pytest.approx([19.0, 20.0, 21.0, 21.0])
+
+
+def test_straight_motion_is_exact() -> None:
+    p = _params(p_y1=0.0, p_a1=1.0, p_a2=0.0, p_a3=2.0)
+    m = motion(p, [0.0, 1.0, 2.0, 3.0])
+    # x = v0 t + a t^2 / 2 during the pulse, then constant speed 22 m/s
+    assert m.x == pytest.approx([0.0, 20.5, 42.0, 64.0], abs=1e-9)
+    assert m.y == pytest.approx([0.0] * 4, abs=1e-12)
+
+
+def test_lateral_displacement_small_angle_closed_form() -> None:
+    # constant v: y(2 p_t) = int v sin(psi) ~ v * int psi = v * p_y1 p_t / pi * 2 p_t
+    p = _params(p_y1=0.01, p_t=2.0, p_v0=20.0)
+    small_angle = 20.0 * 0.01 * 2.0 / math.pi * 4.0
+    assert lateral_displacement(p) == pytest.approx(small_angle, rel=2e-4)
+
+
+@settings(max_examples=40, deadline=None)
+@given(p_y1=st.floats(0.01, 0.15), p_t=st.floats(1.0, 4.0), v0=st.floats(10.0, 40.0))
+def test_crossing_is_near_p_t_for_a_symmetric_lane_change(p_y1: float, p_t: float,
+                                                          v0: float) -> None:
+    p = _params(p_y1=p_y1, p_t=p_t, p_v0=v0)
+    half = lateral_displacement(p) / 2.0
+    # constant speed: the motion is point-symmetric about t = p_t
+    assert crossing_time(p, half) == pytest.approx(p_t, abs=2e-3)
+
+
+def test_crossing_left_and_right_are_mirror_images() -> None:
+    left, right = _params(p_y1=0.06), _params(p_y1=-0.06)
+    assert crossing_time(left, 1.0) == pytest.approx(crossing_time(right, 1.0), abs=1e-12)
+    assert motion(left, [3.0]).y[0] == pytest.approx(-motion(right, [3.0]).y[0], abs=1e-12)
+
+
+def test_no_crossing_is_a_clear_error() -> None:
+    with pytest.raises(CutInParamError, match="never reaches"):
+        crossing_time(_params(p_y1=0.001), 1.875)
+
+
+def test_validation_names_the_parameter() -> None:
+    with pytest.raises(CutInParamError, match="p_t"):
+        _params(p_t=0.0)
+    with pytest.raises(CutInParamError, match="p_a3"):
+        _params(p_a3=-0.1)
+    with pytest.raises(CutInParamError, match="missing parameter"):
+        CutInParams.from_mapping({"p_y1": 0.1})
+    assert tuple(_params().as_dict()) == PARAM_NAMES
+
+
+def test_ttc() -> None:
+    assert ttc_from_gap_dv([10.0, 10.0, 10.0], [2.0, 0.0, -1.0]) == pytest.approx(
+        [5.0, np.inf, np.inf])
