@@ -18,7 +18,7 @@ from __future__ import annotations
 import csv
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -67,19 +67,33 @@ def _csv_cell(value: Any) -> Any:
     return value
 
 
+class CsvRowWriter:
+    """Streams rows to an open text file: header from the first row, then one line each."""
+
+    def __init__(self, fh: TextIO, lead: Sequence[str] = ()) -> None:
+        self._writer = csv.writer(fh, lineterminator="\n")
+        self._lead = tuple(lead)
+        self.columns: list[str] | None = None
+
+    def write(self, index: int, row: Row, lead_values: Sequence[Any] = ()) -> None:
+        """Write ``row`` (``index`` goes first, after the ``lead`` columns)."""
+        full = _with_index(index, row)
+        if self.columns is None:
+            self.columns = list(full)
+            self._writer.writerow([*self._lead, *self.columns])
+        else:
+            _check_columns(self.columns, full, index)
+        self._writer.writerow(
+            [*lead_values, *(_csv_cell(full.get(c)) for c in self.columns)]
+        )
+
+
 def write_csv(items: Iterator[Item], path: Path) -> None:
     """Header line plus one line per item; ``\\n`` line ends, minimal RFC 4180 quoting."""
-    columns: list[str] | None = None
     with path.open("w", encoding="utf-8", newline="") as fh:
-        writer = csv.writer(fh, lineterminator="\n")
+        writer = CsvRowWriter(fh)
         for index, _scenario, _summary, row in items:
-            full = _with_index(index, row)
-            if columns is None:
-                columns = list(full)
-                writer.writerow(columns)
-            else:
-                _check_columns(columns, full, index)
-            writer.writerow([_csv_cell(full.get(c)) for c in columns])
+            writer.write(index, row)
 
 
 def _kind(value: Any) -> str | None:
