@@ -1,0 +1,63 @@
+"""Exceptions of the sampler package.
+
+Hierarchy (every one is a ``ValueError``, so the CLI reports it as one line, exit 2)::
+
+    SamplerError
+    ├── ConstraintError      a constraint or region is malformed (unknown name, operator)
+    ├── ModelError           fitting, loading or using the GMM failed (bad table, bad JSON)
+    │   └── NotFittedError   a method needs a fitted model
+    ├── BuilderError         a parameter vector cannot become a concrete scenario
+    └── EmptyRegionError     the region has (practically) no probability mass
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "BuilderError",
+    "ConstraintError",
+    "EmptyRegionError",
+    "ModelError",
+    "NotFittedError",
+    "SamplerError",
+]
+
+
+class SamplerError(ValueError):
+    """Base class of every error raised by ``sampler``."""
+
+
+class ConstraintError(SamplerError):
+    """A constraint or a region is malformed. The message lists the valid choices."""
+
+
+class ModelError(SamplerError):
+    """Fitting, loading or evaluating the scenario model failed. The message names the field."""
+
+
+class NotFittedError(ModelError):
+    """The model must be fitted (or loaded) first."""
+
+
+class BuilderError(SamplerError):
+    """A parameter vector cannot be turned into a concrete scenario."""
+
+
+class EmptyRegionError(SamplerError):
+    """The region has no (or too little) probability mass to sample within the draw budget.
+
+    Attributes
+    ----------
+    n_draws : int
+        Model draws spent looking for the region.
+    n_hits : int
+        Draws that fell inside the region.
+    p_upper : float
+        One-sided 95 % upper bound of the region's mass found by the search.
+    """
+
+    def __init__(self, message: str, *, n_draws: int = 0, n_hits: int = 0,
+                 p_upper: float = float("nan")) -> None:
+        super().__init__(message)
+        self.n_draws = n_draws
+        self.n_hits = n_hits
+        self.p_upper = p_upper

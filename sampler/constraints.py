@@ -1,0 +1,381 @@
+"""Constraints as data: which part of the parameter space a sample set lives in.
+
+A constraint is ``{"name": "ttc", "op": "<", "value": 3}``: a *quantity* compared with a
+number. Quantities are the cut-in parameters (``PARAM_NAMES``) and derived quantities
+(``DERIVED``), all computed vectorised for an array of parameter vectors. A ``Region`` is
+the conjunction of its constraints and, unless switched off, the physical bounds
+``PHYSICAL_BOUNDS`` (the vectors a real car could drive: positive speeds, positive gap,
+non-negative durations, a lane change that actually crosses the marking).
+
+Derived quantities (road frame, SI units; ``t = 0`` is the start of the lateral motion)::
+
+    ttc           s    gap / dv at the crossing moment if dv > 0, else +inf
+    t_cross       s    crossing moment: first t with |y(t)| = lane_width / 2 (NaN if never)
+    v_cross       m/s  cutter speed at t_cross
+    v_ego         m/s  ego speed = v_cross + dv (the ego drives at constant speed)
+    thw           s    gap / v_ego (+inf if v_ego <= 0)
+    lat_disp      m    |y(2 p_t)|, the lateral distance covered by the lane change
+    cross_margin  m    lat_disp - lane_width / 2 (> 0: the marking is crossed)
+    lat_offset    m    final lateral offset of the cutter from the ego-lane centre, + left:
+                       -sign(p_y1) lane_width + y(2 p_t) (it starts in the adjacent lane)
+    direction     -    +1 if the cutter moves left (p_y1 > 0, starts on the right), else -1
+    psi_max       rad  peak heading 2 |p_y1| p_t / pi
+    v_cut_min     m/s  the cutter's lowest speed at any time (before or after the pulse)
+    max_lat_speed m/s  the largest lateral speed |v sin psi| during the lane change
+
+Short form (CLI): ``ttc<3``, ``v_ego>=20``, ``lat_offset > -0.5`` — a name, one of the
+operators ``< <= > >=`` and a finite number, parsed by a regular expression (never eval).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
+from sampler._exceptions import ConstraintError
+from sampler.kinematics import crossing_kinematics, plateau_speeds
+
+__all__ = [
+    "DERIVED",
+    "OPERATORS",
+    "PHYSICAL_BOUNDS",
+    "QUANTITY_NAMES",
+    "Constraint",
+    "Region",
+    "derive",
+    "parse_constraint",
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+OPERATORS: dict[str, Callable[[FloatArray, float], BoolArray]] = {
+    "<": np.less,
+    "<=": np.less_equal,
+    ">": np.greater,
+    ">=": np.greater_equal,
+}
+
+
+@dataclass(frozen=True)
+class _Quantity:
+    unit: str
+    doc: str
+    kinematic: bool  # needs the crossing kinematics (costly: evaluated last, on survivors)
+
+
+#: Derived quantities: name -> unit, meaning, whether the kinematics are needed.
+DERIVED: dict[str, _Quantity] = {
+    "ttc": _Quantity("s", "gap / dv at the crossing moment if dv > 0, else +inf", False),
+    "direction": _Quantity("-", "+1 if the cutter moves left (p_y1 > 0), else -1", False),
+    "psi_max": _Quantity("rad", "peak heading 2 |p_y1| p_t / pi", False),
+    "v_cut_min": _Quantity("m/s", "the cutter's lowest speed at any time", False),
+    "t_cross": _Quantity("s", "crossing moment (|y| = lane_width / 2)", True),
+    "v_cross": _Quantity("m/s", "cutter speed at the crossing moment", True),
+    "v_ego": _Quantity("m/s", "ego speed = v_cross + dv", True),
+    "thw": _Quantity("s", "gap / v_ego at the crossing moment", True),
+    "lat_disp": _Quantity("m", "lateral distance covered by the lane change", True),
+    "cross_margin": _Quantity("m", "lat_disp - lane_width / 2 (> 0: marking crossed)", True),
+    "lat_offset": _Quantity("m", "final offset of the cutter from the ego-lane centre", True),
+    "max_lat_speed": _Quantity("m/s", "largest lateral speed during the lane change", True),
+}
+
+#: Every name a constraint may use.
+QUANTITY_NAMES: tuple[str, ...] = (*PARAM_NAMES, *DERIVED)
+
+
+class Constraint(BaseModel):
+    """One comparison ``quantity op value``; JSON ``{"name": "ttc", "op": "<", "value": 3}``."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str = Field(description="a parameter or derived quantity (see QUANTITY_NAMES)")
+    op: str = Field(description="one of < <= > >=")
+    value: float = Field(description="threshold in the quantity's SI unit; finite")
+
+    @field_validator("name")
+    @classmethod
+    def _known_name(cls, v: str) -> str:
+        if v not in QUANTITY_NAMES:
+            raise ValueError(
+                f"unknown quantity {v!r}; valid names: {', '.join(QUANTITY_NAMES)}"
+            )
+        return v
+
+    @field_validator("op")
+    @classmethod
+    def _known_op(cls, v: str) -> str:
+        if v not in OPERATORS:
+            raise ValueError(f"unknown operator {v!r}; valid operators: {' '.join(OPERATORS)}")
+        return v
+
+    @field_validator("value")
+    @classmethod
+    def _finite(cls, v: float) -> float:
+        if not math.isfinite(v):
+            raise ValueError(f"value must be a finite number, got {v!r}")
+        return v
+
+    @property
+    def is_kinematic(self) -> bool:
+        """True when evaluating this constraint needs the crossing kinematics."""
+        return self.name in DERIVED and DERIVED[self.name].kinematic
+
+    def __str__(self) -> str:
+        return f"{self.name}{self.op}{self.value:g}"
+
+    def mask(self, values: FloatArray) -> BoolArray:
+        """Rows of ``values`` (the quantity, shape (n,)) that satisfy the constraint."""
+        return np.asarray(OPERATORS[self.op](values, self.value), dtype=bool)
+
+
+#: The physical bounds every sample of a bounded region satisfies.
+PHYSICAL_BOUNDS: tuple[Constraint, ...] = (
+    Constraint(name="p_t", op=">", value=0.0),           # a lane change takes time
+    Constraint(name="p_a3", op=">=", value=0.0),         # durations are non-negative
+    Constraint(name="p_v0", op=">", value=0.0),          # the cutter drives forwards ...
+    Constraint(name="v_cut_min", op=">", value=0.0),     # ... at every moment
+    Constraint(name="gap", op=">", value=0.0),           # the cutter is ahead of the ego
+    Constraint(name="psi_max", op="<", value=math.pi / 2),  # never turns sideways
+    Constraint(name="v_ego", op=">", value=0.0),         # the ego drives forwards
+    Constraint(name="cross_margin", op=">", value=0.0),  # the marking is crossed
+)
+
+_SHORT = re.compile(
+    r"^\s*(?P<name>[A-Za-z_][A-Za-z0-9_]*)\s*(?P<op><=|>=|<|>|==|=<|=>|!=|=)\s*(?P<value>\S+)\s*$"
+)
+
+
+def parse_constraint(text: str) -> Constraint:
+    """Parse the short form ``name op value`` (e.g. ``"ttc<3"``, ``"v_ego >= 20"``).
+
+    Raises
+    ------
+    ConstraintError
+        Malformed text, unknown name or operator, or a value that is not a finite number;
+        the message lists the valid names or operators.
+    """
+    if not isinstance(text, str):
+        raise ConstraintError(f"constraint: expected text like 'ttc<3', got {type(text).__name__}")
+    m = _SHORT.match(text)
+    if m is None:
+        raise ConstraintError(
+            f"constraint {text!r}: expected NAME OP VALUE such as 'ttc<3' "
+            f"(operators: {' '.join(OPERATORS)})"
+        )
+    name, op, raw = m.group("name"), m.group("op"), m.group("value")
+    if op not in OPERATORS:
+        raise ConstraintError(
+            f"constraint {text!r}: unknown operator {op!r}; valid operators: {' '.join(OPERATORS)}"
+        )
+    if name not in QUANTITY_NAMES:
+        raise ConstraintError(
+            f"constraint {text!r}: unknown quantity {name!r}; valid names: "
+            f"{', '.join(QUANTITY_NAMES)}"
+        )
+    try:
+        value = float(raw)
+    except ValueError:
+        raise ConstraintError(f"constraint {text!r}: value {raw!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ConstraintError(f"constraint {text!r}: value must be finite, got {raw!r}")
+    return Constraint(name=name, op=op, value=value)
+
+
+def _as_constraint(c: Any) -> Constraint:
+    if isinstance(c, Constraint):
+        return c
+    if isinstance(c, str):
+        return parse_constraint(c)
+    if isinstance(c, Mapping):
+        try:
+            return Constraint.model_validate(c)
+        except ValueError as exc:  # pydantic.ValidationError is a ValueError
+            raise ConstraintError(_pydantic_message(exc)) from None
+    raise ConstraintError(f"constraint: expected text, a mapping or Constraint, got {c!r}")
+
+
+def _pydantic_message(exc: Exception) -> str:
+    errors = getattr(exc, "errors", None)
+    if callable(errors):
+        parts = []
+        for err in errors():
+            loc = ".".join(str(x) for x in err.get("loc", ()))
+            msg = str(err.get("msg", "")).removeprefix("Value error, ")
+            parts.append(f"{loc}: {msg}" if loc else msg)
+        return "constraint: " + "; ".join(parts)
+    return f"constraint: {exc}"
+
+
+def _params_matrix(params: ArrayLike | Mapping[str, ArrayLike]) -> FloatArray:
+    """Accept (n, 8) arrays in PARAM_NAMES order, or a mapping/DataFrame of columns."""
+    if isinstance(params, Mapping) or hasattr(params, "columns"):
+        cols: Any = params  # DataFrame or mapping
+        missing = [k for k in PARAM_NAMES if k not in cols]
+        if missing:
+            raise ConstraintError(f"params: missing column(s) {', '.join(missing)}")
+        arr = np.column_stack([np.asarray(cols[k], dtype=np.float64).reshape(-1)
+                               for k in PARAM_NAMES])
+    else:
+        arr = np.asarray(params, dtype=np.float64)
+        if arr.ndim == 1:
+            arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != len(PARAM_NAMES):
+        raise ConstraintError(
+            f"params: expected shape (n, {len(PARAM_NAMES)}) in the order {PARAM_NAMES}, "
+            f"got {arr.shape}"
+        )
+    return arr
+
+
+class _Quantities:
+    """Lazy, cached evaluation of parameters and derived quantities for rows of a matrix."""
+
+    def __init__(self, params: FloatArray, lane_width: float) -> None:
+        self.p = params
+        self.lane_width = lane_width
+        self._cache: dict[str, FloatArray] = {}
+
+    def __getitem__(self, name: str) -> FloatArray:
+        if name in self._cache:
+            return self._cache[name]
+        if name in PARAM_NAMES:
+            return self.p[:, PARAM_NAMES.index(name)]
+        col = {k: self.p[:, i] for i, k in enumerate(PARAM_NAMES)}
+        c = self._cache
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            if name == "ttc":
+                c[name] = ttc_from_gap_dv(col["gap"], col["dv"])
+            elif name == "direction":
+                c[name] = np.where(col["p_y1"] > 0, 1.0, -1.0)
+            elif name == "psi_max":
+                c[name] = 2.0 * np.abs(col["p_y1"]) * col["p_t"] / np.pi
+            elif name == "v_cut_min":
+                before, after = plateau_speeds(col["p_a1"], col["p_a2"], col["p_a3"], col["p_v0"])
+                c[name] = np.minimum(before, after)
+            elif name in DERIVED:
+                kin = crossing_kinematics(self.p, self.lane_width / 2.0)
+                c["t_cross"] = kin.t_cross
+                c["v_cross"] = kin.v_cross
+                c["v_ego"] = kin.v_cross + col["dv"]
+                c["thw"] = np.where(c["v_ego"] > 0, col["gap"] / np.where(
+                    c["v_ego"] > 0, c["v_ego"], 1.0), np.inf)
+                c["thw"][np.isnan(c["v_ego"])] = np.nan
+                c["lat_disp"] = np.abs(kin.y_end)
+                c["cross_margin"] = c["lat_disp"] - self.lane_width / 2.0
+                start = np.where(col["p_y1"] > 0, -self.lane_width, self.lane_width)
+                c["lat_offset"] = start + kin.y_end
+                c["max_lat_speed"] = kin.max_lat_speed
+            else:
+                raise ConstraintError(
+                    f"unknown quantity {name!r}; valid names: {', '.join(QUANTITY_NAMES)}"
+                )
+        return c[name]
+
+
+def derive(params: ArrayLike | Mapping[str, ArrayLike], names: Iterable[str] | None = None,
+           *, lane_width: float = DEFAULT_LANE_WIDTH) -> dict[str, FloatArray]:
+    """Evaluate derived quantities for many parameter vectors.
+
+    Parameters
+    ----------
+    params : array-like of shape (n, 8) in ``PARAM_NAMES`` order, or a mapping/DataFrame
+        with those columns. SI units.
+    names : iterable of str, optional
+        Which quantities (parameters or ``DERIVED`` names); default all of ``DERIVED``.
+    lane_width : float
+        Lane width in m.
+
+    Returns
+    -------
+    dict of name -> ndarray of shape (n,)
+    """
+    arr = _params_matrix(params)
+    q = _Quantities(arr, float(lane_width))
+    wanted = list(DERIVED) if names is None else list(names)
+    return {name: np.array(q[name], dtype=np.float64) for name in wanted}
+
+
+class Region(BaseModel):
+    """A region of the parameter space: constraints AND (by default) the physical bounds.
+
+    JSON: ``{"constraints": [{"name": "ttc", "op": "<", "value": 3}],
+    "lane_width": 3.75, "physical_bounds": true}``.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    constraints: tuple[Constraint, ...] = ()
+    lane_width: float = Field(default=DEFAULT_LANE_WIDTH, gt=0, le=10,
+                              description="lane width in m")
+    physical_bounds: bool = True
+
+    @classmethod
+    def from_constraints(cls, constraints: Iterable[Any] = (), *,
+                         lane_width: float = DEFAULT_LANE_WIDTH,
+                         physical_bounds: bool = True) -> Region:
+        """Build from Constraint objects, mappings or short-form strings."""
+        if isinstance(constraints, str | Mapping | Constraint):
+            constraints = [constraints]
+        cs = tuple(_as_constraint(c) for c in constraints)
+        if not (isinstance(lane_width, int | float) and 0 < lane_width <= 10):
+            raise ConstraintError(f"lane_width: must be in (0, 10] m, got {lane_width!r}")
+        return cls(constraints=cs, lane_width=float(lane_width), physical_bounds=physical_bounds)
+
+    @property
+    def all_constraints(self) -> tuple[Constraint, ...]:
+        """The user's constraints followed by the physical bounds (when on)."""
+        return self.constraints + (PHYSICAL_BOUNDS if self.physical_bounds else ())
+
+    def describe(self) -> str:
+        """Short human-readable form, e.g. ``ttc<3 & physical bounds``."""
+        parts = [str(c) for c in self.constraints]
+        if self.physical_bounds:
+            parts.append("physical bounds")
+        return " & ".join(parts) if parts else "everything"
+
+    def _mask(self, arr: FloatArray, constraints: Sequence[Constraint]) -> BoolArray:
+        mask: BoolArray = np.asarray(np.isfinite(arr).all(axis=1), dtype=bool)
+        cheap = [c for c in constraints if not c.is_kinematic]
+        costly = [c for c in constraints if c.is_kinematic]
+        q = _Quantities(arr, self.lane_width)
+        for c in cheap:
+            mask &= c.mask(q[c.name])
+        if costly:
+            idx = np.flatnonzero(mask)
+            if idx.size:
+                q2 = _Quantities(arr[idx], self.lane_width)
+                sub = np.ones(idx.size, dtype=bool)
+                for c in costly:
+                    sub &= c.mask(q2[c.name])
+                mask[idx] = sub
+        return mask
+
+    def contains(self, params: ArrayLike | Mapping[str, ArrayLike]) -> BoolArray:
+        """Rows inside the region (constraints and bounds), shape (n,) bool.
+
+        Cheap constraints are tested first on all rows; the kinematic ones (crossing
+        time, ...) only on the rows that survive. Rows with a NaN are outside.
+        """
+        return self._mask(_params_matrix(params), self.all_constraints)
+
+    def in_bounds(self, params: ArrayLike | Mapping[str, ArrayLike]) -> BoolArray:
+        """Rows inside the physical bounds only (all True when the bounds are off)."""
+        arr = _params_matrix(params)
+        if not self.physical_bounds:
+            return np.asarray(np.isfinite(arr).all(axis=1), dtype=bool)
+        return self._mask(arr, PHYSICAL_BOUNDS)
+
+    def violations(self, params: ArrayLike | Mapping[str, ArrayLike]) -> dict[str, BoolArray]:
+        """For every constraint and bound (by its short form), the rows that violate it."""
+        arr = _params_matrix(params)
+        q = _Quantities(arr, self.lane_width)
+        return {str(c): ~c.mask(q[c.name]) for c in self.all_constraints}
