@@ -1,19 +1,90 @@
-"""FastAPI application factory. Routers are added per resource under app/routes/."""
+"""FastAPI application factory: settings, lifespan, error handlers, one router per resource.
+
+The lifespan opens the ``ServiceContext`` once (database migrated to head, the embedded
+TNO dataset and its default model — fitted at the first start and cached under the data
+dir), starts the catalogue job thread (which resumes unfinished jobs) and closes all of it
+at shutdown.
+"""
 
 from __future__ import annotations
 
-from fastapi import FastAPI
+import logging
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI, Request, Response
 
 from app import __version__
+from app.context import ServiceContext
+from app.errors import error_body, install_error_handlers
+from app.jobs.manager import JobManager
+from app.routes import catalogues, datasets, health, models, risk, scenarios
+from app.settings import Settings, get_settings
+
+log = logging.getLogger("scengen.app")
+
+#: routers in the order they appear in /docs; the dashboard (issue 6) adds its own here
+ROUTERS = (
+    health.router,
+    datasets.router,
+    models.router,
+    scenarios.router,
+    risk.router,
+    catalogues.router,
+)
+
+
+def _settings_of(app: FastAPI) -> Settings:
+    factory = app.dependency_overrides.get(get_settings, get_settings)
+    settings: Settings = factory()
+    return settings
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    settings = _settings_of(app)
+    ctx = ServiceContext.open(settings)
+    jobs = JobManager(ctx.runner())
+    jobs.start(resume=settings.resume_jobs)
+    app.state.ctx = ctx
+    app.state.jobs = jobs
+    log.info("scengen %s ready (database %s, default model %s)", __version__,
+             ctx.db.engine.dialect.name, ctx.default_model_id)
+    try:
+        yield
+    finally:
+        jobs.stop()
+        ctx.close()
 
 
 def create_app() -> FastAPI:
-    application = FastAPI(title="scengen", version=__version__)
+    application = FastAPI(
+        title="scengen",
+        version=__version__,
+        description="Risk-constrained cut-in scenarios: sample from a GMM learnt from real "
+        "cut-ins, build concrete scenarios, score them with the Monte-Carlo TTR risk, and "
+        "keep test catalogues. Errors: {\"error\": {\"status\", \"message\", \"field\"}}.",
+        lifespan=lifespan,
+    )
+    install_error_handlers(application)
 
-    @application.get("/health")
-    def health() -> dict[str, str]:
-        return {"status": "ok"}
+    @application.middleware("http")
+    async def upload_limit(request: Request,
+                           call_next: Callable[[Request], Awaitable[Response]]) -> Response:
+        # refuse an oversized upload before its body is read (the route counts too)
+        if request.method == "POST" and request.url.path.rstrip("/") == "/datasets":
+            limit = _settings_of(application).upload_limit_bytes
+            length = request.headers.get("content-length", "")
+            if length.isdigit() and int(length) > limit + 64 * 1024:
+                from fastapi.responses import JSONResponse
 
+                return JSONResponse(error_body(413, f"upload larger than the limit of "
+                                               f"{limit} bytes", "body.files"),
+                                    status_code=413)
+        return await call_next(request)
+
+    for router in ROUTERS:
+        application.include_router(router)
     return application
 
 

@@ -1,0 +1,164 @@
+"""Catalogue use cases shared by the HTTP routes and the CLI: create, describe, page,
+export and delete. Routes and CLI commands stay thin wrappers around these."""
+
+from __future__ import annotations
+
+import gzip
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from app import domain
+from app.context import ServiceContext
+from app.db import repository as repo
+from app.db.models import CatalogueRow, ScenarioRow
+from app.errors import Conflict, InvalidInput, ServiceError
+from riskcore.scenario import ConcreteScenario
+
+SAMPLER_METHODS = ("auto", "rejection", "mcmc")
+
+
+def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
+           model: str | None = None, method: str = "auto", score: bool = True,
+           chunk_size: int | None = None) -> CatalogueRow:
+    """Validate and store a new catalogue job (status ``queued``); the caller runs it."""
+    limit = ctx.settings.catalogue_n_limit
+    if not 1 <= n <= limit:
+        raise InvalidInput(f"n must be between 1 and {limit}, got {n}", field="body.n")
+    if method not in SAMPLER_METHODS:
+        raise InvalidInput(f"unknown sampler {method!r}; choose one of "
+                           f"{', '.join(SAMPLER_METHODS)}", field="body.sampler")
+    size = chunk_size or ctx.settings.chunk_size
+    if size < 1:
+        raise InvalidInput("chunk_size must be at least 1", field="body.chunk_size")
+    model_id = ctx.resolve_model_id(model)
+    ctx.model(model_id)  # 404 for an unknown model, before anything is stored
+    domain.parse_constraints(constraints)
+    spec = {"constraints": list(constraints), "method": method, "score": bool(score),
+            "store_trajectories": bool(ctx.settings.store_trajectories)}
+    with ctx.db.session() as s:
+        row = CatalogueRow(id=repo.new_id("cat"), model_id=model_id, status="queued", n=n,
+                           seed=seed, chunk_size=size, n_chunks=(n + size - 1) // size,
+                           spec=spec)
+        s.add(row)
+    return row
+
+
+def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
+    """Status, progress, counts, P(A) and summary statistics of a catalogue."""
+    with ctx.db.session() as s:
+        row = repo.get_catalogue(s, catalogue_id)
+        chunks = repo.stored_chunk_indices(s, catalogue_id)
+        stored = repo.count_scenarios(s, catalogue_id)
+        stats = repo.summary_statistics(s, catalogue_id)
+    return {
+        "id": row.id,
+        "status": row.status,
+        "model": row.model_id,
+        "n": row.n,
+        "seed": row.seed,
+        "constraints": row.spec.get("constraints", []),
+        "sampler": row.spec.get("method", "auto"),
+        "score": row.spec.get("score", True),
+        "chunk_size": row.chunk_size,
+        "chunks": {"total": row.n_chunks, "done": len(chunks)},
+        "scenarios_stored": stored,
+        "progress": len(chunks) / row.n_chunks if row.n_chunks else 1.0,
+        "p_region": domain.jsonable(domain.decode_floats(row.p_region)),
+        "summary": stats,
+        "error": row.error,
+        "created_at": row.created_at.isoformat(),
+        "updated_at": row.updated_at.isoformat(),
+        "finished_at": row.finished_at.isoformat() if row.finished_at else None,
+    }
+
+
+def scenario_view(row: ScenarioRow) -> dict[str, Any]:
+    return {
+        "index": row.idx,
+        "seed": row.seed,
+        "params": row.params,
+        "ttc": domain.finite_or_none(row.ttc),
+        "risk": domain.finite_or_none(row.risk),
+        "exposure_weight": domain.finite_or_none(row.exposure_weight),
+        "summary": domain.jsonable(domain.decode_floats(row.summary)),
+    }
+
+
+def export_summary(row: ScenarioRow) -> dict[str, Any]:
+    """The flat summary an export gets for one scenario (scores + exposure weight)."""
+    summary = dict(domain.decode_floats(row.summary))
+    summary["scenario_id"] = row.idx
+    summary["exposure_weight"] = row.exposure_weight
+    return summary
+
+
+def _chunk_scenarios(path: Path) -> Iterator[ConcreteScenario]:
+    with gzip.open(path, "rt", encoding="utf-8") as fh:
+        for line in fh:
+            if line.strip():
+                yield ConcreteScenario.from_dict(json.loads(line))
+
+
+def iter_items(ctx: ServiceContext,
+               catalogue_id: str) -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
+    """(scenario, summary) pairs of a finished catalogue in index order."""
+    with ctx.db.session() as s:
+        chunks = {c.chunk_index: c for c in repo.chunk_rows(s, catalogue_id)}
+    current: int | None = None
+    stream: Iterator[ConcreteScenario] | None = None
+    with ctx.db.sessions() as s:
+        for row in repo.iter_scenarios(s, catalogue_id):
+            if row.chunk_index != current:
+                current = row.chunk_index
+                chunk = chunks.get(current)
+                stream = (None if chunk is None or chunk.file_path is None
+                          else _chunk_scenarios(ctx.data_dir / chunk.file_path))
+            if stream is not None:
+                scenario = next(stream)
+            else:
+                scenario = domain.build_scenario(row.params, row.seed)
+            yield scenario, export_summary(row)
+
+
+def manifest(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
+    from app.exports import build_manifest
+
+    with ctx.db.session() as s:
+        row = repo.get_catalogue(s, catalogue_id)
+        model = repo.get_model(s, row.model_id, field="model")
+    p = domain.decode_floats(row.p_region) if row.p_region else None
+    return build_manifest(
+        seed=row.seed, model_hash=model.model_hash,
+        sampler_settings={"method": row.spec.get("method", "auto"),
+                          "chunk_size": row.chunk_size,
+                          "score": bool(row.spec.get("score", True))},
+        constraints=list(row.spec.get("constraints", [])), p_region=p,
+        extra={"n": row.n, "model_id": row.model_id},
+    )
+
+
+def export(ctx: ServiceContext, catalogue_id: str, fmt: str, out: Path) -> Path:
+    """Write a finished catalogue to ``out`` in ``fmt`` (``app.exports``)."""
+    from app.exports import EXPORT_FORMATS, ExportError, export_catalogue
+
+    if fmt not in EXPORT_FORMATS:
+        raise InvalidInput(f"unknown format {fmt!r}; choose one of {', '.join(EXPORT_FORMATS)}",
+                           field="query.format")
+    with ctx.db.session() as s:
+        row = repo.get_catalogue(s, catalogue_id)
+        if row.status != "done":
+            raise Conflict(f"catalogue {catalogue_id} is {row.status}; export needs a "
+                           "finished catalogue", field="path.catalogue_id")
+    try:
+        return export_catalogue(fmt, iter_items(ctx, catalogue_id),
+                                manifest(ctx, catalogue_id), out)
+    except ExportError as exc:
+        raise ServiceError(f"export of catalogue {catalogue_id} failed: {exc}") from None
+
+
+def delete(ctx: ServiceContext, catalogue_id: str) -> None:
+    with ctx.db.session() as s:
+        repo.delete_catalogue(s, catalogue_id)
+    repo.remove_catalogue_files(ctx.data_dir, catalogue_id)

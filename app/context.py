@@ -1,0 +1,157 @@
+"""What the service and the CLI load once: database, embedded dataset, default model, jobs.
+
+``ServiceContext.open(settings)`` migrates the database, registers the embedded TNO
+dataset and its default model (fitted at the first start and cached on disk under
+``<data_dir>/models/`` keyed by the data's hash), and builds the catalogue runner.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from app import domain
+from app.db import repository as repo
+from app.db.database import Database
+from app.db.models import DatasetRow, ModelRow
+from app.jobs.executors import ChunkExecutor, make_executor
+from app.jobs.runner import CatalogueRunner
+from app.settings import Settings
+
+log = logging.getLogger("scengen.app")
+
+EMBEDDED_ID = "tno-cutin"
+EMBEDDED_NAME = "TNO real cut-ins (2017, 297 recorded cut-ins, MIT)"
+
+
+@dataclass
+class ServiceContext:
+    settings: Settings
+    db: Database
+    data_dir: Path
+    default_dataset_id: str | None = None
+    default_model_id: str | None = None
+    startup_error: str | None = None
+    _executor: ChunkExecutor | None = None
+    _models: dict[str, Any] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    @classmethod
+    def open(cls, settings: Settings, *, load_defaults: bool = True) -> ServiceContext:
+        data_dir = Path(settings.data_dir).resolve()
+        data_dir.mkdir(parents=True, exist_ok=True)
+        log.info("data dir %s", data_dir)
+        db = Database(settings.resolved_database_url)
+        db.migrate()
+        ctx = cls(settings=settings, db=db, data_dir=data_dir)
+        if load_defaults:
+            try:
+                ctx.load_defaults()
+            except NotImplementedError as exc:
+                # the service still answers (health, stored catalogues); the routes that
+                # need the model say what is missing
+                ctx.startup_error = str(exc)
+                log.warning("embedded dataset/model not available: %s", exc)
+        return ctx
+
+    # ----------------------------------------------------------------- defaults
+    def load_defaults(self) -> None:
+        table = domain.embedded_parameter_table()
+        data_hash = domain.table_hash(table)
+        table_rel = f"datasets/{EMBEDDED_ID}/table-{data_hash[:16]}.parquet"
+        table_path = self.data_dir / table_rel
+        if not table_path.exists():
+            table_path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = table_path.with_suffix(".tmp")
+            table.to_parquet(tmp, index=False)
+            tmp.replace(table_path)
+        with self.db.session() as s:
+            row = s.get(DatasetRow, EMBEDDED_ID)
+            if row is None:
+                row = DatasetRow(id=EMBEDDED_ID, name=EMBEDDED_NAME, kind="embedded",
+                                 embedded=True, data_hash=data_hash, n_cutins=len(table),
+                                 table_path=table_rel,
+                                 report={"source": "datasets.embedded (TNO cut-in.json)",
+                                         "licence": "MIT"})
+                s.add(row)
+            else:
+                row.data_hash, row.n_cutins, row.table_path = data_hash, len(table), table_rel
+        self.default_dataset_id = EMBEDDED_ID
+
+        cache = self.data_dir / "models" / f"default-{data_hash[:16]}.json"
+        if cache.exists():
+            log.info("loading the cached default model %s", cache)
+            fitted = domain.describe_model(cache.read_text())
+        else:
+            log.info("first start for this data (hash %s): fitting the default model on "
+                     "%d cut-ins", data_hash[:12], len(table))
+            fitted = domain.fit_model(table, {})
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            repo.write_file_atomic(cache, fitted.model_json.encode())
+            log.info("fitted %d components; cached at %s", fitted.n_components, cache)
+        model_id = f"default-{data_hash[:12]}"
+        with self.db.session() as s:
+            for other in repo.list_models(s):
+                if other.is_default and other.id != model_id:
+                    other.is_default = False
+            if s.get(ModelRow, model_id) is None:
+                s.add(self.model_row(model_id, EMBEDDED_ID, fitted, {}, is_default=True))
+        self._models[model_id] = fitted.model
+        self.default_model_id = model_id
+
+    @staticmethod
+    def model_row(model_id: str, dataset_id: str, fitted: domain.FittedModel,
+                  options: dict[str, Any], is_default: bool = False) -> ModelRow:
+        return ModelRow(id=model_id, dataset_id=dataset_id, is_default=is_default,
+                        options=domain.jsonable(options), n_components=fitted.n_components,
+                        model_hash=fitted.model_hash, model_json=fitted.model_json,
+                        bic_curve=fitted.bic_curve, fit_report=fitted.fit_report)
+
+    # ----------------------------------------------------------------- lookups
+    def model(self, model_id: str, field: str = "body.model") -> Any:
+        """The fitted model object (cached in memory)."""
+        with self._lock:
+            if model_id in self._models:
+                return self._models[model_id]
+        with self.db.session() as s:
+            text = repo.get_model(s, model_id, field=field).model_json
+        model = domain.load_model(text)
+        with self._lock:
+            self._models[model_id] = model
+        return model
+
+    def resolve_model_id(self, model_id: str | None) -> str:
+        if model_id in (None, "", "default"):
+            if self.default_model_id is None:
+                raise domain.DomainUnavailable(
+                    f"no default model: {self.startup_error or 'not loaded'}")
+            return self.default_model_id
+        assert model_id is not None
+        return model_id
+
+    def dataset_table(self, row: DatasetRow) -> pd.DataFrame:
+        return pd.read_parquet(self.data_dir / row.table_path)
+
+    # ----------------------------------------------------------------- jobs
+    @property
+    def executor(self) -> ChunkExecutor:
+        with self._lock:
+            if self._executor is None:
+                self._executor = make_executor(dask_scheduler=self.settings.dask_scheduler,
+                                               local_workers=self.settings.local_workers)
+            return self._executor
+
+    def runner(self) -> CatalogueRunner:
+        return CatalogueRunner(self.db, self.data_dir, self.executor)
+
+    def close(self) -> None:
+        with self._lock:
+            executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.close()
+        self.db.dispose()

@@ -1,0 +1,128 @@
+"""Tables of the service (SQLAlchemy 2 typed ORM). The schema is created by Alembic
+migrations in ``app/migrations/``; change both together.
+
+Floats that may be infinite (TTC, TTR) are stored as IEEE doubles (SQLite REAL and
+PostgreSQL double precision both hold +inf); JSON columns never hold non-finite numbers
+(``app.domain.jsonable`` turns them into null first).
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any, ClassVar
+
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class Base(DeclarativeBase):
+    type_annotation_map: ClassVar[dict[Any, Any]] = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class DatasetRow(Base):
+    """A source of cut-ins: the embedded TNO data or an upload, with its parameter table."""
+
+    __tablename__ = "datasets"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    kind: Mapped[str] = mapped_column(String(32))  # embedded | highd | egocentric
+    embedded: Mapped[bool] = mapped_column(Boolean, default=False)
+    data_hash: Mapped[str] = mapped_column(String(64))
+    n_cutins: Mapped[int] = mapped_column(Integer)
+    table_path: Mapped[str] = mapped_column(Text)  # relative to the data dir (Parquet)
+    report: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ModelRow(Base):
+    """A fitted cut-in GMM (the JSON of ``CutInGMM.to_json``)."""
+
+    __tablename__ = "models"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    dataset_id: Mapped[str] = mapped_column(ForeignKey("datasets.id", ondelete="CASCADE"))
+    is_default: Mapped[bool] = mapped_column(Boolean, default=False)
+    options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    n_components: Mapped[int] = mapped_column(Integer)
+    model_hash: Mapped[str] = mapped_column(String(64))
+    model_json: Mapped[str] = mapped_column(Text)
+    bic_curve: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    fit_report: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class CatalogueRow(Base):
+    """A catalogue job and its result summary."""
+
+    __tablename__ = "catalogues"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    model_id: Mapped[str] = mapped_column(ForeignKey("models.id", ondelete="RESTRICT"))
+    status: Mapped[str] = mapped_column(String(16))  # queued|running|done|failed|cancelled
+    n: Mapped[int] = mapped_column(Integer)
+    seed: Mapped[int] = mapped_column(BigInteger)
+    chunk_size: Mapped[int] = mapped_column(Integer)
+    n_chunks: Mapped[int] = mapped_column(Integer)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # the full, JSON-able job spec
+    p_region: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+
+class ChunkRow(Base):
+    """One finished chunk of a catalogue. ``(catalogue_id, chunk_index)`` is unique."""
+
+    __tablename__ = "catalogue_chunks"
+    __table_args__ = (UniqueConstraint("catalogue_id", "chunk_index", name="uq_chunk_index"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    catalogue_id: Mapped[str] = mapped_column(
+        ForeignKey("catalogues.id", ondelete="CASCADE"), index=True
+    )
+    chunk_index: Mapped[int] = mapped_column(Integer)
+    n_scenarios: Mapped[int] = mapped_column(Integer)
+    file_path: Mapped[str | None] = mapped_column(Text, nullable=True)  # relative to data dir
+    sha256: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    diagnostics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ScenarioRow(Base):
+    """One scenario of a catalogue: parameters and scores (trajectories live in chunk files)."""
+
+    __tablename__ = "catalogue_scenarios"
+    __table_args__ = (
+        UniqueConstraint("catalogue_id", "idx", name="uq_scenario_idx"),
+        Index("ix_scenario_risk", "catalogue_id", "risk"),
+        Index("ix_scenario_ttc", "catalogue_id", "ttc"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    catalogue_id: Mapped[str] = mapped_column(ForeignKey("catalogues.id", ondelete="CASCADE"))
+    idx: Mapped[int] = mapped_column(Integer)  # 0 .. n-1 within the catalogue
+    chunk_index: Mapped[int] = mapped_column(Integer)
+    seed: Mapped[int] = mapped_column(BigInteger)  # the builder's seed for this scenario
+    params: Mapped[dict[str, Any]] = mapped_column(JSON)
+    ttc: Mapped[float | None] = mapped_column(Float, nullable=True)
+    risk: Mapped[float | None] = mapped_column(Float, nullable=True)
+    exposure_weight: Mapped[float | None] = mapped_column(Float, nullable=True)
+    summary: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)

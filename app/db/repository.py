@@ -1,0 +1,217 @@
+"""Reading and writing the service's records. Functions take an open Session; the caller
+owns the transaction (``Database.session()``), so a chunk is stored all-or-nothing.
+
+Files (parameter tables, chunk trajectories) live under the data dir and are referenced by
+relative paths; they are written under a temporary name and renamed into place *before*
+the transaction that references them commits, so a crash never leaves a reference to a
+missing or half-written file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import uuid
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import delete, func, insert, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from app.db.models import CatalogueRow, ChunkRow, DatasetRow, ModelRow, ScenarioRow, utcnow
+from app.errors import NotFound
+
+ACTIVE = ("queued", "running")
+
+
+def new_id(prefix: str) -> str:
+    return f"{prefix}-{uuid.uuid4().hex[:12]}"
+
+
+def write_file_atomic(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+# --------------------------------------------------------------------------- datasets
+def get_dataset(session: Session, dataset_id: str,
+                field: str = "path.dataset_id") -> DatasetRow:
+    row = session.get(DatasetRow, dataset_id)
+    if row is None:
+        raise NotFound(f"dataset {dataset_id!r} not found", field=field)
+    return row
+
+
+def list_datasets(session: Session) -> list[DatasetRow]:
+    stmt = select(DatasetRow).order_by(DatasetRow.embedded.desc(), DatasetRow.created_at,
+                                       DatasetRow.id)
+    return list(session.scalars(stmt))
+
+
+# --------------------------------------------------------------------------- models
+def get_model(session: Session, model_id: str, field: str = "path.model_id") -> ModelRow:
+    row = session.get(ModelRow, model_id)
+    if row is None:
+        raise NotFound(f"model {model_id!r} not found", field=field)
+    return row
+
+
+def list_models(session: Session) -> list[ModelRow]:
+    stmt = select(ModelRow).order_by(ModelRow.is_default.desc(), ModelRow.created_at,
+                                     ModelRow.id)
+    return list(session.scalars(stmt))
+
+
+# --------------------------------------------------------------------------- catalogues
+def get_catalogue(session: Session, catalogue_id: str) -> CatalogueRow:
+    row = session.get(CatalogueRow, catalogue_id)
+    if row is None:
+        raise NotFound(f"catalogue {catalogue_id!r} not found", field="path.catalogue_id")
+    return row
+
+
+def list_catalogues(session: Session) -> list[CatalogueRow]:
+    return list(session.scalars(select(CatalogueRow).order_by(CatalogueRow.created_at)))
+
+
+def stored_chunk_indices(session: Session, catalogue_id: str) -> set[int]:
+    stmt = select(ChunkRow.chunk_index).where(ChunkRow.catalogue_id == catalogue_id)
+    return set(session.scalars(stmt))
+
+
+def chunk_file(catalogue_id: str, index: int) -> str:
+    return f"catalogues/{catalogue_id}/chunk_{index:06d}.jsonl.gz"
+
+
+def store_chunk(session: Session, data_dir: Path, catalogue_id: str, index: int,
+                rows: Sequence[dict[str, Any]], blob: bytes | None, sha256: str | None,
+                diagnostics: dict[str, Any]) -> bool:
+    """Store one finished chunk: its file first, then its rows in this transaction.
+
+    Returns False (and changes nothing) when the chunk is already stored or the catalogue
+    is gone. The chunk file's content is a function of (spec, index), so rewriting it for
+    a chunk that was computed twice writes the same bytes.
+    """
+    if session.get(CatalogueRow, catalogue_id) is None:
+        return False
+    if index in stored_chunk_indices(session, catalogue_id):
+        return False
+    rel = None
+    if blob is not None:
+        rel = chunk_file(catalogue_id, index)
+        write_file_atomic(data_dir / rel, blob)
+    try:
+        with session.begin_nested():
+            session.add(ChunkRow(catalogue_id=catalogue_id, chunk_index=index,
+                                 n_scenarios=len(rows), file_path=rel, sha256=sha256,
+                                 diagnostics=diagnostics))
+            session.flush()
+            if rows:
+                session.execute(insert(ScenarioRow),
+                                [{**r, "catalogue_id": catalogue_id} for r in rows])
+    except IntegrityError:
+        return False  # another runner stored it first; same content by construction
+    session.execute(update(CatalogueRow).where(CatalogueRow.id == catalogue_id)
+                    .values(updated_at=utcnow()))
+    return True
+
+
+def count_scenarios(session: Session, catalogue_id: str) -> int:
+    stmt = select(func.count()).select_from(ScenarioRow).where(
+        ScenarioRow.catalogue_id == catalogue_id)
+    return int(session.scalar(stmt) or 0)
+
+
+@dataclass(frozen=True)
+class ScenarioFilter:
+    risk_min: float | None = None
+    risk_max: float | None = None
+    ttc_min: float | None = None
+    ttc_max: float | None = None
+
+    def apply(self, stmt: Any) -> Any:
+        if self.risk_min is not None:
+            stmt = stmt.where(ScenarioRow.risk >= self.risk_min)
+        if self.risk_max is not None:
+            stmt = stmt.where(ScenarioRow.risk <= self.risk_max)
+        if self.ttc_min is not None:
+            stmt = stmt.where(ScenarioRow.ttc >= self.ttc_min)
+        if self.ttc_max is not None:
+            stmt = stmt.where(ScenarioRow.ttc <= self.ttc_max)
+        return stmt
+
+
+def page_scenarios(session: Session, catalogue_id: str, flt: ScenarioFilter, offset: int,
+                   limit: int) -> tuple[int, list[ScenarioRow]]:
+    base = flt.apply(select(ScenarioRow).where(ScenarioRow.catalogue_id == catalogue_id))
+    total = int(session.scalar(select(func.count()).select_from(base.subquery())) or 0)
+    rows = list(session.scalars(base.order_by(ScenarioRow.idx).offset(offset).limit(limit)))
+    return total, rows
+
+
+def iter_scenarios(session: Session, catalogue_id: str,
+                   batch: int = 1000) -> Iterator[ScenarioRow]:
+    """All scenario rows of a catalogue in index order, fetched in batches."""
+    last = -1
+    while True:
+        stmt = (select(ScenarioRow).where(ScenarioRow.catalogue_id == catalogue_id,
+                                          ScenarioRow.idx > last)
+                .order_by(ScenarioRow.idx).limit(batch))
+        rows = list(session.scalars(stmt))
+        if not rows:
+            return
+        yield from rows
+        last = rows[-1].idx
+
+
+def chunk_rows(session: Session, catalogue_id: str) -> list[ChunkRow]:
+    stmt = select(ChunkRow).where(ChunkRow.catalogue_id == catalogue_id).order_by(
+        ChunkRow.chunk_index)
+    return list(session.scalars(stmt))
+
+
+def summary_statistics(session: Session, catalogue_id: str) -> dict[str, Any]:
+    """Counts and distribution summaries of risk, TTC and exposure weight."""
+    out: dict[str, Any] = {}
+    for name, col in (("risk", ScenarioRow.risk), ("ttc", ScenarioRow.ttc),
+                      ("exposure_weight", ScenarioRow.exposure_weight)):
+        finite = [v for v in session.scalars(
+            select(col).where(ScenarioRow.catalogue_id == catalogue_id, col.is_not(None)))
+            if v is not None and math.isfinite(v)]
+        if not finite:
+            out[name] = {"count": 0}
+            continue
+        finite.sort()
+        k = len(finite)
+
+        def q(p: float, vals: list[float] = finite, k: int = k) -> float:
+            pos = p * (k - 1)
+            lo = math.floor(pos)
+            hi = min(lo + 1, k - 1)
+            return vals[lo] + (vals[hi] - vals[lo]) * (pos - lo)
+
+        out[name] = {"count": k, "min": finite[0], "max": finite[-1],
+                     "mean": math.fsum(finite) / k, "p50": q(0.5), "p95": q(0.95)}
+    return out
+
+
+def delete_catalogue(session: Session, catalogue_id: str) -> None:
+    row = get_catalogue(session, catalogue_id)
+    session.execute(delete(ScenarioRow).where(ScenarioRow.catalogue_id == catalogue_id))
+    session.execute(delete(ChunkRow).where(ChunkRow.catalogue_id == catalogue_id))
+    session.delete(row)
+    session.flush()
+
+
+def remove_catalogue_files(data_dir: Path, catalogue_id: str) -> None:
+    """Remove a deleted catalogue's chunk files (call after the deletion committed)."""
+    shutil.rmtree(data_dir / "catalogues" / catalogue_id, ignore_errors=True)

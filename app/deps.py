@@ -1,0 +1,36 @@
+"""Shared request dependencies as ``Annotated`` aliases (one import for every router)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Annotated
+
+from fastapi import Depends, Request
+from sqlalchemy.orm import Session
+
+from app.context import ServiceContext
+from app.jobs.manager import JobManager
+from app.settings import Settings, get_settings
+
+
+def get_context(request: Request) -> ServiceContext:
+    ctx: ServiceContext = request.app.state.ctx
+    return ctx
+
+
+def get_jobs(request: Request) -> JobManager:
+    jobs: JobManager = request.app.state.jobs
+    return jobs
+
+
+ContextDep = Annotated[ServiceContext, Depends(get_context)]
+JobsDep = Annotated[JobManager, Depends(get_jobs)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+
+
+def get_session(ctx: ContextDep) -> Iterator[Session]:
+    with ctx.db.session() as session:
+        yield session
+
+
+SessionDep = Annotated[Session, Depends(get_session)]

@@ -1,0 +1,108 @@
+"""The service's errors and the one JSON shape every error response has.
+
+Exception hierarchy::
+
+    ServiceError                  base: status 500 unless a subclass says otherwise
+    ├── NotFound                  404  an unknown id
+    ├── InvalidInput              422  a value the domain rejects (names the field)
+    ├── PayloadTooLarge           413  an upload over the size limit
+    ├── Conflict                  409  the resource is not in a state that allows it
+    └── DomainUnavailable         501  a domain function has not landed yet
+
+Every error body is ``{"error": {"status": <int>, "message": <str>, "field": <str|null>}}``;
+``field`` is a dotted path such as ``body.n`` or ``query.format`` when one field is to blame.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+log = logging.getLogger("scengen.app")
+
+
+class ServiceError(Exception):
+    """Base of the service's errors. ``status`` is the HTTP status it maps to."""
+
+    status: int = 500
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.field = field
+
+
+class NotFound(ServiceError, LookupError):
+    status = 404
+
+
+class InvalidInput(ServiceError, ValueError):
+    status = 422
+
+
+class PayloadTooLarge(ServiceError, ValueError):
+    status = 413
+
+
+class Conflict(ServiceError, ValueError):
+    status = 409
+
+
+class DomainUnavailable(ServiceError, NotImplementedError):
+    status = 501
+
+
+def error_body(status: int, message: str, field: str | None = None) -> dict[str, Any]:
+    return {"error": {"status": status, "message": message, "field": field}}
+
+
+def _response(status: int, message: str, field: str | None = None,
+              headers: dict[str, str] | None = None) -> JSONResponse:
+    return JSONResponse(error_body(status, message, field), status_code=status, headers=headers)
+
+
+def _loc_to_field(loc: tuple[int | str, ...] | list[int | str]) -> str:
+    return ".".join(str(p) for p in loc)
+
+
+async def _service_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, ServiceError)
+    return _response(exc.status, exc.message, exc.field)
+
+
+async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    errors = list(exc.errors())
+    if not errors:
+        return _response(422, "invalid request")
+    first = errors[0]
+    field = _loc_to_field(first.get("loc", ()))
+    parts = []
+    for err in errors[:5]:
+        parts.append(f"{_loc_to_field(err.get('loc', ()))}: {err.get('msg', 'invalid')}")
+    more = f" (and {len(errors) - 5} more)" if len(errors) > 5 else ""
+    return _response(422, "; ".join(parts) + more, field)
+
+
+async def _http_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    headers = dict(exc.headers) if exc.headers else None
+    return _response(exc.status_code, str(exc.detail), None, headers)
+
+
+async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+    log.exception("unexpected error on %s %s", request.method, request.url.path)
+    return _response(500, f"internal error: {type(exc).__name__}")
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Map every error to the one body shape (see the module docstring)."""
+    app.add_exception_handler(ServiceError, _service_error)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(Exception, _unexpected)

@@ -1,0 +1,140 @@
+"""Run a catalogue job to the end, from whatever chunks are already stored.
+
+The job's state is in the database only: the catalogue row (spec, status, P(A)) and one
+row per finished chunk. ``CatalogueRunner.run`` computes the chunks that are missing and
+stores each one as soon as it is finished (``repository.store_chunk``: one transaction,
+unique chunk index). A process killed at any moment loses at most the chunks in flight;
+running the job again completes it with exactly the content an uninterrupted run has,
+because chunk i depends only on (spec, i).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from app import domain
+from app.db import repository as repo
+from app.db.database import Database
+from app.db.models import CatalogueRow, utcnow
+from app.jobs.chunk import CatalogueSpec, region_seed
+from app.jobs.executors import ChunkExecutor
+
+log = logging.getLogger("scengen.jobs")
+
+Progress = Callable[[int, int], None]  # (chunks stored, chunks in total)
+
+
+class _Either:
+    """Set when any of the given events is set (the executors' ``cancel`` check)."""
+
+    def __init__(self, *events: threading.Event | None) -> None:
+        self.events = [e for e in events if e is not None]
+
+    def is_set(self) -> bool:
+        return any(e.is_set() for e in self.events)
+
+
+def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
+    """The executor-side spec of a catalogue row (adds the model's JSON)."""
+    spec = dict(row.spec)
+    return CatalogueSpec(
+        n=row.n, seed=row.seed, chunk_size=row.chunk_size, model_json=model_json,
+        constraints=tuple(spec.get("constraints", ())), method=spec.get("method", "auto"),
+        score=bool(spec.get("score", True)),
+        store_trajectories=bool(spec.get("store_trajectories", True)),
+    )
+
+
+def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
+    """P(A) of the catalogue's region: one estimate from the catalogue's seed."""
+    model = domain.load_model(spec.model_json)
+    constraints = domain.parse_constraints(spec.constraints)
+    return domain.encode_floats(domain.estimate_region(model, constraints,
+                                                       region_seed(spec.seed)))
+
+
+class CatalogueRunner:
+    """Runs catalogue jobs against one database/data dir with one executor."""
+
+    def __init__(self, db: Database, data_dir: Path, executor: ChunkExecutor) -> None:
+        self.db = db
+        self.data_dir = Path(data_dir)
+        self.executor = executor
+
+    def run(self, catalogue_id: str, *, cancel: threading.Event | None = None,
+            stop: threading.Event | None = None, progress: Progress | None = None) -> str:
+        """Finish the catalogue; return its final status (done, failed, cancelled,
+        deleted, or interrupted when ``stop`` was set: the service is shutting down and
+        the job stays ``running``, to be resumed at the next start). Errors of the job
+        end in status ``failed`` with the message kept."""
+        halt = _Either(cancel, stop)
+        with self.db.session() as s:
+            row = repo.get_catalogue(s, catalogue_id)
+            if row.status == "done":
+                return "done"
+            model_json = repo.get_model(s, row.model_id, field="model").model_json
+            spec = worker_spec(row, model_json)
+            row.status = "running"
+            row.error = None
+            row.updated_at = utcnow()
+            need_region = row.p_region is None
+            done = repo.stored_chunk_indices(s, catalogue_id)
+        total = spec.n_chunks
+        log.info("catalogue %s: %d of %d chunks stored, running the rest on %s",
+                 catalogue_id, len(done), total, self.executor.name)
+        if progress is not None:
+            progress(len(done), total)
+        try:
+            if need_region:
+                p_region = estimate_region(spec)
+                with self.db.session() as s:
+                    row = repo.get_catalogue(s, catalogue_id)
+                    row.p_region = p_region
+            todo = [i for i in range(total) if i not in done]
+            stored = len(done)
+            for result in self.executor.run(spec, todo, halt):
+                with self.db.session() as s:
+                    ok = repo.store_chunk(s, self.data_dir, catalogue_id, result.index,
+                                          result.rows, result.blob, result.sha256,
+                                          result.diagnostics)
+                if not ok and not self._exists(catalogue_id):
+                    repo.remove_catalogue_files(self.data_dir, catalogue_id)
+                    return "deleted"
+                stored += 1
+                if progress is not None:
+                    progress(stored, total)
+            if cancel is not None and cancel.is_set():
+                return self._finish(catalogue_id, "cancelled", None)
+            if stop is not None and stop.is_set():
+                log.info("catalogue %s interrupted by shutdown; resumes at next start",
+                         catalogue_id)
+                return "interrupted"
+            with self.db.session() as s:
+                missing = total - len(repo.stored_chunk_indices(s, catalogue_id))
+            if missing:
+                return self._finish(catalogue_id, "failed", f"{missing} chunks missing")
+            return self._finish(catalogue_id, "done", None)
+        except Exception as exc:
+            log.exception("catalogue %s failed", catalogue_id)
+            return self._finish(catalogue_id, "failed", f"{type(exc).__name__}: {exc}")
+
+    def _exists(self, catalogue_id: str) -> bool:
+        with self.db.session() as s:
+            return s.get(CatalogueRow, catalogue_id) is not None
+
+    def _finish(self, catalogue_id: str, status: str, error: str | None) -> str:
+        with self.db.session() as s:
+            row = s.get(CatalogueRow, catalogue_id)
+            if row is None:
+                return "deleted"
+            row.status = status
+            row.error = error
+            row.updated_at = utcnow()
+            if status == "done":
+                row.finished_at = utcnow()
+        log.info("catalogue %s: %s%s", catalogue_id, status, f" ({error})" if error else "")
+        return status

@@ -1,0 +1,124 @@
+"""Catalogues: persisted, chunked, resumable jobs; status, paging, export, delete."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, BackgroundTasks, Query
+from fastapi.responses import FileResponse, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from app import catalogues as service
+from app.db import repository as repo
+from app.deps import ContextDep, JobsDep, SessionDep
+from app.routes.scenarios import SEED_MAX
+
+router = APIRouter(prefix="/catalogues", tags=["catalogues"])
+
+MEDIA_TYPES = {
+    "jsonl": "application/x-ndjson",
+    "csv": "text/csv",
+    "parquet": "application/vnd.apache.parquet",
+    "xosc": "application/zip",
+}
+SUFFIXES = {"jsonl": "jsonl", "csv": "csv", "parquet": "parquet", "xosc": "zip"}
+
+
+class CatalogueRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    model: str = Field(default="default", description="model id ('default': the embedded "
+                       "data's model)")
+    constraints: list[str] = Field(default_factory=lambda: ["ttc<3"])
+    n: int = Field(ge=1, description="number of scenarios (≤ SCENGEN_CATALOGUE_N_LIMIT)")
+    seed: int = Field(default=0, ge=0, le=SEED_MAX)
+    sampler: Literal["auto", "rejection", "mcmc"] = "auto"
+    score: bool = True
+    chunk_size: int | None = Field(default=None, ge=1, le=100_000,
+                                   description="scenarios per stored chunk (default from "
+                                   "the settings)")
+
+
+@router.post("", status_code=202, summary="Start a catalogue job; answers with its id")
+def create_catalogue(body: CatalogueRequest, ctx: ContextDep, jobs: JobsDep) -> dict[str, Any]:
+    row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
+                         model=body.model, method=body.sampler, score=body.score,
+                         chunk_size=body.chunk_size)
+    jobs.submit(row.id)
+    return {"id": row.id, "status": row.status, "href": f"/catalogues/{row.id}"}
+
+
+@router.get("", summary="List catalogues")
+def list_catalogues(session: SessionDep) -> dict[str, Any]:
+    return {"catalogues": [
+        {"id": r.id, "status": r.status, "n": r.n, "seed": r.seed, "model": r.model_id,
+         "created_at": r.created_at.isoformat()}
+        for r in repo.list_catalogues(session)]}
+
+
+@router.get("/{catalogue_id}", summary="Status, progress, counts, P(A), summary statistics")
+def show_catalogue(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
+    return service.describe(ctx, catalogue_id)
+
+
+@router.get("/{catalogue_id}/scenarios", summary="Page through the stored scenarios, "
+            "filtered by risk and TTC")
+def list_scenarios(
+    catalogue_id: str,
+    session: SessionDep,
+    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    risk_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
+    risk_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
+    ttc_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
+    ttc_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
+) -> dict[str, Any]:
+    repo.get_catalogue(session, catalogue_id)
+    flt = repo.ScenarioFilter(risk_min=risk_min, risk_max=risk_max, ttc_min=ttc_min,
+                              ttc_max=ttc_max)
+    total, rows = repo.page_scenarios(session, catalogue_id, flt, offset, limit)
+    return {"catalogue": catalogue_id, "total": total, "offset": offset, "limit": limit,
+            "scenarios": [service.scenario_view(r) for r in rows]}
+
+
+@router.get("/{catalogue_id}/export", summary="Export a finished catalogue",
+            response_class=FileResponse)
+def export_catalogue(
+    catalogue_id: str,
+    ctx: ContextDep,
+    background: BackgroundTasks,
+    format: Annotated[Literal["jsonl", "csv", "parquet", "xosc"], Query()] = "jsonl",
+) -> Response:
+    tmp = Path(tempfile.mkdtemp(prefix="export-", dir=_tmp_dir(ctx.data_dir)))
+    out = tmp / f"{catalogue_id}.{SUFFIXES[format]}"
+    try:
+        service.export(ctx, catalogue_id, format, out)
+    except BaseException:
+        _rmtree(tmp)
+        raise
+    background.add_task(_rmtree, tmp)
+    return FileResponse(out, media_type=MEDIA_TYPES[format], filename=out.name)
+
+
+@router.delete("/{catalogue_id}", status_code=204, summary="Delete a catalogue (stops its "
+               "job) and its files")
+def delete_catalogue(catalogue_id: str, ctx: ContextDep, jobs: JobsDep) -> Response:
+    with ctx.db.session() as s:
+        repo.get_catalogue(s, catalogue_id)
+    jobs.cancel(catalogue_id)
+    service.delete(ctx, catalogue_id)
+    return Response(status_code=204)
+
+
+def _tmp_dir(data_dir: Path) -> Path:
+    path = data_dir / "tmp"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _rmtree(path: Path) -> None:
+    import shutil
+
+    shutil.rmtree(path, ignore_errors=True)

@@ -1,0 +1,135 @@
+"""Datasets: the embedded real data first, uploads, and their cut-in parameter tables."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import uuid
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, File, Form, Query, UploadFile
+from fastapi.responses import Response
+
+from app import domain
+from app.db import repository as repo
+from app.db.models import DatasetRow
+from app.deps import ContextDep, SessionDep
+from app.errors import InvalidInput, PayloadTooLarge
+
+router = APIRouter(prefix="/datasets", tags=["datasets"])
+
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,200}$")
+_COPY_BLOCK = 1024 * 1024
+
+
+def dataset_view(row: DatasetRow) -> dict[str, Any]:
+    return {
+        "id": row.id,
+        "name": row.name,
+        "kind": row.kind,
+        "embedded": row.embedded,
+        "n_cutins": row.n_cutins,
+        "data_hash": row.data_hash,
+        "report": row.report,
+        "created_at": row.created_at.isoformat(),
+    }
+
+
+@router.get("", summary="List datasets (the embedded real data first)")
+def list_datasets(session: SessionDep) -> dict[str, Any]:
+    return {"datasets": [dataset_view(r) for r in repo.list_datasets(session)]}
+
+
+@router.get("/{dataset_id}", summary="One dataset")
+def show_dataset(dataset_id: str, session: SessionDep) -> dict[str, Any]:
+    return dataset_view(repo.get_dataset(session, dataset_id))
+
+
+@router.get("/{dataset_id}/parameters", summary="The cut-in parameter table, paged",
+            response_model=None)
+def parameter_table(
+    dataset_id: str,
+    ctx: ContextDep,
+    session: SessionDep,
+    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
+    format: Annotated[Literal["json", "csv"], Query()] = "json",
+) -> dict[str, Any] | Response:
+    row = repo.get_dataset(session, dataset_id)
+    table = ctx.dataset_table(row)
+    page = table.iloc[offset:offset + limit]
+    if format == "csv":
+        return Response(page.to_csv(index=False), media_type="text/csv",
+                        headers={"X-Total-Count": str(len(table))})
+    return {
+        "dataset": dataset_id,
+        "total": len(table),
+        "offset": offset,
+        "limit": limit,
+        "columns": [str(c) for c in table.columns],
+        "rows": domain.jsonable(page.to_dict(orient="records")),
+    }
+
+
+@router.post("", status_code=201, summary="Upload a dataset (highD recording files or "
+             "one ego-centric CSV/Parquet file)")
+def upload_dataset(
+    ctx: ContextDep,
+    kind: Annotated[Literal["highd", "egocentric"], Form()],
+    files: Annotated[list[UploadFile], File()],
+    name: Annotated[str | None, Form(max_length=200)] = None,
+) -> dict[str, Any]:
+    limit = ctx.settings.upload_limit_bytes
+    dataset_id = repo.new_id("ds")
+    staging = ctx.data_dir / "tmp" / f"upload-{uuid.uuid4().hex}"
+    raw = staging / "raw"
+    raw.mkdir(parents=True)
+    try:
+        paths = _save_uploads(files, raw, limit)
+        table, report = domain.dataset_from_files(kind, paths)
+        if len(table) == 0:
+            raise InvalidInput("no cut-ins found in the uploaded files", field="body.files")
+        data_hash = domain.table_hash(table)
+        table.to_parquet(staging / "table.parquet", index=False)
+        final = ctx.data_dir / "datasets" / dataset_id
+        final.parent.mkdir(parents=True, exist_ok=True)
+        staging.replace(final)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    try:
+        with ctx.db.session() as s:
+            row = DatasetRow(id=dataset_id, name=name or paths[0].name, kind=kind,
+                             embedded=False, data_hash=data_hash, n_cutins=len(table),
+                             table_path=f"datasets/{dataset_id}/table.parquet",
+                             report=domain.jsonable(report))
+            s.add(row)
+    except BaseException:
+        shutil.rmtree(final, ignore_errors=True)
+        raise
+    return dataset_view(row)
+
+
+def _save_uploads(files: list[UploadFile], folder: Path, limit: int) -> list[Path]:
+    if not files:
+        raise InvalidInput("no file uploaded", field="body.files")
+    total = 0
+    paths: list[Path] = []
+    for i, upload in enumerate(files):
+        name = Path(upload.filename or "").name
+        if not _SAFE_NAME.match(name):
+            raise InvalidInput(f"file name {upload.filename!r} is not allowed (letters, "
+                               "digits, '.', '_', '-')", field=f"body.files.{i}")
+        target = folder / name
+        if target.exists():
+            raise InvalidInput(f"file {name!r} uploaded twice", field=f"body.files.{i}")
+        with open(target, "wb") as out:
+            while block := upload.file.read(_COPY_BLOCK):
+                total += len(block)
+                if total > limit:
+                    raise PayloadTooLarge(f"upload larger than the limit of {limit} bytes",
+                                          field="body.files")
+                out.write(block)
+        paths.append(target)
+    return paths

@@ -1,0 +1,74 @@
+"""Fitted cut-in models (GMMs): fit on a dataset, list, show."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter
+from pydantic import BaseModel, ConfigDict, Field
+
+from app import domain
+from app.context import ServiceContext
+from app.db import repository as repo
+from app.db.models import ModelRow
+from app.deps import ContextDep, SessionDep
+from app.errors import InvalidInput
+
+router = APIRouter(prefix="/models", tags=["models"])
+
+
+class FitRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    dataset: str = Field(default="tno-cutin", description="id of the dataset to fit on")
+    options: dict[str, Any] = Field(
+        default_factory=dict,
+        description="keyword options of sampler.model.CutInGMM (e.g. max_components)",
+    )
+
+
+def model_view(row: ModelRow, detail: bool = False, components: Any = None) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "id": row.id,
+        "dataset": row.dataset_id,
+        "default": row.is_default,
+        "n_components": row.n_components,
+        "model_hash": row.model_hash,
+        "options": row.options,
+        "created_at": row.created_at.isoformat(),
+    }
+    if detail:
+        out["bic_curve"] = row.bic_curve
+        out["fit_report"] = row.fit_report
+        out["components"] = components
+    return out
+
+
+@router.get("", summary="List fitted models (the default model first)")
+def list_models(session: SessionDep) -> dict[str, Any]:
+    return {"models": [model_view(r) for r in repo.list_models(session)]}
+
+
+@router.get("/{model_id}", summary="A model: components, BIC curve, fit report")
+def show_model(model_id: str, ctx: ContextDep) -> dict[str, Any]:
+    mid = ctx.resolve_model_id(model_id)
+    model = ctx.model(mid, field="path.model_id")
+    with ctx.db.session() as s:
+        row = repo.get_model(s, mid)
+    return model_view(row, detail=True, components=domain.model_components(model))
+
+
+@router.post("", status_code=201, summary="Fit a GMM on a dataset")
+def fit(body: FitRequest, ctx: ContextDep) -> dict[str, Any]:
+    with ctx.db.session() as s:
+        dataset = repo.get_dataset(s, body.dataset, field="body.dataset")
+    try:
+        table = ctx.dataset_table(dataset)
+    except OSError as exc:
+        raise InvalidInput(f"dataset {body.dataset!r} has no readable table: {exc}",
+                                  field="body.dataset") from None
+    fitted = domain.fit_model(table, body.options)
+    row = ServiceContext.model_row(repo.new_id("mdl"), dataset.id, fitted, body.options)
+    with ctx.db.session() as s:
+        s.add(row)
+    return model_view(row, detail=True, components=domain.model_components(fitted.model))

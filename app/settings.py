@@ -1,0 +1,64 @@
+"""Service settings: one pydantic-settings class, read from ``SCENGEN_*`` environment variables.
+
+``get_settings()`` is cached; tests override it (``app.dependency_overrides[get_settings]``)
+or build the app with ``create_app(settings)``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Everything the service can be told from outside. Names map to ``SCENGEN_<NAME>``."""
+
+    model_config = SettingsConfigDict(env_prefix="SCENGEN_", extra="ignore")
+
+    data_dir: Path = Field(
+        default=Path("var"),
+        description="directory for the SQLite file, uploaded data, the cached fitted model "
+        "and catalogue trajectories (SCENGEN_DATA_DIR)",
+    )
+    database_url: str | None = Field(
+        default=None,
+        description="SQLAlchemy URL; default a SQLite file <data_dir>/scengen.db, e.g. "
+        "postgresql+psycopg://postgres@127.0.0.1:5432/test (SCENGEN_DATABASE_URL)",
+    )
+    dask_scheduler: str | None = Field(
+        default=None,
+        description="address of a dask.distributed scheduler (tcp://host:8786); when set "
+        "catalogue chunks run there instead of on the local process pool",
+    )
+    local_workers: int = Field(
+        default=2, ge=0,
+        description="processes of the local pool; 0 runs chunks inline in the job thread",
+    )
+    sync_n_limit: int = Field(default=500, ge=1, description="largest n of POST /scenarios")
+    catalogue_n_limit: int = Field(default=1_000_000, ge=1, description="largest catalogue n")
+    upload_limit_bytes: int = Field(
+        default=50 * 1024 * 1024, ge=1, description="largest dataset upload (all files)"
+    )
+    chunk_size: int = Field(default=250, ge=1, description="scenarios per catalogue chunk")
+    store_trajectories: bool = Field(
+        default=True,
+        description="keep each catalogue scenario's trajectories in per-chunk files; when "
+        "false they are rebuilt from the stored parameters and seed on export",
+    )
+    resume_jobs: bool = Field(
+        default=True, description="resume unfinished catalogue jobs when the service starts"
+    )
+
+    @property
+    def resolved_database_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'scengen.db').resolve()}"
+
+
+@lru_cache
+def get_settings() -> Settings:
+    return Settings()
