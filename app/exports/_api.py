@@ -44,6 +44,10 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
     "exposure_weight",
 )
 
+#: Column names the exports add themselves (``index``: position in the catalogue; ``file``:
+#: the .xosc name in the xosc zip's catalogue.csv); a summary may not use them.
+RESERVED_COLUMNS: tuple[str, ...] = ("index", "file")
+
 #: ``format`` field of every manifest ``build_manifest`` returns.
 MANIFEST_FORMAT = "scengen.catalogue-manifest/1"
 
@@ -113,8 +117,9 @@ def scenario_row(scenario: ConcreteScenario, summary: Mapping[str, Any]) -> dict
     Raises
     ------
     ExportError
-        A summary key is not a string, a value is not a number/string/None, or a summary
-        value contradicts a column computed from the scenario.
+        A summary key is not a string or is one of ``RESERVED_COLUMNS``, a value is not a
+        number/string/None, or a summary value contradicts a column computed from the
+        scenario.
     """
     if not isinstance(scenario, ConcreteScenario):
         raise ExportError(f"scenario: expected a ConcreteScenario, got {type(scenario).__name__}")
@@ -124,6 +129,9 @@ def scenario_row(scenario: ConcreteScenario, summary: Mapping[str, Any]) -> dict
     for key, value in summary.items():
         if not isinstance(key, str) or not key:
             raise ExportError(f"summary: keys must be non-empty strings, got {key!r}")
+        if key in RESERVED_COLUMNS:
+            raise ExportError(f"summary[{key!r}]: the column name {key!r} is reserved by "
+                              "the exports; rename it")
         clean[key] = check_flat_value(value, f"summary[{key!r}]")
 
     row: Row = {}

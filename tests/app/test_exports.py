@@ -1,0 +1,626 @@
+"""Catalogue exports: hand-made scenarios with hand-known rows, files and trajectories.
+
+The scenarios are built by hand (ego plus one cut-in at known positions), never by the
+sampler. Every expected value below is written out, not computed by app.exports.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.metadata
+import io
+import json
+import math
+import re
+import zipfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from lxml import etree
+
+import app.exports._tabular as tabular
+from app.exports import (
+    EXPORT_FORMATS,
+    ExportError,
+    build_manifest,
+    export_catalogue,
+    read_jsonl,
+    read_jsonl_manifest,
+    scenario_row,
+)
+from riskcore.scenario import ConcreteScenario, Track
+
+# --------------------------------------------------------------------------- factories
+
+PARAMS_A = {"p_y1": -0.05, "p_t": 2.0, "p_a1": 0.5, "p_a2": 0.25, "p_a3": 1.0,
+            "p_v0": 25.0, "dv": 4.0, "gap": 12.0}  # ttc = 12 / 4 = 3 s
+PARAMS_B = {"p_y1": 0.04, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
+            "p_v0": 31.0, "dv": -1.0, "gap": 20.0}  # opening: ttc = inf
+
+SUMMARY_A = {"risk": 0.4, "risk_ind": 0.5, "min_ttr": 1.2, "min_ttc": 2.5, "min_wttc": 1.75,
+             "min_thw": 0.625, "evasion": "brake", "exposure_weight": 0.01}
+SUMMARY_B = {"risk": 0.0, "risk_ind": 0.0, "min_ttr": math.inf, "min_ttc": math.inf,
+             "min_wttc": math.inf, "min_thw": 1.5, "evasion": None, "exposure_weight": 2.0}
+
+
+def _track(track_id: str, length: float, width: float, x: list[float], y: list[float],
+           psi: list[float], v: list[float]) -> Track:
+    return Track(track_id, length, width, x=np.array(x), y=np.array(y), psi=np.array(psi),
+                 v=np.array(v))
+
+
+def scenario_a() -> ConcreteScenario:
+    """Ego at 30 m/s in its lane; a cut-in from the left lane, 4 steps of 0.1 s from t=0."""
+    return ConcreteScenario(
+        t=np.array([0.0, 0.1, 0.2, 0.3]),
+        ego=_track("ego", 4.5, 1.8, [0.0, 3.0, 6.0, 9.0], [0.0] * 4, [0.0] * 4, [30.0] * 4),
+        objects=(_track("cutin", 4.0, 1.7, [20.0, 22.5, 25.0, 27.5],
+                        [3.75, 3.5, 3.25, 3.0], [-0.1] * 4, [25.0] * 4),),
+        params=dict(PARAMS_A), seed=7, provenance={"scenario_id": "a"},
+    )
+
+
+def scenario_b() -> ConcreteScenario:
+    """A cut-in from the right whose time grid starts at t = 2 s (3 steps of 0.5 s)."""
+    return ConcreteScenario(
+        t=np.array([2.0, 2.5, 3.0]),
+        ego=_track("ego", 5.0, 2.0, [100.0, 115.0, 130.0], [0.0] * 3, [0.0] * 3, [30.0] * 3),
+        objects=(_track("car 1", 4.25, 1.75, [110.0, 126.0, 142.0], [-3.5, -2.5, -1.5],
+                        [0.2, 0.25, 0.125], [32.0] * 3),),
+        params=dict(PARAMS_B), seed=8, provenance={"scenario_id": "b"},
+    )
+
+
+def items() -> list[tuple[ConcreteScenario, dict[str, Any]]]:
+    return [(scenario_a(), dict(SUMMARY_A)), (scenario_b(), dict(SUMMARY_B))]
+
+
+def manifest() -> dict[str, Any]:
+    return build_manifest(seed=42, model_hash="sha256:abc", sampler_settings={"method": "mcmc"},
+                          constraints=["ttc<3"],
+                          p_region={"estimate": 0.0125, "ci": [0.01, 0.015]},
+                          extra={"catalogue_id": "cat-1"})
+
+
+EXPECTED_COLUMNS = [
+    "scenario_id", "seed",
+    "p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap",
+    "ttc", "duration", "dt", "n_steps", "n_objects",
+    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "evasion",
+    "exposure_weight",
+]
+ROW_A = {"scenario_id": "a", "seed": 7, **PARAMS_A, "ttc": 3.0, "duration": 0.3, "dt": 0.1,
+         "n_steps": 4, "n_objects": 1, **SUMMARY_A}
+ROW_B = {"scenario_id": "b", "seed": 8, **PARAMS_B, "ttc": math.inf, "duration": 1.0,
+         "dt": 0.5, "n_steps": 3, "n_objects": 1, **SUMMARY_B}
+
+
+def _export(tmp_path: Path, fmt: str, name: str | None = None,
+            data: list[tuple[ConcreteScenario, dict[str, Any]]] | None = None) -> Path:
+    out = tmp_path / (name or f"catalogue.{'zip' if fmt == 'xosc' else fmt}")
+    return export_catalogue(fmt, data if data is not None else items(), manifest(), out)
+
+
+def _assert_close_row(actual: dict[str, Any], expected: dict[str, Any]) -> None:
+    assert list(actual) == list(expected)
+    for key, value in expected.items():
+        if isinstance(value, float):
+            assert actual[key] == pytest.approx(value, rel=1e-12), key
+        else:
+            assert actual[key] == value, key
+
+
+# --------------------------------------------------------------------------- scenario_row
+
+
+def test_formats_are_the_four_documented_ones() -> None:
+    assert EXPORT_FORMATS == ("jsonl", "csv", "parquet", "xosc")
+
+
+def test_row_has_parameters_then_derived_then_scores_in_fixed_order() -> None:
+    row = scenario_row(scenario_a(), SUMMARY_A)
+    assert list(row) == EXPECTED_COLUMNS
+    _assert_close_row(row, ROW_A)
+    assert row["ttc"] == 3.0  # 12 m / 4 m/s
+
+
+def test_row_of_an_opening_cut_in_has_infinite_ttc_and_keeps_none() -> None:
+    row = scenario_row(scenario_b(), SUMMARY_B)
+    assert row["ttc"] == math.inf
+    assert row["evasion"] is None
+    assert row["min_ttr"] == math.inf
+
+
+def test_row_without_scores_has_empty_score_columns_and_extras_sorted_last() -> None:
+    sc = scenario_a()
+    row = scenario_row(sc, {"zeta": 1, "alpha": "x"})
+    assert list(row) == [*EXPECTED_COLUMNS, "alpha", "zeta"]
+    assert row["risk"] is None and row["exposure_weight"] is None
+    assert row["alpha"] == "x" and row["zeta"] == 1
+
+
+def test_row_scenario_id_from_summary_wins_over_provenance() -> None:
+    assert scenario_row(scenario_a(), {"scenario_id": 17})["scenario_id"] == 17
+
+
+def test_row_of_a_recorded_drive_without_parameters() -> None:
+    sc = scenario_a()
+    drive = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects)
+    row = scenario_row(drive, {})
+    assert row["p_y1"] is None and row["gap"] is None and row["ttc"] is None
+    assert row["scenario_id"] is None and row["seed"] is None
+
+
+def test_row_accepts_numpy_scalars_as_plain_numbers() -> None:
+    row = scenario_row(scenario_a(), {"risk": np.float64(0.5), "n_hits": np.int64(3)})
+    assert type(row["risk"]) is float and row["risk"] == 0.5
+    assert type(row["n_hits"]) is int and row["n_hits"] == 3
+
+
+@pytest.mark.parametrize(
+    ("summary", "message"),
+    [
+        ({"risk": [0.1, 0.2]}, "summary['risk']: expected a number, string or None, got list"),
+        ({"ttc": 2.0}, "column 'ttc' = 2.0 conflicts with the value 3.0"),
+        ({3: 1.0}, "summary: keys must be non-empty strings"),
+        ({"index": 1}, "summary['index']: the column name 'index' is reserved"),
+        ({"file": "x"}, "summary['file']: the column name 'file' is reserved"),
+    ],
+)
+def test_row_bad_summary_is_a_clear_error(summary: dict[Any, Any], message: str) -> None:
+    with pytest.raises(ExportError, match=re.escape(message)):
+        scenario_row(scenario_a(), summary)
+
+
+def test_row_summary_may_repeat_a_derived_value_when_it_agrees() -> None:
+    assert scenario_row(scenario_a(), {"ttc": 3.0})["ttc"] == 3.0
+
+
+# --------------------------------------------------------------------------- manifest
+
+
+def test_manifest_has_provenance_versions_and_no_clock() -> None:
+    m = manifest()
+    assert m["format"] == "scengen.catalogue-manifest/1"
+    assert m["seed"] == 42
+    assert m["model_hash"] == "sha256:abc"
+    assert m["sampler_settings"] == {"method": "mcmc"}
+    assert m["constraints"] == ["ttc<3"]
+    assert m["p_region"] == {"estimate": 0.0125, "ci": [0.01, 0.015]}
+    assert m["catalogue_id"] == "cat-1"
+    assert set(m["versions"]) == {"scengen", "numpy", "scipy", "scikit-learn", "emcee",
+                                  "scenariogeneration"}
+    assert m["versions"]["numpy"] == np.__version__
+    assert m["versions"]["scenariogeneration"] == importlib.metadata.version(
+        "scenariogeneration")
+    assert "no wall-clock timestamp" in m["note"]
+    assert "created_at" not in m
+    assert manifest() == m  # deterministic
+
+
+def test_manifest_takes_a_timestamp_only_when_given() -> None:
+    m = build_manifest(seed=None, model_hash=None, sampler_settings={}, constraints="ttc<3",
+                       p_region=0.5, extra={"created_at": "2026-01-02T03:04:05"})
+    assert m["created_at"] == "2026-01-02T03:04:05"
+    assert m["constraints"] == ["ttc<3"]
+    assert m["p_region"] == 0.5
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"seed": "7"}, "seed: expected an integer or None"),
+        ({"seed": True}, "seed: expected an integer or None"),
+        ({"sampler_settings": [1]}, "sampler_settings: expected a mapping"),
+        ({"constraints": [3]}, r"constraints\[0\]: expected a string"),
+        ({"p_region": "high"}, "p_region: expected a number, mapping or None"),
+        ({"extra": {"seed": 1}}, r"extra\['seed'\]: would replace a standard manifest field"),
+        ({"sampler_settings": {"f": object()}}, "sampler_settings.f: expected JSON-able data"),
+    ],
+)
+def test_manifest_bad_fields_are_named(kwargs: dict[str, Any], message: str) -> None:
+    args: dict[str, Any] = {"seed": 1, "model_hash": "h", "sampler_settings": {},
+                            "constraints": [], "p_region": None}
+    args.update(kwargs)
+    with pytest.raises(ExportError, match=message):
+        build_manifest(**args)
+
+
+# --------------------------------------------------------------------------- jsonl
+
+
+def _reject_constant(name: str) -> None:
+    raise AssertionError(f"non-standard JSON constant {name}")
+
+
+def test_jsonl_round_trip_is_lossless(tmp_path: Path) -> None:
+    path = _export(tmp_path, "jsonl")
+    back = list(read_jsonl(path))
+    assert [sc for sc, _ in back] == [scenario_a(), scenario_b()]
+    assert [summary for _, summary in back] == [SUMMARY_A, SUMMARY_B]
+    assert back[1][1]["min_ttr"] == math.inf
+    assert read_jsonl_manifest(path) == manifest()
+
+
+def test_jsonl_is_strict_json_one_record_per_line(tmp_path: Path) -> None:
+    lines = _export(tmp_path, "jsonl").read_text(encoding="utf-8").splitlines()
+    assert len(lines) == 3
+    records = [json.loads(line, parse_constant=_reject_constant) for line in lines]
+    assert records[0]["kind"] == "manifest"
+    assert records[0]["manifest"]["seed"] == 42
+    assert [r["kind"] for r in records[1:]] == ["scenario", "scenario"]
+    assert [r["index"] for r in records[1:]] == [0, 1]
+    assert records[2]["summary"]["min_ttr"] == "Infinity"
+    assert records[1]["scenario"] == scenario_a().to_dict()
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.dictionaries(st.text(min_size=1, max_size=8).filter(
+                           lambda k: k not in {"index", "file", *EXPECTED_COLUMNS}),
+                       st.one_of(st.none(), st.booleans(), st.floats(allow_nan=False),
+                                 st.integers(-(2**53), 2**53),
+                                 st.text(max_size=10).filter(
+                                     lambda s: s not in ("Infinity", "-Infinity", "NaN"))),
+                       max_size=6))
+def test_jsonl_round_trips_any_flat_summary(summary: dict[str, Any]) -> None:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = export_catalogue("jsonl", [(scenario_a(), summary)], {"k": 1},
+                               Path(tmp) / "c.jsonl")
+        [(sc, back)] = list(read_jsonl(out))
+    assert sc == scenario_a()
+    assert back == summary
+    assert [type(v) for v in back.values()] == [type(v) for v in summary.values()]
+
+
+# --------------------------------------------------------------------------- csv
+
+
+def test_csv_has_one_row_per_scenario_with_every_column(tmp_path: Path) -> None:
+    text = _export(tmp_path, "csv").read_text(encoding="utf-8")
+    rows = list(csv.reader(io.StringIO(text)))
+    assert rows[0] == ["index", *EXPECTED_COLUMNS]
+    assert len(rows) == 3
+    a = dict(zip(rows[0], rows[1], strict=True))
+    b = dict(zip(rows[0], rows[2], strict=True))
+    assert a["index"] == "0" and b["index"] == "1"
+    assert a["scenario_id"] == "a" and a["seed"] == "7"
+    assert a["gap"] == "12.0" and a["dv"] == "4.0" and a["ttc"] == "3.0"
+    assert a["p_y1"] == "-0.05" and a["p_a2"] == "0.25"
+    assert a["n_steps"] == "4" and a["n_objects"] == "1"
+    assert a["risk"] == "0.4" and a["min_thw"] == "0.625" and a["evasion"] == "brake"
+    assert a["exposure_weight"] == "0.01"
+    assert b["ttc"] == "inf" and b["min_ttr"] == "inf"
+    assert b["evasion"] == ""  # None
+    assert float(a["duration"]) == pytest.approx(0.3)
+    assert "\r" not in text
+
+
+def test_csv_reads_back_with_pandas(tmp_path: Path) -> None:
+    import pandas as pd
+
+    df = pd.read_csv(_export(tmp_path, "csv"))
+    assert list(df.columns) == ["index", *EXPECTED_COLUMNS]
+    assert df.loc[0, "gap"] == 12.0
+    assert df.loc[1, "ttc"] == math.inf
+
+
+def test_csv_rejects_a_summary_key_that_the_first_row_did_not_have(tmp_path: Path) -> None:
+    data = [(scenario_a(), dict(SUMMARY_A)), (scenario_b(), {**SUMMARY_B, "surprise": 1.0})]
+    with pytest.raises(ExportError, match=r"item 1: column\(s\) 'surprise' not in the first row"):
+        _export(tmp_path, "csv", data=data)
+    assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- parquet
+
+
+def test_parquet_has_typed_columns_values_and_the_manifest(tmp_path: Path) -> None:
+    path = _export(tmp_path, "parquet")
+    table = pq.read_table(path)
+    assert table.column_names == ["index", *EXPECTED_COLUMNS]
+    assert table.schema.field("index").type == pa.int64()
+    assert table.schema.field("seed").type == pa.int64()
+    assert table.schema.field("gap").type == pa.float64()
+    assert table.schema.field("evasion").type == pa.string()
+    assert table.schema.field("scenario_id").type == pa.string()
+    rows = table.to_pylist()
+    _assert_close_row({k: v for k, v in rows[0].items() if k != "index"}, ROW_A)
+    _assert_close_row({k: v for k, v in rows[1].items() if k != "index"}, ROW_B)
+    assert [r["index"] for r in rows] == [0, 1]
+    meta = pq.read_schema(path).metadata
+    assert json.loads(meta[b"scengen.manifest"]) == manifest()
+
+
+def test_parquet_is_written_in_row_groups(tmp_path: Path,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(tabular, "ROW_GROUP_SIZE", 2)
+    data = [(scenario_a(), dict(SUMMARY_A))] * 5
+    path = _export(tmp_path, "parquet", data=data)
+    meta = pq.ParquetFile(path).metadata
+    assert meta.num_row_groups == 3
+    assert meta.num_rows == 5
+    assert pq.read_table(path).column("index").to_pylist() == [0, 1, 2, 3, 4]
+
+
+def test_parquet_rejects_a_column_that_changes_kind(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(tabular, "ROW_GROUP_SIZE", 1)
+    data = [(scenario_a(), {"note": 1.5}), (scenario_b(), {"note": "text"})]
+    with pytest.raises(ExportError, match="item 1: column 'note' holds number values"):
+        _export(tmp_path, "parquet", data=data)
+
+
+# --------------------------------------------------------------------------- xosc
+
+
+def _xsd(name: str) -> etree.XMLSchema:
+    files = importlib.metadata.files("scenariogeneration") or []
+    [path] = [f for f in files if f.name == name]
+    return etree.XMLSchema(etree.parse(str(path.locate())))
+
+
+@pytest.fixture(scope="module")
+def xosc_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _export(tmp_path_factory.mktemp("xosc"), "xosc")
+
+
+def test_xosc_zip_layout(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        names = zf.namelist()
+        infos = zf.infolist()
+    assert names == ["catalogue.csv", "manifest.json", "road.xodr",
+                     "scenario_0000000.xosc", "scenario_0000001.xosc"]
+    assert all(i.date_time == (1980, 1, 1, 0, 0, 0) for i in infos)
+
+
+def test_every_xosc_validates_against_openscenario_1_2(xosc_zip: Path) -> None:
+    schema = _xsd("OpenSCENARIO_1_2.xsd")
+    with zipfile.ZipFile(xosc_zip) as zf:
+        for name in ("scenario_0000000.xosc", "scenario_0000001.xosc"):
+            doc = etree.fromstring(zf.read(name))
+            assert schema.validate(doc), (name, schema.error_log)
+            header = doc.find("FileHeader")
+            assert header is not None
+            assert (header.get("revMajor"), header.get("revMinor")) == ("1", "2")
+
+
+def test_road_validates_against_opendrive_1_7_and_centres_the_ego_lane(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        doc = etree.fromstring(zf.read("road.xodr"))
+    schema = _xsd("opendrive_17_core.xsd")
+    assert schema.validate(doc), schema.error_log
+    geometry = doc.find("road/planView/geometry")
+    assert geometry is not None
+    # vehicles reach y = 3.75 (one lane left) and y = -3.5 (one lane right): 3 lanes of
+    # 3.75 m, the reference line (left edge) 1.5 lane widths above the ego lane centre.
+    assert float(geometry.get("y", "nan")) == 5.625
+    assert float(geometry.get("hdg", "nan")) == 0.0
+    lanes = doc.findall("road/lanes/laneSection/right/lane")
+    assert [lane.get("id") for lane in lanes] == ["-1", "-2", "-3"]
+    assert all(lane.find("width").get("a") == "3.75" for lane in lanes)  # type: ignore[union-attr]
+    assert doc.findall("road/lanes/laneSection/left/lane") == []
+    # x: from the rearmost vehicle end (-2.25 m) to the foremost (144.125 m) +- 50 m
+    x0 = float(geometry.get("x", "nan"))
+    length = float(geometry.get("length", "nan"))
+    assert x0 <= -52.25 and x0 + length >= 194.125
+    assert doc.find("header").get("date") is None  # type: ignore[union-attr]
+
+
+def _vertices(doc: etree._Element, entity: str) -> list[etree._Element]:
+    group = doc.xpath(f"//ManeuverGroup[Actors/EntityRef/@entityRef='{entity}']")
+    assert len(group) == 1
+    return list(group[0].iterfind(".//Trajectory/Shape/Polyline/Vertex"))
+
+
+def test_xosc_trajectories_are_the_exact_scenario_tracks(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        doc_a = etree.fromstring(zf.read("scenario_0000000.xosc"))
+        doc_b = etree.fromstring(zf.read("scenario_0000001.xosc"))
+    for doc, expected in (
+        (doc_a, {"ego": [(0.0, 0.0, 0.0, 0.0), (0.3, 9.0, 0.0, 0.0)],
+                 "cutin": [(0.0, 20.0, 3.75, -0.1), (0.3, 27.5, 3.0, -0.1)]}),
+        (doc_b, {"ego": [(2.0, 100.0, 0.0, 0.0), (3.0, 130.0, 0.0, 0.0)],
+                 "car 1": [(2.0, 110.0, -3.5, 0.2), (3.0, 142.0, -1.5, 0.125)]}),
+    ):
+        n_steps = 4 if doc is doc_a else 3
+        for entity, ((t0, x0, y0, h0), (t1, x1, y1, h1)) in expected.items():
+            vertices = _vertices(doc, entity)
+            assert len(vertices) == n_steps
+            first, last = vertices[0], vertices[-1]
+            p0, p1 = first.find("Position/WorldPosition"), last.find("Position/WorldPosition")
+            assert p0 is not None and p1 is not None
+            assert float(first.get("time", "nan")) == t0
+            assert float(last.get("time", "nan")) == t1
+            assert (float(p0.get("x")), float(p0.get("y")), float(p0.get("h"))) == (x0, y0, h0)
+            assert (float(p1.get("x")), float(p1.get("y")), float(p1.get("h"))) == (x1, y1, h1)
+    # a middle vertex too: the cut-in of scenario a at t = 0.2 s is at (25, 3.25)
+    middle = _vertices(doc_a, "cutin")[2]
+    assert float(middle.get("time", "nan")) == pytest.approx(0.2)
+    pos = middle.find("Position/WorldPosition")
+    assert pos is not None and (pos.get("x"), pos.get("y")) == ("25.0", "3.25")
+
+
+def test_xosc_timing_entities_and_init(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        doc = etree.fromstring(zf.read("scenario_0000001.xosc"))
+    timings = doc.findall(".//FollowTrajectoryAction/TimeReference/Timing")
+    assert len(timings) == 2
+    for timing in timings:
+        assert timing.get("domainAbsoluteRelative") == "absolute"
+        assert float(timing.get("offset", "nan")) == -2.0  # the grid starts at t = 2 s
+        assert float(timing.get("scale", "nan")) == 1.0
+    modes = doc.xpath("//FollowTrajectoryAction/TrajectoryFollowingMode/@followingMode")
+    assert modes == ["position", "position"]
+    [car] = doc.xpath("//ScenarioObject[@name='car 1']/Vehicle")
+    assert car.find("BoundingBox/Center").get("x") == "0.0"
+    dims = car.find("BoundingBox/Dimensions")
+    assert (dims.get("length"), dims.get("width")) == ("4.25", "1.75")
+    [teleport] = doc.xpath("//Init//Private[@entityRef='car 1']//TeleportAction//WorldPosition")
+    assert (teleport.get("x"), teleport.get("y"), teleport.get("h")) == ("110.0", "-3.5", "0.2")
+    [speed] = doc.xpath("//Init//Private[@entityRef='car 1']//AbsoluteTargetSpeed/@value")
+    assert float(speed) == 32.0
+    [stop] = doc.xpath("/OpenSCENARIO/Storyboard/StopTrigger//SimulationTimeCondition/@value")
+    assert float(stop) == 1.0  # 3 s - 2 s
+    assert doc.xpath("//RoadNetwork/LogicFile/@filepath") == ["road.xodr"]
+
+
+def test_xosc_manifest_and_index(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        m = json.loads(zf.read("manifest.json"), parse_constant=_reject_constant)
+        index = list(csv.DictReader(io.StringIO(zf.read("catalogue.csv").decode())))
+    expected = manifest()
+    for key, value in expected.items():
+        assert m[key] == value, key
+    assert m["export"]["n_scenarios"] == 2
+    assert m["export"]["lane_width"] == 3.75
+    assert m["export"]["road_file"] == "road.xodr"
+    assert [r["file"] for r in index] == ["scenario_0000000.xosc", "scenario_0000001.xosc"]
+    assert [r["scenario_id"] for r in index] == ["a", "b"]
+    assert index[0]["risk"] == "0.4"
+
+
+def test_xosc_road_grows_lanes_for_far_vehicles_and_uses_the_lane_width(
+        tmp_path: Path) -> None:
+    sc = scenario_a()
+    far = _track("far", 4.0, 1.8, [0.0, 1.0, 2.0, 3.0], [7.0] * 4, [0.0] * 4, [10.0] * 4)
+    wide = ConcreteScenario(t=sc.t, ego=sc.ego, objects=(*sc.objects, far),
+                            params={**PARAMS_A, "lane_width": 3.5})
+    path = _export(tmp_path, "xosc", data=[(wide, {})])
+    with zipfile.ZipFile(path) as zf:
+        doc = etree.fromstring(zf.read("road.xodr"))
+    lanes = doc.findall("road/lanes/laneSection/right/lane")
+    # y = 7 m is two 3.5 m lanes left of the ego lane: lanes -1 (far), -2, -3 (ego), -4
+    assert [lane.get("id") for lane in lanes] == ["-1", "-2", "-3", "-4"]
+    assert float(doc.find("road/planView/geometry").get("y")) == 8.75  # type: ignore[union-attr]
+
+
+def test_xosc_rejects_mixed_lane_widths(tmp_path: Path) -> None:
+    sc = scenario_a()
+    other = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects,
+                             params={**PARAMS_A, "lane_width": 3.5})
+    with pytest.raises(ExportError, match=re.escape("item 1: lane_width 3.5 m differs")):
+        _export(tmp_path, "xosc", data=[(sc, {}), (other, {})])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_schema_failure_is_a_clear_error() -> None:
+    import xml.etree.ElementTree as ET
+
+    from app.exports._xosc import _validated_bytes
+
+    message = "does not validate against OpenSCENARIO_1_2.xsd"
+    with pytest.raises(ExportError, match=re.escape(message)):
+        _validated_bytes(ET.Element("OpenSCENARIO"), "OpenSCENARIO_1_2.xsd", "scenario 0")
+
+
+# --------------------------------------------------------------------------- determinism
+
+
+@pytest.mark.parametrize("fmt", EXPORT_FORMATS)
+def test_same_input_gives_byte_identical_files(tmp_path: Path, fmt: str) -> None:
+    first = _export(tmp_path, fmt, name="one")
+    second = _export(tmp_path, fmt, name="two")
+    assert first.read_bytes() == second.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one", "two"]  # no leftovers
+
+
+def test_different_input_gives_different_files(tmp_path: Path) -> None:
+    first = _export(tmp_path, "xosc", name="one")
+    second = _export(tmp_path, "xosc", name="two", data=[items()[1], items()[0]])
+    assert first.read_bytes() != second.read_bytes()
+
+
+# --------------------------------------------------------------------------- streaming and errors
+
+
+@pytest.mark.parametrize("fmt", EXPORT_FORMATS)
+def test_items_are_consumed_lazily_from_a_generator(tmp_path: Path, fmt: str) -> None:
+    consumed: list[int] = []
+
+    def gen() -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
+        for i, item in enumerate(items() * 2):
+            consumed.append(i)
+            yield item
+
+    export_catalogue(fmt, gen(), {}, tmp_path / "out")
+    assert consumed == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("fmt", EXPORT_FORMATS)
+def test_a_failing_stream_leaves_no_file(tmp_path: Path, fmt: str) -> None:
+    def gen() -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
+        yield items()[0]
+        raise RuntimeError("database went away")
+
+    with pytest.raises(RuntimeError, match="database went away"):
+        export_catalogue(fmt, gen(), {}, tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unknown_format_is_named(tmp_path: Path) -> None:
+    message = "unknown export format 'xlsx'; choose one of jsonl, csv, parquet, xosc"
+    with pytest.raises(ExportError, match=re.escape(message)):
+        export_catalogue("xlsx", items(), {}, tmp_path / "out")
+
+
+@pytest.mark.parametrize("fmt", EXPORT_FORMATS)
+def test_empty_catalogue_is_an_error(tmp_path: Path, fmt: str) -> None:
+    with pytest.raises(ExportError, match="the catalogue is empty"):
+        export_catalogue(fmt, [], {}, tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("fmt", EXPORT_FORMATS)
+def test_scenario_without_objects_is_an_error(tmp_path: Path, fmt: str) -> None:
+    sc = scenario_a()
+    alone = ConcreteScenario(t=sc.t, ego=sc.ego, objects=())
+    with pytest.raises(ExportError, match="item 1: the scenario has no objects besides the ego"):
+        export_catalogue(fmt, [items()[0], (alone, {})], {}, tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ([("not a scenario", {})], "item 0: expected a ConcreteScenario, got str"),
+        ([(None,)], r"item 0: expected a \(scenario, summary\) pair"),
+        ([(None, {}, 3)], r"item 0: expected a \(scenario, summary\) pair"),
+        (42, "items: expected an iterable"),
+        ({"a": 1}, "items: expected an iterable"),
+    ],
+)
+def test_bad_items_are_named(tmp_path: Path, data: Any, message: str) -> None:
+    with pytest.raises(ExportError, match=message):
+        export_catalogue("csv", data, {}, tmp_path / "out")
+
+
+def test_bad_manifest_and_output_path(tmp_path: Path) -> None:
+    with pytest.raises(ExportError, match="manifest: expected a mapping"):
+        export_catalogue("csv", items(), [], tmp_path / "out")  # type: ignore[arg-type]
+    with pytest.raises(ExportError, match=re.escape("manifest.when: expected JSON-able data")):
+        export_catalogue("csv", items(), {"when": object()}, tmp_path / "out")
+    with pytest.raises(ExportError, match="does not exist"):
+        export_catalogue("csv", items(), {}, tmp_path / "missing" / "out")
+    with pytest.raises(ExportError, match="is a directory"):
+        export_catalogue("csv", items(), {}, tmp_path)
+    with pytest.raises(ExportError, match="'export' is reserved"):
+        export_catalogue("xosc", items(), {"export": 1}, tmp_path / "out")
+    with pytest.raises(ExportError, match="created_at: 'yesterday' is not an ISO 8601"):
+        export_catalogue("xosc", items(), {"created_at": "yesterday"}, tmp_path / "out")
+
+
+def test_xosc_header_date_comes_from_created_at(tmp_path: Path) -> None:
+    path = export_catalogue("xosc", items(), {"created_at": "2026-03-04T05:06:07"},
+                            tmp_path / "c.zip")
+    with zipfile.ZipFile(path) as zf:
+        doc = etree.fromstring(zf.read("scenario_0000000.xosc"))
+    assert doc.find("FileHeader").get("date") == "2026-03-04T05:06:07"  # type: ignore[union-attr]
