@@ -108,8 +108,15 @@ def iter_items(ctx: ServiceContext,
         chunks = {c.chunk_index: c for c in repo.chunk_rows(s, catalogue_id)}
     current: int | None = None
     stream: Iterator[ConcreteScenario] | None = None
-    with ctx.db.sessions() as s:
-        for row in repo.iter_scenarios(s, catalogue_id):
+    last = -1
+    while True:
+        # one short transaction per batch: never hold the database during a long export
+        with ctx.db.session() as s:
+            rows = repo.scenario_batch(s, catalogue_id, last, 500)
+        if not rows:
+            return
+        last = rows[-1].idx
+        for row in rows:
             if row.chunk_index != current:
                 current = row.chunk_index
                 chunk = chunks.get(current)

@@ -1,20 +1,174 @@
-"""``scengen serve`` (and later ``scengen catalogue ...``)."""
+"""``scengen serve`` and ``scengen catalogue create|resume|status|list|export``.
+
+The catalogue commands work on the local store (``SCENGEN_DATA_DIR``,
+``SCENGEN_DATABASE_URL``) — the same one the service uses — and run jobs in the
+foreground on the configured executor (local pool, or Dask when
+``SCENGEN_DASK_SCHEDULER`` is set), with a progress bar on stderr. A ``create`` that is
+interrupted (Ctrl-C, kill) leaves its finished chunks stored; ``resume ID`` (or a service
+start) completes it with the same result an uninterrupted run gives.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import logging
+import sys
+from pathlib import Path
 from typing import Any
+
+from app.cli import CliError
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     serve = subparsers.add_parser("serve", help="start the HTTP service")
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--log-level", default="info",
+                       choices=["critical", "error", "warning", "info", "debug"])
     serve.set_defaults(func=_serve)
+
+    cat = subparsers.add_parser("catalogue", help="test catalogues in the local store")
+    sub = cat.add_subparsers(dest="catalogue_command", metavar="ACTION", required=True)
+
+    create = sub.add_parser("create", help="generate a catalogue (foreground, resumable)")
+    create.add_argument("--n", type=int, required=True, help="number of scenarios")
+    create.add_argument("--seed", type=int, default=0)
+    create.add_argument("--constraint", action="append", dest="constraints", default=None,
+                        metavar="EXPR", help="risk-region constraint, repeatable "
+                        "(default: ttc<3)")
+    create.add_argument("--model", default="default", help="model id (default: the "
+                        "embedded data's model)")
+    create.add_argument("--sampler", default="auto", choices=["auto", "rejection", "mcmc"])
+    create.add_argument("--no-score", action="store_true", help="skip the TTR risk")
+    create.add_argument("--chunk-size", type=int, default=None)
+    create.add_argument("--no-progress", action="store_true")
+    create.set_defaults(func=_create)
+
+    resume = sub.add_parser("resume", help="finish an interrupted catalogue")
+    resume.add_argument("id")
+    resume.add_argument("--no-progress", action="store_true")
+    resume.set_defaults(func=_resume)
+
+    status = sub.add_parser("status", help="print a catalogue's status as JSON")
+    status.add_argument("id")
+    status.set_defaults(func=_status)
+
+    listing = sub.add_parser("list", help="list the catalogues")
+    listing.set_defaults(func=_list)
+
+    export = sub.add_parser("export", help="export a finished catalogue")
+    export.add_argument("id")
+    export.add_argument("--format", default="jsonl",
+                        choices=["jsonl", "csv", "parquet", "xosc"])
+    export.add_argument("--out", type=Path, required=True, help="output file")
+    export.set_defaults(func=_export)
 
 
 def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    uvicorn.run("app.main:app", host=args.host, port=args.port)
+    _logging()
+    uvicorn.run("app.main:app", host=args.host, port=args.port, log_level=args.log_level)
+    return 0
+
+
+def _logging() -> None:
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def _context(load_defaults: bool = True) -> Any:
+    from app.context import ServiceContext
+    from app.settings import get_settings
+
+    return ServiceContext.open(get_settings(), load_defaults=load_defaults)
+
+
+def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
+    from tqdm import tqdm
+
+    bar: Any = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if not show_progress:
+            return
+        if bar is None:
+            bar = tqdm(total=total, initial=done, unit="chunk", file=sys.stderr,
+                       desc=catalogue_id)
+        else:
+            bar.update(done - bar.n)
+
+    try:
+        status = ctx.runner().run(catalogue_id, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    print(json.dumps({"id": catalogue_id, "status": status}))
+    if status != "done":
+        from app import catalogues
+
+        error = catalogues.describe(ctx, catalogue_id).get("error")
+        raise CliError(f"catalogue {catalogue_id} {status}: {error}")
+    return 0
+
+
+def _create(args: argparse.Namespace) -> int:
+    from app import catalogues
+
+    ctx = _context()
+    try:
+        row = catalogues.create(ctx, n=args.n, seed=args.seed,
+                                constraints=args.constraints or ["ttc<3"], model=args.model,
+                                method=args.sampler, score=not args.no_score,
+                                chunk_size=args.chunk_size)
+        print(f"catalogue {row.id}: {row.n} scenarios in {row.n_chunks} chunks",
+              file=sys.stderr)
+        return _run(ctx, row.id, not args.no_progress)
+    finally:
+        ctx.close()
+
+
+def _resume(args: argparse.Namespace) -> int:
+    ctx = _context(load_defaults=False)
+    try:
+        return _run(ctx, args.id, not args.no_progress)
+    finally:
+        ctx.close()
+
+
+def _status(args: argparse.Namespace) -> int:
+    from app import catalogues
+
+    ctx = _context(load_defaults=False)
+    try:
+        print(json.dumps(catalogues.describe(ctx, args.id), indent=2))
+    finally:
+        ctx.close()
+    return 0
+
+
+def _list(args: argparse.Namespace) -> int:
+    from app.db import repository as repo
+
+    ctx = _context(load_defaults=False)
+    try:
+        with ctx.db.session() as s:
+            for r in repo.list_catalogues(s):
+                print(f"{r.id}\t{r.status}\tn={r.n}\tseed={r.seed}\t{r.created_at:%Y-%m-%d %H:%M}")
+    finally:
+        ctx.close()
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from app import catalogues
+
+    ctx = _context(load_defaults=False)
+    try:
+        out = catalogues.export(ctx, args.id, args.format, args.out)
+    finally:
+        ctx.close()
+    print(str(out))
     return 0

@@ -163,14 +163,20 @@ def iter_scenarios(session: Session, catalogue_id: str,
     """All scenario rows of a catalogue in index order, fetched in batches."""
     last = -1
     while True:
-        stmt = (select(ScenarioRow).where(ScenarioRow.catalogue_id == catalogue_id,
-                                          ScenarioRow.idx > last)
-                .order_by(ScenarioRow.idx).limit(batch))
-        rows = list(session.scalars(stmt))
+        rows = scenario_batch(session, catalogue_id, last, batch)
         if not rows:
             return
         yield from rows
         last = rows[-1].idx
+
+
+def scenario_batch(session: Session, catalogue_id: str, after: int,
+                   limit: int) -> list[ScenarioRow]:
+    """Up to ``limit`` scenario rows with index > ``after``, in index order."""
+    stmt = (select(ScenarioRow).where(ScenarioRow.catalogue_id == catalogue_id,
+                                      ScenarioRow.idx > after)
+            .order_by(ScenarioRow.idx).limit(limit))
+    return list(session.scalars(stmt))
 
 
 def chunk_rows(session: Session, catalogue_id: str) -> list[ChunkRow]:

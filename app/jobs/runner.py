@@ -60,10 +60,12 @@ def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
 class CatalogueRunner:
     """Runs catalogue jobs against one database/data dir with one executor."""
 
-    def __init__(self, db: Database, data_dir: Path, executor: ChunkExecutor) -> None:
+    def __init__(self, db: Database, data_dir: Path, executor: ChunkExecutor,
+                 region: Callable[[CatalogueSpec], dict[str, Any]] = estimate_region) -> None:
         self.db = db
         self.data_dir = Path(data_dir)
         self.executor = executor
+        self.region = region
 
     def run(self, catalogue_id: str, *, cancel: threading.Event | None = None,
             stop: threading.Event | None = None, progress: Progress | None = None) -> str:
@@ -90,7 +92,7 @@ class CatalogueRunner:
             progress(len(done), total)
         try:
             if need_region:
-                p_region = estimate_region(spec)
+                p_region = self.region(spec)
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region

@@ -1,0 +1,83 @@
+"""Data factories for the app tests: settings, stores, PostgreSQL databases, rows."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import psycopg
+from sqlalchemy.engine import make_url
+
+from app.settings import Settings
+
+PG_ADMIN_URL = os.environ.get("SCENGEN_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
+
+
+def make_settings(data_dir: Path, **overrides: Any) -> Settings:
+    """Settings for a private store under ``data_dir`` (SQLite unless database_url given)."""
+    values: dict[str, Any] = {"data_dir": data_dir, "local_workers": 0, "chunk_size": 5}
+    values.update(overrides)
+    return Settings(**values)
+
+
+def pg_available() -> bool:
+    try:
+        with psycopg.connect(_libpq(PG_ADMIN_URL), connect_timeout=3):
+            return True
+    except psycopg.Error:
+        return False
+
+
+def _libpq(url: str) -> str:
+    u = make_url(url)
+    return u.set(drivername="postgresql").render_as_string(hide_password=False)
+
+
+@contextmanager
+def pg_database() -> Iterator[str]:
+    """A fresh, uniquely named PostgreSQL database; dropped afterwards. Yields its URL."""
+    name = f"scengen_t_{uuid.uuid4().hex[:16]}"
+    admin = _libpq(PG_ADMIN_URL)
+    with psycopg.connect(admin, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    try:
+        yield make_url(PG_ADMIN_URL).set(database=name).render_as_string(hide_password=False)
+    finally:
+        with psycopg.connect(admin, autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def copy_model_cache(src_data_dir: Path, dst_data_dir: Path) -> None:
+    """Reuse a fitted default model (the cache is keyed by the data hash)."""
+    src = src_data_dir / "models"
+    if src.is_dir():
+        shutil.copytree(src, dst_data_dir / "models", dirs_exist_ok=True)
+
+
+def scenario_rows(chunk_index: int, start: int, count: int) -> list[dict[str, Any]]:
+    """Stored-scenario rows as a chunk would produce them (hand-made numbers)."""
+    rows = []
+    for k in range(count):
+        idx = start + k
+        rows.append({
+            "idx": idx, "chunk_index": chunk_index, "seed": 1000 + idx,
+            "params": {"gap": 10.0 + idx, "dv": 5.0},
+            "ttc": (10.0 + idx) / 5.0 if idx % 4 else float("inf"),
+            "risk": idx / 100.0,
+            "exposure_weight": 1.0,
+            "summary": {"risk": idx / 100.0, "min_ttr": "Infinity"},
+        })
+    return rows

@@ -1,0 +1,86 @@
+"""Every error class maps to its status and the one body shape."""
+
+from __future__ import annotations
+
+import pytest
+from fastapi import FastAPI
+from fastapi.testclient import TestClient
+from pydantic import BaseModel
+
+from app.errors import (
+    Conflict,
+    DomainUnavailable,
+    InvalidInput,
+    NotFound,
+    PayloadTooLarge,
+    ServiceError,
+    install_error_handlers,
+)
+
+
+class Body(BaseModel):
+    n: int
+
+
+def _app() -> FastAPI:
+    app = FastAPI()
+    install_error_handlers(app)
+    errors: dict[str, ServiceError] = {
+        "notfound": NotFound("thing 'x' not found", field="path.id"),
+        "invalid": InvalidInput("n is too big", field="body.n"),
+        "large": PayloadTooLarge("too big"),
+        "conflict": Conflict("not finished"),
+        "unavailable": DomainUnavailable("sampler.sample is not available yet"),
+    }
+
+    @app.get("/raise/{kind}")
+    def raise_(kind: str) -> None:
+        if kind == "crash":
+            raise ZeroDivisionError("bug")
+        raise errors[kind]
+
+    @app.post("/body")
+    def body(b: Body) -> dict[str, int]:
+        return {"n": b.n}
+
+    return app
+
+
+@pytest.mark.parametrize(("kind", "status", "field"), [
+    ("notfound", 404, "path.id"),
+    ("invalid", 422, "body.n"),
+    ("large", 413, None),
+    ("conflict", 409, None),
+    ("unavailable", 501, None),
+])
+def test_service_errors_have_the_common_shape(kind: str, status: int, field: str | None) -> None:
+    with TestClient(_app()) as client:
+        r = client.get(f"/raise/{kind}")
+    assert r.status_code == status
+    body = r.json()
+    assert set(body) == {"error"}
+    assert body["error"]["status"] == status
+    assert body["error"]["field"] == field
+    assert isinstance(body["error"]["message"], str) and body["error"]["message"]
+
+
+def test_validation_errors_name_the_field() -> None:
+    with TestClient(_app()) as client:
+        r = client.post("/body", json={"n": "many"})
+        missing = client.post("/body", json={})
+        not_json = client.post("/body", content=b"{", headers={"content-type": "application/json"})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "body.n"
+    assert "body.n" in r.json()["error"]["message"]
+    assert missing.status_code == 422 and missing.json()["error"]["field"] == "body.n"
+    assert not_json.status_code == 422 and not_json.json()["error"]["status"] == 422
+
+
+def test_unknown_route_and_unexpected_errors_keep_the_shape() -> None:
+    with TestClient(_app(), raise_server_exceptions=False) as client:
+        r404 = client.get("/nowhere")
+        r500 = client.get("/raise/crash")
+        r405 = client.delete("/body")
+    assert r404.status_code == 404 and r404.json()["error"]["status"] == 404
+    assert r405.status_code == 405 and r405.json()["error"]["status"] == 405
+    assert r500.status_code == 500
+    assert r500.json()["error"]["message"] == "internal error: ZeroDivisionError"

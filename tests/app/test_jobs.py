@@ -1,0 +1,163 @@
+"""The job runner's bookkeeping with an injected chunk function (no domain code): chunks
+stored as they finish, a failed job keeps them, a resumed job equals an uninterrupted one,
+cancellation, and the seed derivation."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app.db import repository as repo
+from app.db.database import Database
+from app.db.models import CatalogueRow, DatasetRow, ModelRow
+from app.jobs import CatalogueRunner, CatalogueSpec, ChunkResult, InlineExecutor
+from app.jobs.chunk import chunk_seed, scenario_seed
+
+
+def fake_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
+    """Deterministic stand-in for compute_chunk: rows from (seed, index) only."""
+    start, stop = spec.bounds(index)
+    rng = np.random.default_rng(chunk_seed(spec.seed, index))
+    rows = [{"idx": i, "chunk_index": index, "seed": scenario_seed(spec.seed, i),
+             "params": {"gap": float(rng.uniform(5, 50)), "dv": 3.0},
+             "ttc": 1.0, "risk": float(rng.uniform()), "exposure_weight": 1.0,
+             "summary": {}} for i in range(start, stop)]
+    return ChunkResult(index=index, rows=rows, blob=f"chunk {index}".encode())
+
+
+class Exploding:
+    """Fails at chunk ``at`` (a crash in the middle of a job)."""
+
+    def __init__(self, at: int) -> None:
+        self.at = at
+
+    def __call__(self, spec: CatalogueSpec, index: int) -> ChunkResult:
+        if index == self.at:
+            raise RuntimeError(f"boom at chunk {index}")
+        return fake_chunk(spec, index)
+
+
+def region(spec: CatalogueSpec) -> dict[str, Any]:
+    return {"estimate": 0.25, "ci": [0.2, 0.3]}
+
+
+def _db(tmp_path: Path) -> Database:
+    db = Database(f"sqlite:///{tmp_path / 'jobs.db'}")
+    db.migrate()
+    with db.session() as s:
+        s.add(DatasetRow(id="ds", name="d", kind="embedded", embedded=True, data_hash="h",
+                         n_cutins=1, table_path="x", report={}))
+        s.flush()
+        s.add(ModelRow(id="m", dataset_id="ds", is_default=True, options={}, n_components=1,
+                       model_hash="mh", model_json="{}", bic_curve=[], fit_report={}))
+    return db
+
+
+def _catalogue(db: Database, cid: str, n: int = 23, seed: int = 11) -> None:
+    with db.session() as s:
+        s.add(CatalogueRow(id=cid, model_id="m", status="queued", n=n, seed=seed,
+                           chunk_size=5, n_chunks=(n + 4) // 5,
+                           spec={"constraints": ["ttc<3"], "method": "auto", "score": True}))
+
+
+def _rows(db: Database, cid: str) -> list[tuple[Any, ...]]:
+    with db.session() as s:
+        return [(r.idx, r.chunk_index, r.seed, r.params, r.risk)
+                for r in repo.iter_scenarios(s, cid)]
+
+
+def test_a_job_stores_every_chunk_and_p_region(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    _catalogue(db, "a")
+    seen: list[tuple[int, int]] = []
+    runner = CatalogueRunner(db, tmp_path, InlineExecutor(fake_chunk), region=region)
+    assert runner.run("a", progress=lambda d, t: seen.append((d, t))) == "done"
+    assert seen[0] == (0, 5) and seen[-1] == (5, 5)
+    with db.session() as s:
+        row = repo.get_catalogue(s, "a")
+        assert row.status == "done" and row.finished_at is not None
+        assert row.p_region == {"estimate": 0.25, "ci": [0.2, 0.3]}
+        assert repo.count_scenarios(s, "a") == 23
+        files = [c.file_path for c in repo.chunk_rows(s, "a")]
+    assert (tmp_path / str(files[4])).read_bytes() == b"chunk 4"
+    assert [r[0] for r in _rows(db, "a")] == list(range(23))
+    # running a finished job again changes nothing
+    assert runner.run("a") == "done"
+    assert len(_rows(db, "a")) == 23
+
+
+def test_failed_job_keeps_its_chunks_and_resumes_to_the_same_result(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    _catalogue(db, "crashy")
+    _catalogue(db, "clean")
+    crashing = CatalogueRunner(db, tmp_path, InlineExecutor(Exploding(at=3)), region=region)
+    assert crashing.run("crashy") == "failed"
+    with db.session() as s:
+        row = repo.get_catalogue(s, "crashy")
+        assert row.status == "failed" and "boom at chunk 3" in (row.error or "")
+        assert repo.stored_chunk_indices(s, "crashy") == {0, 1, 2}
+    calls: list[int] = []
+
+    def counting(spec: CatalogueSpec, index: int) -> ChunkResult:
+        calls.append(index)
+        return fake_chunk(spec, index)
+
+    good = CatalogueRunner(db, tmp_path, InlineExecutor(counting), region=region)
+    assert good.run("crashy") == "done"
+    assert calls == [3, 4]  # only the missing chunks were computed
+    CatalogueRunner(db, tmp_path, InlineExecutor(fake_chunk), region=region).run("clean")
+    assert _rows(db, "crashy") == _rows(db, "clean")
+
+
+def test_cancel_stops_between_chunks(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    _catalogue(db, "c")
+    cancel = threading.Event()
+
+    def cancelling(spec: CatalogueSpec, index: int) -> ChunkResult:
+        if index == 1:
+            cancel.set()
+        return fake_chunk(spec, index)
+
+    runner = CatalogueRunner(db, tmp_path, InlineExecutor(cancelling), region=region)
+    assert runner.run("c", cancel=cancel) == "cancelled"
+    with db.session() as s:
+        assert repo.get_catalogue(s, "c").status == "cancelled"
+        assert repo.stored_chunk_indices(s, "c") == {0, 1}
+
+
+def test_shutdown_leaves_the_job_resumable(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    _catalogue(db, "s")
+    stop = threading.Event()
+
+    def stopping(spec: CatalogueSpec, index: int) -> ChunkResult:
+        stop.set()
+        return fake_chunk(spec, index)
+
+    runner = CatalogueRunner(db, tmp_path, InlineExecutor(stopping), region=region)
+    assert runner.run("s", stop=stop) == "interrupted"
+    with db.session() as s:
+        assert repo.get_catalogue(s, "s").status == "running"  # resumed at the next start
+
+
+def test_seeds_depend_only_on_catalogue_seed_and_index() -> None:
+    assert chunk_seed(5, 3) == chunk_seed(5, 3)
+    assert len({chunk_seed(5, i) for i in range(1000)}) == 1000
+    assert chunk_seed(5, 3) != chunk_seed(6, 3)
+    assert scenario_seed(5, 3) != chunk_seed(5, 3)
+    assert all(0 <= scenario_seed(9, i) < 2**31 for i in range(100))
+
+
+def test_spec_bounds_cover_n_exactly() -> None:
+    spec = CatalogueSpec(n=23, seed=1, chunk_size=5, model_json="{}", constraints=("ttc<3",))
+    assert spec.n_chunks == 5
+    assert [spec.bounds(i) for i in range(5)] == [(0, 5), (5, 10), (10, 15), (15, 20),
+                                                  (20, 23)]
+    with pytest.raises(IndexError):
+        spec.bounds(5)
+    assert CatalogueSpec.from_dict(spec.to_dict()) == spec

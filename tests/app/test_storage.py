@@ -1,0 +1,122 @@
+"""The store against SQLite and a live PostgreSQL: migrations, chunk rows (unique, all or
+nothing), infinite floats, paging and filters, deletion."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from sqlalchemy import func, inspect, select, text
+from sqlalchemy.exc import IntegrityError
+
+from app.db import repository as repo
+from app.db.database import Database
+from app.db.models import CatalogueRow, ChunkRow, DatasetRow, ModelRow, ScenarioRow
+from app.errors import NotFound
+from tests.app.factories import scenario_rows
+
+
+def _store(url: str) -> Database:
+    db = Database(url)
+    db.migrate()
+    return db
+
+
+def _catalogue(db: Database, cid: str = "cat-1", n: int = 10) -> None:
+    with db.session() as s:
+        s.add(DatasetRow(id="ds", name="d", kind="embedded", embedded=True, data_hash="h",
+                         n_cutins=1, table_path="x.parquet", report={}))
+        s.add(ModelRow(id="m", dataset_id="ds", is_default=True, options={}, n_components=1,
+                       model_hash="mh", model_json="{}", bic_curve=[], fit_report={}))
+        s.flush()
+        s.add(CatalogueRow(id=cid, model_id="m", status="queued", n=n, seed=7, chunk_size=5,
+                           n_chunks=(n + 4) // 5, spec={"constraints": ["ttc<3"]}))
+
+
+def test_migrations_create_the_schema_and_are_idempotent(database_url: str) -> None:
+    db = _store(database_url)
+    db.migrate()  # a second start changes nothing
+    names = set(inspect(db.engine).get_table_names())
+    assert {"datasets", "models", "catalogues", "catalogue_chunks",
+            "catalogue_scenarios", "alembic_version"} <= names
+    with db.engine.connect() as conn:
+        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0001"
+    db.dispose()
+
+
+def test_a_chunk_is_stored_once_with_its_file(database_url: str, tmp_path: Path) -> None:
+    db = _store(database_url)
+    _catalogue(db)
+    with db.session() as s:
+        assert repo.store_chunk(s, tmp_path, "cat-1", 0, scenario_rows(0, 0, 5), b"abc",
+                                "sha", {"ok": True})
+    # the same chunk again (a second runner, a resumed job): refused, nothing duplicated
+    with db.session() as s:
+        assert not repo.store_chunk(s, tmp_path, "cat-1", 0, scenario_rows(0, 0, 5), b"abc",
+                                    "sha", {})
+    with db.session() as s:
+        assert repo.stored_chunk_indices(s, "cat-1") == {0}
+        assert repo.count_scenarios(s, "cat-1") == 5
+        chunk = repo.chunk_rows(s, "cat-1")[0]
+        assert (tmp_path / str(chunk.file_path)).read_bytes() == b"abc"
+    # and the database itself refuses a duplicate chunk index
+    with pytest.raises(IntegrityError), db.session() as s:
+        s.add(ChunkRow(catalogue_id="cat-1", chunk_index=0, n_scenarios=0, diagnostics={}))
+    db.dispose()
+
+
+def test_a_failing_transaction_keeps_what_was_stored(database_url: str, tmp_path: Path) -> None:
+    db = _store(database_url)
+    _catalogue(db)
+    with db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 0, scenario_rows(0, 0, 5), None, None, {})
+    with pytest.raises(RuntimeError), db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 1, scenario_rows(1, 5, 5), None, None, {})
+        raise RuntimeError("crash before commit")
+    with db.session() as s:
+        assert repo.stored_chunk_indices(s, "cat-1") == {0}
+        assert repo.count_scenarios(s, "cat-1") == 5
+    db.dispose()
+
+
+def test_infinite_ttc_round_trips_and_filters(database_url: str, tmp_path: Path) -> None:
+    db = _store(database_url)
+    _catalogue(db)
+    with db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 0, scenario_rows(0, 0, 5), None, None, {})
+        repo.store_chunk(s, tmp_path, "cat-1", 1, scenario_rows(1, 5, 5), None, None, {})
+    with db.session() as s:
+        ttc = {r.idx: r.ttc for r in repo.iter_scenarios(s, "cat-1", batch=3)}
+        assert list(ttc) == list(range(10))
+        assert math.isinf(ttc[0]) and math.isinf(ttc[4]) and math.isinf(ttc[8])
+        assert ttc[1] == 11.0 / 5.0
+        # hand count: idx 1,2,3 have ttc 2.2, 2.4, 2.6 (< 2.5: 1 and 2)
+        total, rows = repo.page_scenarios(s, "cat-1", repo.ScenarioFilter(ttc_max=2.5), 0, 100)
+        assert total == 2 and [r.idx for r in rows] == [1, 2]
+        flt = repo.ScenarioFilter(risk_min=0.03, risk_max=0.07)
+        total, rows = repo.page_scenarios(s, "cat-1", flt, 1, 2)
+        assert total == 5 and [r.idx for r in rows] == [4, 5]
+        stats = repo.summary_statistics(s, "cat-1")
+    assert stats["risk"]["count"] == 10
+    assert stats["risk"]["max"] == pytest.approx(0.09)
+    assert stats["risk"]["mean"] == pytest.approx(0.045)
+    assert stats["ttc"]["count"] == 7  # three infinite TTCs are not in the statistics
+    db.dispose()
+
+
+def test_delete_removes_rows_and_files(database_url: str, tmp_path: Path) -> None:
+    db = _store(database_url)
+    _catalogue(db)
+    with db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 0, scenario_rows(0, 0, 5), b"x", "s", {})
+    with db.session() as s:
+        repo.delete_catalogue(s, "cat-1")
+    repo.remove_catalogue_files(tmp_path, "cat-1")
+    with db.session() as s:
+        assert s.scalar(select(func.count()).select_from(ScenarioRow)) == 0
+        assert s.scalar(select(func.count()).select_from(ChunkRow)) == 0
+        with pytest.raises(NotFound):
+            repo.get_catalogue(s, "cat-1")
+    assert not (tmp_path / "catalogues" / "cat-1").exists()
+    db.dispose()
