@@ -17,6 +17,7 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
         yield f"sqlite:///{tmp_path / 'store.db'}"
         return
     if not pg_available():
-        pytest.fail("PostgreSQL is not reachable on 127.0.0.1:5432 (run scripts/ensure-services.sh)")
+        pytest.fail("PostgreSQL is not reachable on 127.0.0.1:5432 "
+                    "(run scripts/ensure-services.sh)")
     with pg_database() as url:
         yield url
