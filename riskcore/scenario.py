@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from riskcore.errors import RiskcoreError
+
 SCHEMA = "scengen.concrete-scenario/1"
 _SERIES = ("x", "y", "psi", "v")
 _OPTIONAL_SERIES = ("a", "yaw_rate")
@@ -43,8 +45,10 @@ _TOP_KEYS = frozenset({"schema", "t", "ego", "objects", "params", "seed", "prove
 FloatArray = NDArray[np.float64]
 
 
-class ScenarioError(ValueError):
-    """A concrete scenario is malformed. The message names the field and the problem."""
+class ScenarioError(RiskcoreError):
+    """A concrete scenario is malformed. The message names the field and the problem.
+
+    A ``ValueError`` (through :class:`riskcore.errors.RiskcoreError`)."""
 
 
 def _as_series(value: Any, where: str, n: int | None) -> FloatArray:
@@ -217,6 +221,8 @@ class ConcreteScenario:
         for key, value in params_raw.items():
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise ScenarioError(f"params.{key}: expected a number")
+            if not math.isfinite(value):
+                raise ScenarioError(f"params.{key}: value {value!r} is not a finite number")
             params[str(key)] = float(value)
         seed = data.get("seed")
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):

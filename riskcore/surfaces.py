@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from riskcore import _kernels
 from riskcore.errors import SurfaceError
 
 __all__ = ["FORMAT", "InputSurfaces", "Surface"]
@@ -84,17 +85,6 @@ def _table(value: Any, where: str, shape: tuple[int, int]) -> FloatArray:
         i, j = (int(k) for k in np.argwhere(bad)[0])
         raise SurfaceError(f"{where}[{i}][{j}]: value {arr[i, j]!r} is not a finite number")
     return arr
-
-
-def _bracket(axis: FloatArray, x: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
-    """Lower cell index and weight of the upper node, clamped to the axis range."""
-    n = axis.shape[0]
-    if n == 1:
-        return np.zeros(x.shape, dtype=np.intp), np.zeros(x.shape)
-    xc = np.clip(x, axis[0], axis[-1])
-    i = np.clip(np.searchsorted(axis, xc, side="right") - 1, 0, n - 2)
-    w = (xc - axis[i]) / (axis[i + 1] - axis[i])
-    return i, w
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,16 +176,11 @@ class Surface:
                                    np.asarray(x0, dtype=np.float64))
         if not (np.isfinite(v).all() and np.isfinite(x).all()):
             raise SurfaceError("surface lookup: v0 and x0 must be finite")
-        i, wi = _bracket(self.v0, v)
-        j, wj = _bracket(self.x0, x)
-        i1 = np.minimum(i + 1, self.v0.shape[0] - 1)
-        j1 = np.minimum(j + 1, self.x0.shape[0] - 1)
-        out = []
-        for table in (self.mean, self.std):
-            lo = table[i, j] * (1.0 - wj) + table[i, j1] * wj
-            hi = table[i1, j] * (1.0 - wj) + table[i1, j1] * wj
-            out.append(np.asarray(lo * (1.0 - wi) + hi * wi, dtype=np.float64))
-        return out[0], out[1]
+        vf = np.ascontiguousarray(v, dtype=np.float64).ravel()
+        xf = np.ascontiguousarray(x, dtype=np.float64).ravel()
+        mean = _kernels.bilinear(self.v0, self.x0, self.mean, vf, xf).reshape(v.shape)
+        std = _kernels.bilinear(self.v0, self.x0, self.std, vf, xf).reshape(v.shape)
+        return mean, std
 
     def mirrored(self) -> Surface:
         """The surface of the mirrored input x → -x: mean(v, -x) → -mean(v, x), same std."""
