@@ -22,11 +22,15 @@ Simulators that put the reference point on the rear axle read the box centre fro
 file, so they place the vehicle correctly.
 
 Trajectories: every vehicle (ego included) gets a ``FollowTrajectoryAction`` whose
-``Trajectory`` shape is a ``Polyline`` with one ``Vertex`` per time step (time t_i,
-``WorldPosition(x_i, y_i, h=psi_i)``), ``TimeReference/Timing`` absolute with scale 1 and
-offset -t_0 (so the first vertex is reached at simulation time 0 and vertex times equal
-the scenario's times), following mode ``position``. ``Init`` teleports each vehicle to its
-first vertex with its first speed; the storyboard stops at simulation time t_last - t_0.
+``Trajectory`` shape is a ``Polyline`` with one ``Vertex`` per time step (time
+t_i - t_0, ``WorldPosition(x_i, y_i, h=psi_i)``), ``TimeReference/Timing`` absolute with
+scale 1 and offset 0, following mode ``position``. Simulation time 0 is the scenario's
+first time step; for the usual grid that starts at t_0 = 0 the vertex times are the
+scenario's times exactly. A grid that starts elsewhere is shifted rather than expressed
+with the ``Timing`` offset, because simulators disagree on that offset's sign (esmini
+looks up trajectory time = simulation time * scale + offset); t_0 is kept in the file
+header's ``scengen.t0`` property. ``Init`` teleports each vehicle to its first vertex with
+its first speed; the storyboard stops at simulation time t_last - t_0.
 
 Road: the reference line is the road's left edge; all lanes are right lanes (ids -1, -2,
 ...) driving in +x, ``lane_width`` wide (the scenario's ``params["lane_width"]`` or
@@ -168,7 +172,7 @@ def _sim_time_trigger(name: str, value: float, point: str = "start") -> xosc.Val
     )
 
 
-def _follow(track: Track, times: list[float], t0: float) -> xosc.ManeuverGroup:
+def _follow(track: Track, times: list[float]) -> xosc.ManeuverGroup:
     positions = [
         xosc.WorldPosition(x, y, h=psi)
         for x, y, psi in zip(track.x.tolist(), track.y.tolist(), track.psi.tolist(),
@@ -177,8 +181,7 @@ def _follow(track: Track, times: list[float], t0: float) -> xosc.ManeuverGroup:
     trajectory = xosc.Trajectory(f"{track.id} trajectory", False)
     trajectory.add_shape(xosc.Polyline(times, positions))
     action = xosc.FollowTrajectoryAction(
-        trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.absolute,
-        1.0, 0.0 - t0,
+        trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.absolute, 1.0, 0.0,
     )
     event = xosc.Event(f"{track.id} follows its trajectory", xosc.Priority.override)
     event.add_action(f"{track.id} follow trajectory", action)
@@ -194,6 +197,7 @@ def _follow(track: Track, times: list[float], t0: float) -> xosc.ManeuverGroup:
 def _properties(index: int, scenario: ConcreteScenario, row: Row) -> xosc.Properties:
     props = xosc.Properties()
     props.add_property("scengen.index", str(index))
+    props.add_property("scengen.t0", _num(scenario.t[0]))
     if row.get("scenario_id") is not None:
         props.add_property("scengen.scenario_id", str(row["scenario_id"]))
     if scenario.seed is not None:
@@ -214,8 +218,8 @@ def scenario_xosc(
     """One scenario as a validated OpenSCENARIO 1.2 document (UTF-8 bytes)."""
     if not scenario.objects:
         raise ExportError("the scenario has no objects besides the ego")
-    times = scenario.t.tolist()
-    t0 = times[0]
+    t0 = float(scenario.t[0])
+    times = (scenario.t - t0).tolist()  # simulation time; unchanged when t0 == 0
     tracks = (scenario.ego, *scenario.objects)
     with _LOCK:
         entities = xosc.Entities()
@@ -229,10 +233,10 @@ def scenario_xosc(
                 xosc.WorldPosition(float(track.x[0]), float(track.y[0]),
                                    h=float(track.psi[0]))))
             init.add_init_action(track.id, xosc.AbsoluteSpeedAction(float(track.v[0]), step))
-            act.add_maneuver_group(_follow(track, times, t0))
+            act.add_maneuver_group(_follow(track, times))
         story = xosc.Story("scengen cut-in")
         story.add_act(act)
-        storyboard = xosc.StoryBoard(init, _sim_time_trigger("end", times[-1] - t0, "stop"))
+        storyboard = xosc.StoryBoard(init, _sim_time_trigger("end", times[-1], "stop"))
         storyboard.add_story(story)
         description = f"scengen scenario {index}"
         doc = xosc.Scenario(
@@ -375,7 +379,9 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
             "frame": "scengen road frame = OpenSCENARIO world frame: x along the road, "
                      "y left, heading counter-clockwise from +x, z up; ego lane centre y = 0",
             "reference_point": "vehicle bounding-box centre (BoundingBox Center x = y = 0)",
-            "time": "vertex times are the scenario's times; Timing offset = -t[0]",
+            "time": "vertex time = scenario time - t[0] (simulation starts at the first "
+                    "step); Timing absolute, scale 1, offset 0; t[0] in the scengen.t0 "
+                    "header property",
         }
         with zipfile.ZipFile(path, "w") as zf:
             info = _zinfo(INDEX_FILE)

@@ -428,8 +428,9 @@ def test_xosc_trajectories_are_the_exact_scenario_tracks(xosc_zip: Path) -> None
     for doc, expected in (
         (doc_a, {"ego": [(0.0, 0.0, 0.0, 0.0), (0.3, 9.0, 0.0, 0.0)],
                  "cutin": [(0.0, 20.0, 3.75, -0.1), (0.3, 27.5, 3.0, -0.1)]}),
-        (doc_b, {"ego": [(2.0, 100.0, 0.0, 0.0), (3.0, 130.0, 0.0, 0.0)],
-                 "car 1": [(2.0, 110.0, -3.5, 0.2), (3.0, 142.0, -1.5, 0.125)]}),
+        # b's grid starts at t = 2 s: simulation time 0 is its first step
+        (doc_b, {"ego": [(0.0, 100.0, 0.0, 0.0), (1.0, 130.0, 0.0, 0.0)],
+                 "car 1": [(0.0, 110.0, -3.5, 0.2), (1.0, 142.0, -1.5, 0.125)]}),
     ):
         n_steps = 4 if doc is doc_a else 3
         for entity, ((t0, x0, y0, h0), (t1, x1, y1, h1)) in expected.items():
@@ -456,8 +457,13 @@ def test_xosc_timing_entities_and_init(xosc_zip: Path) -> None:
     assert len(timings) == 2
     for timing in timings:
         assert timing.get("domainAbsoluteRelative") == "absolute"
-        assert float(timing.get("offset", "nan")) == -2.0  # the grid starts at t = 2 s
+        assert float(timing.get("offset", "nan")) == 0.0
         assert float(timing.get("scale", "nan")) == 1.0
+    [t0] = doc.xpath("/OpenSCENARIO/FileHeader/Properties/Property[@name='scengen.t0']/@value")
+    assert t0 == "2.0"
+    times = [float(v) for v in doc.xpath(
+        "//ManeuverGroup[Actors/EntityRef/@entityRef='car 1']//Vertex/@time")]
+    assert times == [0.0, 0.5, 1.0]
     modes = doc.xpath("//FollowTrajectoryAction/TrajectoryFollowingMode/@followingMode")
     assert modes == ["position", "position"]
     [car] = doc.xpath("//ScenarioObject[@name='car 1']/Vehicle")
