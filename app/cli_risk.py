@@ -1,10 +1,86 @@
-"""``scengen`` sub-commands of this group (see app/cli.py for the conventions)."""
+"""``scengen risk SCENARIO.json``: score a concrete scenario with riskcore, print JSON.
+
+The input is the concrete-scenario JSON form (riskcore.scenario; docs/riskcore.md). The
+output is ``ScenarioRisk.to_dict()`` (plain JSON; +inf written as null). Settings of Table
+II and the ego's capabilities can be overridden on the command line. User errors (missing
+file, bad JSON, a malformed scenario, bad settings) end as one line
+``scengen: error: ...`` naming the file and field, with exit code 2 (see app/cli.py).
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+from pathlib import Path
 from typing import Any
+
+#: command-line option → (RiskSettings field, type, help)
+_SETTING_OPTIONS: tuple[tuple[str, str, type, str], ...] = (
+    ("--horizon", "horizon", float, "prediction horizon in s (3.0)"),
+    ("--dt", "dt", float, "prediction step in s (0.1)"),
+    ("--n-a", "n_a", int, "acceleration grid points (10)"),
+    ("--n-omega", "n_omega", int, "turn-rate grid points (10)"),
+    ("--sigma-range", "sigma_range", float, "grid half-width in standard deviations (3.0)"),
+    ("--t-pnr", "t_pnr", float, "point of no return T_PNR in s (0.5)"),
+    ("--t-max", "t_max", float, "maximum risk time T_max in s (2.0)"),
+    ("--m", "m", float, "steepness m of the TTR weighting (1.0)"),
+    ("--brake-max", "brake_max", float, "ego full-braking deceleration in m/s^2 (8.0)"),
+    ("--accel-max", "accel_max", float, "ego full acceleration in m/s^2 (2.0)"),
+    ("--lat-accel-max", "lat_accel_max", float, "ego lateral-acceleration limit in m/s^2 (6.0)"),
+    ("--min-turn-radius", "min_turn_radius", float, "ego smallest turning radius in m (5.5)"),
+)
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
-    """Add this group's sub-commands. Nothing here yet."""
+    """Add ``scengen risk``."""
+    p = subparsers.add_parser(
+        "risk", help="score a concrete scenario (Monte-Carlo time-to-react risk)",
+        description="Read a concrete scenario (JSON) and print its risk per time step as "
+                    "JSON: series, per object and step the TTR, weight and evasion arrays.")
+    p.add_argument("scenario", metavar="SCENARIO.json", help="concrete scenario (JSON form)")
+    p.add_argument("--pretty", action="store_true", help="indent the JSON output")
+    p.add_argument("--summary", action="store_true",
+                   help="print only the flat summary (risk, min TTR, ...)")
+    p.add_argument("--surfaces", metavar="FILE", default=None,
+                   help="input-surfaces file (default: the packaged one)")
+    for flag, dest, typ, text in _SETTING_OPTIONS:
+        p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
+    p.set_defaults(func=_run)
+
+
+def _read_scenario(path: str) -> Any:
+    from riskcore import ScenarioError
+
+    text = Path(path).read_text(encoding="utf-8")
+    # NaN / Infinity literals are parsed as floats here, so that the scenario's validation
+    # rejects them with the name of the field they are in.
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid JSON ({exc})") from None
+
+
+def _run(args: argparse.Namespace) -> int:
+    from riskcore import (
+        ConcreteScenario,
+        InputSurfaces,
+        RiskSettings,
+        ScenarioError,
+        evaluate_scenario,
+    )
+
+    data = _read_scenario(args.scenario)
+    try:
+        scenario = ConcreteScenario.from_dict(data)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{args.scenario}: {exc}") from None
+    overrides = {dest: getattr(args, dest) for _, dest, _, _ in _SETTING_OPTIONS
+                 if getattr(args, dest) is not None}
+    settings = RiskSettings().replace(**overrides)
+    surfaces = InputSurfaces.load(args.surfaces) if args.surfaces else None
+    result = evaluate_scenario(scenario, settings, surfaces)
+    out = result.summary() if args.summary else result.to_dict()
+    sys.stdout.write(json.dumps(out, indent=2 if args.pretty else None, allow_nan=False))
+    sys.stdout.write("\n")
+    return 0

@@ -65,7 +65,7 @@ def _as_series(value: Any, where: str, n: int | None) -> FloatArray:
     bad = ~np.isfinite(arr)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ScenarioError(f"{where}[{i}]: value {arr[i]!r} is not a finite number")
+        raise ScenarioError(f"{where}[{i}]: value {float(arr[i])!r} is not a finite number")
     return arr
 
 

@@ -61,7 +61,7 @@ def _axis(value: Any, where: str) -> FloatArray:
     bad = ~np.isfinite(arr)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise SurfaceError(f"{where}[{i}]: value {arr[i]!r} is not a finite number")
+        raise SurfaceError(f"{where}[{i}]: value {float(arr[i])!r} is not a finite number")
     steps = np.diff(arr)
     if (steps <= 0).any():
         i = int(np.flatnonzero(steps <= 0)[0]) + 1
@@ -83,7 +83,7 @@ def _table(value: Any, where: str, shape: tuple[int, int]) -> FloatArray:
     bad = ~np.isfinite(arr)
     if bad.any():
         i, j = (int(k) for k in np.argwhere(bad)[0])
-        raise SurfaceError(f"{where}[{i}][{j}]: value {arr[i, j]!r} is not a finite number")
+        raise SurfaceError(f"{where}[{i}][{j}]: value {float(arr[i, j])!r} is not a finite number")
     return arr
 
 
