@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -35,6 +35,9 @@ from datasets.cutin_model import ttc_from_gap_dv
 from datasets.errors import ExtractionError, FormatError
 from datasets.fit import fit_lateral, fit_pulse, max_lateral_speed
 from datasets.table import TABLE_COLUMNS, empty_table, validate_table
+
+if TYPE_CHECKING:
+    from datasets.highd import HighDRecording
 
 __all__ = [
     "PULSE_MARGIN",
@@ -210,12 +213,14 @@ def extract_egocentric(frame: pd.DataFrame, source: str = "egocentric") -> pd.Da
 
 # ---------------------------------------------------------------------------- highD
 
-def extract_highd_report(recording: Any, progress: bool = False) -> ExtractionResult:
-    """Extract every cut-in of a highD recording."""
-    raise NotImplementedError("highD extraction is not implemented yet (issue 3, in progress)")
+def extract_highd_report(recording: HighDRecording, progress: bool = False) -> ExtractionResult:
+    """Extract every cut-in of a highD recording (see :mod:`datasets.highd_extract`)."""
+    from datasets.highd_extract import extract_recording
+
+    return extract_recording(recording, progress=progress)
 
 
-def extract_highd(recording: Any) -> pd.DataFrame:
+def extract_highd(recording: HighDRecording) -> pd.DataFrame:
     """The parameter table of a :class:`datasets.highd.HighDRecording`."""
     return extract_highd_report(recording).table
 
@@ -240,7 +245,17 @@ def extract_cutins(
         frame = ec.read_egocentric(p)
         return extract_egocentric_report(frame, source=p.name, progress=progress)
     if fmt == "highd":
-        raise NotImplementedError("highD reading is not implemented yet (issue 3, in progress)")
+        from datasets.highd import find_recordings, read_highd
+
+        tables: list[pd.DataFrame] = []
+        skipped: list[tuple[str, str]] = []
+        for prefix in find_recordings(p):
+            rec = read_highd(prefix, progress=progress)
+            res = extract_highd_report(rec, progress=progress)
+            tables.append(res.table)
+            skipped.extend(res.skipped)
+        table = pd.concat(tables, ignore_index=True) if tables else empty_table()
+        return ExtractionResult(table, skipped)
     raise FormatError(f"format: expected 'highd' or 'egocentric', got {fmt!r}")
 
 
