@@ -120,10 +120,36 @@ def _schema(name: str) -> etree.XMLSchema:
         raise ExportError(f"cannot load the schema {path}: {exc}") from None
 
 
+def _to_lxml(element: ET.Element) -> etree._Element:
+    """The same tree as lxml elements, built node by node (ElementTree's pure-Python
+    serialiser was most of the export time)."""
+    # scenariogeneration writes namespace declarations as plain attributes
+    # ("xmlns:xsi", "xsi:noNamespaceSchemaLocation"); lxml wants them as an nsmap and
+    # {namespace}name attributes.
+    nsmap = {k.split(":", 1)[1]: v for k, v in element.attrib.items()
+             if k.startswith("xmlns:")}
+    attrib = {}
+    for key, value in element.attrib.items():
+        if key.startswith("xmlns:"):
+            continue
+        prefix, sep, local = key.partition(":")
+        attrib[f"{{{nsmap[prefix]}}}{local}" if sep and prefix in nsmap else key] = value
+    root = etree.Element(element.tag, attrib, nsmap=nsmap or None)
+    root.text = element.text
+    stack = [(element, root)]
+    while stack:
+        source, target = stack.pop()
+        for child in source:
+            node = etree.SubElement(target, child.tag, dict(child.attrib))
+            node.text = child.text
+            node.tail = child.tail
+            stack.append((child, node))
+    return root
+
+
 def _validated_bytes(element: ET.Element, schema_name: str, what: str) -> bytes:
     """Serialise, validate against the XSD, return pretty-printed UTF-8 with declaration."""
-    parser = etree.XMLParser(remove_blank_text=True)
-    doc = etree.fromstring(ET.tostring(element, encoding="utf-8"), parser=parser)
+    doc = _to_lxml(element)
     schema = _schema(schema_name)
     if not schema.validate(doc):
         errors = "; ".join(
