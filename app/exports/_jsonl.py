@@ -7,7 +7,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from app.exports._common import ExportError, Row, decode_nonfinite, dumps
+from app.exports._common import ExportError, Row, decode_nonfinite, dumps, jsonable
 from riskcore.scenario import ConcreteScenario, ScenarioError
 
 MANIFEST_KIND = "manifest"
@@ -28,7 +28,7 @@ def write_jsonl(
                 "kind": SCENARIO_KIND,
                 "index": index,
                 "scenario": scenario.to_dict(),
-                "summary": dict(summary),
+                "summary": jsonable(summary, f"item {index}: summary"),
             }
             try:
                 text = dumps(line)

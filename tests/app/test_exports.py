@@ -249,6 +249,14 @@ def test_jsonl_round_trip_is_lossless(tmp_path: Path) -> None:
     assert read_jsonl_manifest(path) == manifest()
 
 
+def test_jsonl_writes_numpy_scalars_as_plain_numbers(tmp_path: Path) -> None:
+    summary = {"risk": np.float64(0.25), "n_hits": np.int64(3), "flag": np.bool_(True)}
+    path = export_catalogue("jsonl", [(scenario_a(), summary)], {}, tmp_path / "c.jsonl")
+    [(_, back)] = list(read_jsonl(path))
+    assert back == {"risk": 0.25, "n_hits": 3, "flag": True}
+    assert [type(v) for v in back.values()] == [float, int, bool]
+
+
 def test_jsonl_is_strict_json_one_record_per_line(tmp_path: Path) -> None:
     lines = _export(tmp_path, "jsonl").read_text(encoding="utf-8").splitlines()
     assert len(lines) == 3
