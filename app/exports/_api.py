@@ -28,11 +28,13 @@ ID_COLUMNS: tuple[str, ...] = ("scenario_id", "seed")
 #: Columns computed from the scenario itself, after the parameters.
 DERIVED_COLUMNS: tuple[str, ...] = ("ttc", "duration", "dt", "n_steps", "n_objects")
 
-#: Score columns in their fixed order (always present, None when the summary lacks them).
+#: Score columns in their fixed order (always present, None when the summary lacks them):
+#: the keys of ``riskcore``'s ``ScenarioRisk.summary()`` plus the sampler's exposure weight.
 #: ``risk`` is the scenario risk (max over steps of r_dep), ``risk_ind`` max r_ind,
-#: ``min_*`` the minima over the steps (s), ``evasion`` the evasion type behind ``min_ttr``,
-#: ``exposure_weight`` the sampler's importance weight. Any other summary key follows,
-#: sorted by name.
+#: ``min_*`` the minima over the steps (s; riskcore writes +inf, "never", as None),
+#: ``min_ttr_evasion`` the evasion label behind ``min_ttr``, ``step_of_max_risk`` and
+#: ``t_of_max_risk`` (s) where the risk peaks, ``exposure_weight`` the importance weight.
+#: Any other summary key follows, sorted by name.
 SUMMARY_COLUMNS: tuple[str, ...] = (
     "risk",
     "risk_ind",
@@ -40,7 +42,9 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
     "min_ttc",
     "min_wttc",
     "min_thw",
-    "evasion",
+    "min_ttr_evasion",
+    "step_of_max_risk",
+    "t_of_max_risk",
     "exposure_weight",
 )
 

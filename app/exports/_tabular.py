@@ -5,12 +5,12 @@ may leave an extra column empty but may not bring a new one: the writers are str
 cannot go back to widen the header, so that is an error naming the column.
 
 Parquet column types: the known columns have fixed types (``index``, ``seed``,
-``n_steps``, ``n_objects``: int64; the parameters, the derived floats and the numeric
-scores: float64; ``evasion``: string). Any other column takes its type from the first row
-group: bool if it holds only booleans, string if only strings, int64 for an integer
-``scenario_id``, float64 for numbers (and for a column that is empty in the whole first
-row group; string for an empty ``scenario_id``). A later value of another kind is an
-error naming the column.
+``n_steps``, ``n_objects``, ``step_of_max_risk``: int64; the parameters, the derived
+floats and the numeric scores: float64; ``min_ttr_evasion``: string). Any other column
+takes its type from the first row group: bool if it holds only booleans, string if only
+strings, int64 for an integer ``scenario_id``, float64 for numbers (and for a column that
+is empty in the whole first row group; string for an empty ``scenario_id``). A later value
+of another kind is an error naming the column.
 """
 
 from __future__ import annotations
@@ -35,12 +35,13 @@ ROW_GROUP_SIZE = 2048
 #: Metadata key of the manifest (JSON) in the Parquet file.
 PARQUET_MANIFEST_KEY = b"scengen.manifest"
 
-_INT_COLUMNS = frozenset({"index", "seed", "n_steps", "n_objects"})
+_INT_COLUMNS = frozenset({"index", "seed", "n_steps", "n_objects", "step_of_max_risk"})
 _FLOAT_COLUMNS = frozenset({
     *PARAM_NAMES, "ttc", "duration", "dt",
-    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "exposure_weight",
+    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "t_of_max_risk",
+    "exposure_weight",
 })
-_STRING_COLUMNS = frozenset({"evasion"})
+_STRING_COLUMNS = frozenset({"min_ttr_evasion"})
 
 
 def _with_index(index: int, row: Row) -> Row:

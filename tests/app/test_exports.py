@@ -44,10 +44,14 @@ PARAMS_A = {"p_y1": -0.05, "p_t": 2.0, "p_a1": 0.5, "p_a2": 0.25, "p_a3": 1.0,
 PARAMS_B = {"p_y1": 0.04, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
             "p_v0": 31.0, "dv": -1.0, "gap": 20.0}  # opening: ttc = inf
 
+# the keys of riskcore's ScenarioRisk.summary() plus the exposure weight
 SUMMARY_A = {"risk": 0.4, "risk_ind": 0.5, "min_ttr": 1.2, "min_ttc": 2.5, "min_wttc": 1.75,
-             "min_thw": 0.625, "evasion": "brake", "exposure_weight": 0.01}
-SUMMARY_B = {"risk": 0.0, "risk_ind": 0.0, "min_ttr": math.inf, "min_ttc": math.inf,
-             "min_wttc": math.inf, "min_thw": 1.5, "evasion": None, "exposure_weight": 2.0}
+             "min_thw": 0.625, "min_ttr_evasion": "brake", "step_of_max_risk": 2,
+             "t_of_max_risk": 0.2, "exposure_weight": 0.01}
+# riskcore writes +inf as None; another producer may pass inf itself: both must survive
+SUMMARY_B = {"risk": 0.0, "risk_ind": 0.0, "min_ttr": math.inf, "min_ttc": None,
+             "min_wttc": math.inf, "min_thw": 1.5, "min_ttr_evasion": None,
+             "step_of_max_risk": 0, "t_of_max_risk": 2.0, "exposure_weight": 2.0}
 
 
 def _track(track_id: str, length: float, width: float, x: list[float], y: list[float],
@@ -93,8 +97,8 @@ EXPECTED_COLUMNS = [
     "scenario_id", "seed",
     "p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap",
     "ttc", "duration", "dt", "n_steps", "n_objects",
-    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "evasion",
-    "exposure_weight",
+    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "min_ttr_evasion",
+    "step_of_max_risk", "t_of_max_risk", "exposure_weight",
 ]
 ROW_A = {"scenario_id": "a", "seed": 7, **PARAMS_A, "ttc": 3.0, "duration": 0.3, "dt": 0.1,
          "n_steps": 4, "n_objects": 1, **SUMMARY_A}
@@ -134,7 +138,8 @@ def test_row_has_parameters_then_derived_then_scores_in_fixed_order() -> None:
 def test_row_of_an_opening_cut_in_has_infinite_ttc_and_keeps_none() -> None:
     row = scenario_row(scenario_b(), SUMMARY_B)
     assert row["ttc"] == math.inf
-    assert row["evasion"] is None
+    assert row["min_ttr_evasion"] is None
+    assert row["min_ttc"] is None
     assert row["min_ttr"] == math.inf
 
 
@@ -304,10 +309,11 @@ def test_csv_has_one_row_per_scenario_with_every_column(tmp_path: Path) -> None:
     assert a["gap"] == "12.0" and a["dv"] == "4.0" and a["ttc"] == "3.0"
     assert a["p_y1"] == "-0.05" and a["p_a2"] == "0.25"
     assert a["n_steps"] == "4" and a["n_objects"] == "1"
-    assert a["risk"] == "0.4" and a["min_thw"] == "0.625" and a["evasion"] == "brake"
+    assert a["risk"] == "0.4" and a["min_thw"] == "0.625" and a["min_ttr_evasion"] == "brake"
+    assert a["step_of_max_risk"] == "2" and a["t_of_max_risk"] == "0.2"
     assert a["exposure_weight"] == "0.01"
     assert b["ttc"] == "inf" and b["min_ttr"] == "inf"
-    assert b["evasion"] == ""  # None
+    assert b["min_ttr_evasion"] == "" and b["min_ttc"] == ""  # None
     assert float(a["duration"]) == pytest.approx(0.3)
     assert "\r" not in text
 
@@ -338,7 +344,8 @@ def test_parquet_has_typed_columns_values_and_the_manifest(tmp_path: Path) -> No
     assert table.schema.field("index").type == pa.int64()
     assert table.schema.field("seed").type == pa.int64()
     assert table.schema.field("gap").type == pa.float64()
-    assert table.schema.field("evasion").type == pa.string()
+    assert table.schema.field("min_ttr_evasion").type == pa.string()
+    assert table.schema.field("step_of_max_risk").type == pa.int64()
     assert table.schema.field("scenario_id").type == pa.string()
     rows = table.to_pylist()
     _assert_close_row({k: v for k, v in rows[0].items() if k != "index"}, ROW_A)
