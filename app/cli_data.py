@@ -31,11 +31,98 @@ def _convert_tno(args: argparse.Namespace) -> int:
     return 0
 
 
+def _extract(args: argparse.Namespace) -> int:
+    from datasets.extract import extract_cutins
+    from datasets.table import write_table
+
+    res = extract_cutins(args.path, args.format, progress=not args.quiet)
+    for event_id, reason in res.skipped:
+        print(f"skipped {event_id}: {reason}", file=sys.stderr)
+    write_table(res.table, args.output)
+    print(f"{len(res.table)} cut-ins extracted, {len(res.skipped)} skipped; "
+          f"wrote {args.output}")
+    return 0
+
+
+def _synth(args: argparse.Namespace) -> int:
+    from datasets.synth import write_synthetic
+
+    paths = write_synthetic(args.output, args.seed, minutes=args.minutes,
+                            vehicles=args.vehicles, lanes_per_direction=args.lanes,
+                            name=args.name)
+    print(f"SYNTHETIC recording {args.name} (seed {args.seed}) written:")
+    for p in paths:
+        print(f"  {p}")
+    return 0
+
+
+def _fit_surfaces(args: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from datasets.surfaces_fit import (
+        fit_surfaces,
+        trajectories_from_egocentric,
+        trajectories_from_highd,
+        write_surfaces,
+    )
+
+    if args.input is None:
+        from datasets.embedded import SOURCE, load_default_events
+
+        traj = trajectories_from_egocentric(load_default_events())
+        source = f"embedded {SOURCE}"
+    elif args.format == "egocentric":
+        from datasets.egocentric import read_egocentric
+
+        traj = trajectories_from_egocentric(read_egocentric(args.input))
+        source = str(args.input)
+    else:
+        from datasets.highd import find_recordings, read_highd
+
+        parts = []
+        for prefix in find_recordings(args.input):
+            rec = read_highd(prefix, progress=True)
+            tr = trajectories_from_highd(rec)
+            tr["track_id"] = prefix.name + "/" + tr["track_id"]
+            parts.append(tr)
+        traj = pd.concat(parts, ignore_index=True)
+        source = f"highD format: {args.input}"
+    surfaces = fit_surfaces(traj, source=args.source or source)
+    write_surfaces(surfaces, args.output)
+    print(f"input surfaces fitted from {source}; wrote {args.output}")
+    return 0
+
+
+def _describe(args: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from datasets.table import describe_table, read_table
+
+    if args.table is None:
+        from datasets.embedded import SOURCE, default_parameter_table
+
+        table = default_parameter_table()
+        label = f"embedded table ({SOURCE})"
+    else:
+        table = read_table(args.table)
+        label = str(args.table)
+    print(f"{label}: {len(table)} cut-ins")
+    with pd.option_context("display.width", 200, "display.max_columns", 20,
+                           "display.float_format", "{:.4g}".format):
+        print(describe_table(table).to_string())
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     """Add ``scengen data`` and its sub-commands."""
     data = subparsers.add_parser("data", help="data sets: convert, extract, synth, surfaces")
     sub = data.add_subparsers(dest="data_command", metavar="SUBCOMMAND")
-    data.set_defaults(func=lambda _args: (data.print_help(sys.stderr), 2)[1])
+
+    def _help(_args: argparse.Namespace) -> int:
+        data.print_help(sys.stderr)
+        return 2
+
+    data.set_defaults(func=_help)
 
     p = sub.add_parser("convert-tno", help="convert TNO's cut-in.json to the embedded data")
     p.add_argument("--input", default=str(DEFAULT_TNO_INPUT),
@@ -45,3 +132,32 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                         "LICENSE and PROVENANCE.md are written next to it")
     p.add_argument("--rate", type=float, default=10.0, help="sampling rate in Hz (default 10)")
     p.set_defaults(func=_convert_tno)
+
+    p = sub.add_parser("extract", help="extract cut-ins into the parameter table")
+    p.add_argument("--format", required=True, choices=["highd", "egocentric"])
+    p.add_argument("path", help="highD folder or file, or ego-centric .csv/.parquet")
+    p.add_argument("-o", "--output", required=True, help="table file (.parquet or .csv)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_extract)
+
+    p = sub.add_parser("synth", help="write a SYNTHETIC highD-format recording")
+    p.add_argument("-o", "--output", required=True, help="output folder")
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--minutes", type=float, default=15.0)
+    p.add_argument("--vehicles", type=int, default=1000)
+    p.add_argument("--lanes", type=int, default=3, help="lanes per direction (2-4)")
+    p.add_argument("--name", default="01", help="recording prefix (digits, default 01)")
+    p.set_defaults(func=_synth)
+
+    p = sub.add_parser("fit-surfaces", help="fit riskcore's input-distribution surfaces")
+    p.add_argument("input", nargs="?", default=None,
+                   help="trajectories (default: the embedded TNO events)")
+    p.add_argument("--format", choices=["egocentric", "highd"], default="egocentric")
+    p.add_argument("-o", "--output", required=True, help="surfaces JSON file")
+    p.add_argument("--source", default="", help="text for the file's 'source' field")
+    p.set_defaults(func=_fit_surfaces)
+
+    p = sub.add_parser("describe", help="summary statistics of a parameter table")
+    p.add_argument("table", nargs="?", default=None,
+                   help=".parquet or .csv table (default: the embedded table)")
+    p.set_defaults(func=_describe)

@@ -21,13 +21,24 @@ Columns (SI units, road frame; see docs/datasets.md for the full definitions):
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from datasets.cutin_model import PARAM_NAMES
 from datasets.errors import FormatError
 
-__all__ = ["CONTEXT_COLUMNS", "TABLE_COLUMNS", "TEXT_COLUMNS", "empty_table", "validate_table"]
+__all__ = [
+    "CONTEXT_COLUMNS",
+    "TABLE_COLUMNS",
+    "TEXT_COLUMNS",
+    "describe_table",
+    "empty_table",
+    "read_table",
+    "validate_table",
+    "write_table",
+]
 
 #: derived and context columns, after the parameter vector
 CONTEXT_COLUMNS: tuple[str, ...] = (
@@ -92,3 +103,68 @@ def validate_table(table: pd.DataFrame, where: str = "parameter table") -> pd.Da
         row = int(np.flatnonzero(bad_side.to_numpy())[0])
         raise FormatError(f"{where}: column 'side', row {row}: expected 'left' or 'right'")
     return out.reset_index(drop=True)
+
+
+def write_table(table: pd.DataFrame, path: str | Path) -> Path:
+    """Write a parameter table as ``.parquet`` or ``.csv`` (chosen by the suffix)."""
+    p = Path(path)
+    out = validate_table(table)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    if p.name.lower().endswith(".parquet"):
+        out.to_parquet(p, index=False)
+    elif p.name.lower().endswith((".csv", ".csv.gz")):
+        out.to_csv(p, index=False)
+    else:
+        raise FormatError(f"{p}: unknown table file type; use .parquet or .csv")
+    return p
+
+
+def read_table(path: str | Path) -> pd.DataFrame:
+    """Read and validate a parameter table written by :func:`write_table`."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    try:
+        if p.name.lower().endswith(".parquet"):
+            frame = pd.read_parquet(p)
+        elif p.name.lower().endswith((".csv", ".csv.gz")):
+            frame = pd.read_csv(p, dtype={c: str for c in TEXT_COLUMNS}, keep_default_na=False,
+                                na_values=[""])
+        else:
+            raise FormatError(f"{p}: unknown table file type; use .parquet or .csv")
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, FormatError):
+            raise
+        raise FormatError(f"{p}: cannot read ({exc})") from None
+    return validate_table(frame, where=str(p))
+
+
+def describe_table(table: pd.DataFrame) -> pd.DataFrame:
+    """Summary statistics of every column: one row per column.
+
+    Numeric columns: count of finite values, number of +inf (``ttc``), mean, std, min,
+    quartiles, max over the finite values. Text columns: number of distinct values and the
+    most frequent one with its count.
+    """
+    rows = []
+    for col in TABLE_COLUMNS:
+        s = table[col]
+        if col in TEXT_COLUMNS:
+            counts = s.astype(str).value_counts()
+            top = f"{counts.index[0]} ({int(counts.iloc[0])})" if len(counts) else ""
+            rows.append({"column": col, "count": len(s), "n_inf": 0, "unique": len(counts),
+                         "top": top})
+            continue
+        x = s.to_numpy(dtype=np.float64)
+        fin = x[np.isfinite(x)]
+        row: dict[str, object] = {"column": col, "count": int(fin.size),
+                                  "n_inf": int(np.isinf(x).sum()), "unique": None, "top": ""}
+        if fin.size:
+            q = np.percentile(fin, [0, 25, 50, 75, 100])
+            row.update({"mean": float(fin.mean()),
+                        "std": float(fin.std(ddof=1)) if fin.size > 1 else float("nan"),
+                        "min": q[0], "25%": q[1], "50%": q[2], "75%": q[3], "max": q[4]})
+        rows.append(row)
+    cols = ["column", "count", "n_inf", "mean", "std", "min", "25%", "50%", "75%", "max",
+            "unique", "top"]
+    return pd.DataFrame(rows).reindex(columns=cols).set_index("column")
