@@ -36,14 +36,19 @@ Public API
 - ``build_manifest(*, seed, model_hash, sampler_settings, constraints, p_region, extra=None)``
 - ``read_jsonl(path) -> Iterator[tuple[ConcreteScenario, dict]]`` and
   ``read_jsonl_manifest(path) -> dict``
+- Column order: ``ID_COLUMNS``, the parameters (``datasets.cutin_model.PARAM_NAMES``),
+  ``DERIVED_COLUMNS``, ``SUMMARY_COLUMNS``; ``RESERVED_COLUMNS`` (``index``, ``file``) are
+  added by the exports themselves. ``MANIFEST_FORMAT`` tags every manifest.
 """
 
 from __future__ import annotations
 
 from app.exports._api import (
+    DERIVED_COLUMNS,
     EXPORT_FORMATS,
     ID_COLUMNS,
     MANIFEST_FORMAT,
+    RESERVED_COLUMNS,
     SUMMARY_COLUMNS,
     ExportError,
     build_manifest,
@@ -54,9 +59,11 @@ from app.exports._api import (
 )
 
 __all__ = [
+    "DERIVED_COLUMNS",
     "EXPORT_FORMATS",
     "ID_COLUMNS",
     "MANIFEST_FORMAT",
+    "RESERVED_COLUMNS",
     "SUMMARY_COLUMNS",
     "ExportError",
     "build_manifest",

@@ -145,6 +145,9 @@ def scenario_row(scenario: ConcreteScenario, summary: Mapping[str, Any]) -> dict
     for name in PARAM_NAMES:
         row[name] = float(params[name]) if name in params else None
     for name in sorted(set(params) - set(PARAM_NAMES)):
+        if name in RESERVED_COLUMNS:
+            raise ExportError(f"params[{name!r}]: the column name {name!r} is reserved by "
+                              "the exports; rename the parameter")
         _put(row, name, float(params[name]), f"params[{name!r}]")
     if "gap" in params and "dv" in params:
         row["ttc"] = float(ttc_from_gap_dv(params["gap"], params["dv"]))

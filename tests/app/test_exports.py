@@ -184,6 +184,14 @@ def test_row_bad_summary_is_a_clear_error(summary: dict[Any, Any], message: str)
         scenario_row(scenario_a(), summary)
 
 
+def test_row_rejects_a_parameter_with_a_reserved_name() -> None:
+    sc = scenario_a()
+    odd = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects, params={"index": 1.0})
+    message = "params['index']: the column name 'index' is reserved"
+    with pytest.raises(ExportError, match=re.escape(message)):
+        scenario_row(odd, {})
+
+
 def test_row_summary_may_repeat_a_derived_value_when_it_agrees() -> None:
     assert scenario_row(scenario_a(), {"ttc": 3.0})["ttc"] == 3.0
 
