@@ -66,9 +66,11 @@ class Steer(Manoeuvre):
 
     def inputs(self, v: FloatArray, settings: RiskSettings) -> tuple[FloatArray, FloatArray]:
         v = np.asarray(v, dtype=np.float64)
-        with np.errstate(divide="ignore"):
-            by_lat = np.where(v > 0, settings.lat_accel_max / np.where(v > 0, v, 1.0), 0.0)
-        omega = np.minimum(by_lat, v / settings.min_turn_radius)
+        lat, radius = settings.lat_accel_max, settings.min_turn_radius
+        # min(lat / v, v / radius) without dividing by a tiny v: lat / v is the smaller one
+        # exactly when v² >= lat · radius.
+        fast = v * v >= lat * radius
+        omega = np.where(fast, lat / np.where(fast, v, 1.0), v / radius)
         return np.zeros_like(v), self.direction * omega
 
 

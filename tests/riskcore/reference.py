@@ -27,9 +27,12 @@ def ref_ctra(x0: float, y0: float, psi0: float, v0: float, a: float, w: float,
         tau = 0.0
     psi = psi0 + w * tau
     v = v0 + a * tau
-    if w == 0.0:
-        d = v0 * tau + 0.5 * a * tau * tau
-        return x0 + d * math.cos(psi0), y0 + d * math.sin(psi0), psi
+    if abs(w * tau) < 1e-4:
+        # tiny turn: expand to second order in ω (relative error ~ (ωτ)^4 < 1e-16)
+        lon = v0 * tau + a * tau**2 / 2 - w * w * (v0 * tau**3 / 6 + a * tau**4 / 8)
+        lat = w * (v0 * tau**2 / 2 + a * tau**3 / 3)
+        return (x0 + lon * math.cos(psi0) - lat * math.sin(psi0),
+                y0 + lon * math.sin(psi0) + lat * math.cos(psi0), psi)
     x = x0 + (v * math.sin(psi) - v0 * math.sin(psi0)) / w \
         + a * (math.cos(psi) - math.cos(psi0)) / (w * w)
     y = y0 + (-v * math.cos(psi) + v0 * math.cos(psi0)) / w \
