@@ -94,8 +94,8 @@ ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 ZIP_MODE = 0o644
 
 # scenariogeneration keeps the OpenSCENARIO version in a class attribute shared by every
-# object; building and serialising happen under this lock so that concurrent exports in
-# threads cannot see each other's version.
+# object, and the lxml schema objects are shared too; building, serialising and validating
+# happen under this lock so that concurrent exports in threads cannot interfere.
 _LOCK = threading.Lock()
 
 
@@ -312,22 +312,23 @@ def road_xodr(extent: RoadExtent) -> bytes:
     x_start, x_end = extent.x_range()
     n_lanes = n_left + 1 + n_right
     y_ref = (n_left + 0.5) * w
-    road = xodr.create_road(xodr.Line(x_end - x_start), id=1, left_lanes=0,
-                            right_lanes=n_lanes, lane_width=w)
-    road.planview.set_start_point(x_start, y_ref, 0.0)
-    odr = xodr.OpenDrive("scengen straight road", revMajor="1", revMinor="7")
-    odr.add_road(road)
-    odr.adjust_roads_and_lanes()
-    element = odr.get_element()
-    header = element.find("header")
-    if header is None:  # pragma: no cover - scenariogeneration always writes one
-        raise ExportError("scenariogeneration wrote an OpenDRIVE file without a header")
-    header.attrib.pop("date", None)  # wall-clock time: not deterministic
-    header.set("north", _num(y_ref))
-    header.set("south", _num(y_ref - n_lanes * w))
-    header.set("west", _num(x_start))
-    header.set("east", _num(x_end))
-    return _validated_bytes(element, ODR_XSD, f"the road ({ROAD_FILE})")
+    with _LOCK:  # the schema objects are shared; validate one document at a time
+        road = xodr.create_road(xodr.Line(x_end - x_start), id=1, left_lanes=0,
+                                right_lanes=n_lanes, lane_width=w)
+        road.planview.set_start_point(x_start, y_ref, 0.0)
+        odr = xodr.OpenDrive("scengen straight road", revMajor="1", revMinor="7")
+        odr.add_road(road)
+        odr.adjust_roads_and_lanes()
+        element = odr.get_element()
+        header = element.find("header")
+        if header is None:  # pragma: no cover - scenariogeneration always writes one
+            raise ExportError("scenariogeneration wrote an OpenDRIVE file without a header")
+        header.attrib.pop("date", None)  # wall-clock time: not deterministic
+        header.set("north", _num(y_ref))
+        header.set("south", _num(y_ref - n_lanes * w))
+        header.set("west", _num(x_start))
+        header.set("east", _num(x_end))
+        return _validated_bytes(element, ODR_XSD, f"the road ({ROAD_FILE})")
 
 
 def _lane_width(scenario: ConcreteScenario, index: int) -> float:

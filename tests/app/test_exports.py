@@ -562,6 +562,16 @@ def test_same_input_gives_byte_identical_files(tmp_path: Path, fmt: str) -> None
     assert sorted(p.name for p in tmp_path.iterdir()) == ["one", "two"]  # no leftovers
 
 
+def test_concurrent_xosc_exports_in_threads_agree(tmp_path: Path) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        paths = list(pool.map(lambda name: _export(tmp_path, "xosc", name=name),
+                              ["one", "two", "three", "four"]))
+    contents = {p.read_bytes() for p in paths}
+    assert len(contents) == 1
+
+
 def test_different_input_gives_different_files(tmp_path: Path) -> None:
     first = _export(tmp_path, "xosc", name="one")
     second = _export(tmp_path, "xosc", name="two", data=[items()[1], items()[0]])
