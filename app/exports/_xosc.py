@@ -33,8 +33,9 @@ header's ``scengen.t0`` property. ``Init`` teleports each vehicle to its first v
 its first speed; the storyboard stops at simulation time t_last - t_0.
 
 Road: the reference line is the road's left edge; all lanes are right lanes (ids -1, -2,
-...) driving in +x, ``lane_width`` wide (the scenario's ``params["lane_width"]`` or
-``DEFAULT_LANE_WIDTH``; all scenarios of a catalogue must agree). The ego lane has
+...) driving in +x, ``lane_width`` wide (the scenario's ``params["lane_width"]``, else its
+``provenance["lane_width"]``, else ``DEFAULT_LANE_WIDTH``; all scenarios of a catalogue
+must agree). The ego lane has
 id -(n_left + 1) and its centre at y = 0; there are at least one lane to its left and one
 to its right, and as many more as the vehicles' centres need. The road spans every
 vehicle's x range plus ``ROAD_MARGIN`` m on both sides.
@@ -332,9 +333,19 @@ def road_xodr(extent: RoadExtent) -> bytes:
 
 
 def _lane_width(scenario: ConcreteScenario, index: int) -> float:
-    value = scenario.params.get("lane_width", DEFAULT_LANE_WIDTH)
-    if not (math.isfinite(value) and value > 0):
-        raise ExportError(f"item {index}: params.lane_width must be > 0 m, got {value!r}")
+    """``params["lane_width"]``, else ``provenance["lane_width"]`` (where the sampler's
+    builder records it), else ``DEFAULT_LANE_WIDTH`` (m)."""
+    if "lane_width" in scenario.params:
+        value: Any = scenario.params["lane_width"]
+        where = "params.lane_width"
+    elif "lane_width" in scenario.provenance:
+        value = scenario.provenance["lane_width"]
+        where = "provenance.lane_width"
+    else:
+        return DEFAULT_LANE_WIDTH
+    if (isinstance(value, bool) or not isinstance(value, int | float)
+            or not math.isfinite(value) or value <= 0):
+        raise ExportError(f"item {index}: {where} must be a number > 0 m, got {value!r}")
     return float(value)
 
 

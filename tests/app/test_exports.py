@@ -532,6 +532,31 @@ def test_xosc_road_grows_lanes_for_far_vehicles_and_uses_the_lane_width(
     assert float(doc.find("road/planView/geometry").get("y")) == 8.75  # type: ignore[union-attr]
 
 
+@pytest.mark.parametrize(
+    ("provenance", "expected_y"),
+    [({"lane_width": 3.5}, "5.25"), ({}, "5.625"), ({"lane_width": 4}, "6.0")],
+)
+def test_xosc_lane_width_from_provenance_or_default(tmp_path: Path, provenance: dict[str, Any],
+                                                    expected_y: str) -> None:
+    sc = scenario_a()
+    built = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects, params=PARAMS_A,
+                             provenance=provenance)
+    path = _export(tmp_path, "xosc", data=[(built, {})])
+    with zipfile.ZipFile(path) as zf:
+        doc = etree.fromstring(zf.read("road.xodr"))
+    # reference line 1.5 lane widths left of the ego lane centre
+    assert doc.find("road/planView/geometry").get("y") == expected_y  # type: ignore[union-attr]
+
+
+def test_xosc_rejects_a_bad_lane_width(tmp_path: Path) -> None:
+    sc = scenario_a()
+    bad = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects,
+                           provenance={"lane_width": "wide"})
+    message = "item 0: provenance.lane_width must be a number > 0 m, got 'wide'"
+    with pytest.raises(ExportError, match=re.escape(message)):
+        _export(tmp_path, "xosc", data=[(bad, {})])
+
+
 def test_xosc_rejects_mixed_lane_widths(tmp_path: Path) -> None:
     sc = scenario_a()
     other = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects,
