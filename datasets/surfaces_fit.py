@@ -11,12 +11,16 @@ trajectory ahead, one sample is taken::
     w_bar = (psi(t_k + 1 s) - psi(t_k)) / 1 s              mean turn rate, next second
 
 Fit. For each grid node (v0_i, x0_j) the maximum-likelihood Gaussian of a_bar (or w_bar)
-is computed from kernel-weighted samples: weights
+given (v0, x0) is computed from kernel-weighted samples (the smoothing): weights
 w = exp(-((v0 - v0_i) / dv)^2 / 2 - ((x0 - x0_j) / dx)^2 / 2) with (dv, dx) the grid
-spacings (the smoothing), mean = sum(w y) / sum(w), std = sqrt(sum(w (y - mean)^2) /
-sum(w)) (the weighted ML estimates). The effective count n_eff = (sum w)^2 / sum(w^2) is
-stored in ``count``. A node with n_eff < ``min_count`` is sparse: it is filled with the
-mean and std of the nearest node that is not (distance in grid steps), and its count is 0.
+spacings. The mean is local-linear: weighted least squares of
+y ~ c + b_x (x0 - x0_j) + b_v (v0 - v0_i), mean = c (a local constant, sum(w y) / sum(w),
+would mix the slope of the mean into the spread); the std is the weighted ML estimate
+sqrt(sum(w r^2) / sum(w)) of the residuals r of that fit. Where the 3x3 normal equations
+are singular (no spread of the samples), the local constant is used. The effective count
+n_eff = (sum w)^2 / sum(w^2) is stored in ``count``. A node with n_eff < ``min_count`` is
+sparse: it is filled with the mean and std of the nearest node that is not (distance in
+grid steps), and its count is 0.
 The std has a floor (``std_floor``) so no cell is degenerate.
 
 Mirror symmetry of the turn surface (the risk engine's left/right invariance needs it):
@@ -168,17 +172,32 @@ def fit_surface(
     count = np.zeros(shape)
     zx = (x0[None, :] - x_axis[:, None]) / hx  # (n_x, n_samples)
     kx = np.exp(-0.5 * zx**2)
+    dx = x0[None, :] - x_axis[:, None]
     for i, vi in enumerate(v_axis):
-        kv = np.exp(-0.5 * ((v0 - vi) / hv) ** 2)
+        dv = v0 - vi
+        kv = np.exp(-0.5 * (dv / hv) ** 2)
         w = kx * kv[None, :]  # (n_x, n)
         sw = w.sum(axis=1)
         sw2 = (w * w).sum(axis=1)
+        count[i] = np.where(sw2 > 0, sw * sw / np.where(sw2 > 0, sw2, 1.0), 0.0)
+        # local-linear weighted least squares y ~ c + b_x (x0 - x_j) + b_v (v0 - v_i)
+        basis = np.stack([np.ones_like(dx), dx, np.broadcast_to(dv, dx.shape)], axis=-1)
+        wb = w[..., None] * basis  # (n_x, n, 3)
+        gram = np.einsum("jnk,jnl->jkl", wb, basis)
+        rhs = wb.transpose(0, 2, 1) @ y  # (n_x, 3)
+        yy = w @ (y * y)
         safe = np.where(sw > 0, sw, 1.0)
-        m = (w @ y) / safe
-        var = (w @ (y * y)) / safe - m * m
+        const = (w @ y) / safe
+        m = const.copy()
+        var = yy / safe - const**2
+        scale = np.maximum(np.abs(np.linalg.det(gram)), 0.0)
+        ok = (sw > 0) & (scale > 1e-12 * np.maximum(sw, 1e-300) ** 3)
+        if ok.any():
+            theta = np.linalg.solve(gram[ok], rhs[ok][..., None])[..., 0]
+            m[ok] = theta[:, 0]
+            var[ok] = (yy[ok] - np.einsum("jk,jk->j", theta, rhs[ok])) / sw[ok]
         mean[i] = m
         std[i] = np.sqrt(np.maximum(var, 0.0))
-        count[i] = np.where(sw2 > 0, sw * sw / np.where(sw2 > 0, sw2, 1.0), 0.0)
     observed = count >= min_count
     if not observed.any():
         raise DatasetError(
@@ -225,7 +244,8 @@ def fit_surfaces(
     method = (
         f"kernel-weighted ML Gaussians of the mean input over the next {grid.horizon:g} s "
         f"({len(acc)} acceleration samples, {len(turn)} turn samples x2 mirrored, "
-        f"{grid.rate:g} Hz); Gaussian kernel of one grid step; nodes with fewer than "
+        f"{grid.rate:g} Hz); local-linear fit with a Gaussian kernel of one grid step; "
+        f"nodes with fewer than "
         f"{grid.min_count:g} effective samples filled from the nearest node (count 0); "
         f"std floors {grid.accel_std_floor:g} m/s^2 and {grid.turn_std_floor:g} rad/s; "
         "turn surface mirror-symmetric. Method: datasets.surfaces_fit, docs/datasets.md."
