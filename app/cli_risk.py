@@ -67,19 +67,19 @@ def _run(args: argparse.Namespace) -> int:
         InputSurfaces,
         RiskSettings,
         ScenarioError,
+        SceneError,
         evaluate_scenario,
     )
 
-    data = _read_scenario(args.scenario)
-    try:
-        scenario = ConcreteScenario.from_dict(data)
-    except ScenarioError as exc:
-        raise ScenarioError(f"{args.scenario}: {exc}") from None
     overrides = {dest: getattr(args, dest) for _, dest, _, _ in _SETTING_OPTIONS
                  if getattr(args, dest) is not None}
     settings = RiskSettings().replace(**overrides)
     surfaces = InputSurfaces.load(args.surfaces) if args.surfaces else None
-    result = evaluate_scenario(scenario, settings, surfaces)
+    data = _read_scenario(args.scenario)
+    try:
+        result = evaluate_scenario(ConcreteScenario.from_dict(data), settings, surfaces)
+    except (ScenarioError, SceneError) as exc:  # name the file as well as the field
+        raise ScenarioError(f"{args.scenario}: {exc}") from None
     out = result.summary() if args.summary else result.to_dict()
     sys.stdout.write(json.dumps(out, indent=2 if args.pretty else None, allow_nan=False))
     sys.stdout.write("\n")
