@@ -47,6 +47,14 @@ __all__ = [
     "write_egocentric",
 ]
 
+
+def _show(value: object) -> str:
+    """A cell value for an error message: strings quoted, numbers plain."""
+    if isinstance(value, str):
+        return repr(value)
+    item = getattr(value, "item", None)
+    return str(item() if callable(item) else value)
+
 EVENT_ID = "event_id"
 T = "t"
 EGO_V = "ego_v"
@@ -120,7 +128,7 @@ def validate_egocentric(frame: pd.DataFrame, where: str = "ego-centric frame") -
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             raise FormatError(
-                f"{where}: column {col!r}, row {row}: value {raw.iloc[row]!r} "
+                f"{where}: column {col!r}, row {row}: value {_show(raw.iloc[row])} "
                 "is not a finite number"
             )
         if col in _NON_NEGATIVE and (values < 0).any():

@@ -39,6 +39,14 @@ __all__ = [
     "write_highd",
 ]
 
+
+def _show(value: object) -> str:
+    """A cell value for an error message: strings quoted, numbers plain."""
+    if isinstance(value, str):
+        return repr(value)
+    item = getattr(value, "item", None)
+    return str(item() if callable(item) else value)
+
 #: columns of :func:`road_frame`
 ROAD_COLUMNS: tuple[str, ...] = (
     "id", "frame", "t", "x", "y", "vx", "vy", "ax", "ay", "length", "width",
@@ -144,7 +152,7 @@ def _validate(frame: pd.DataFrame, path: Path, columns: tuple[str, ...],
             kind = "an integer" if col in ints else "a finite number"
             raise FormatError(
                 f"{path}: column {col!r}, row {row} (line {row + 2}): value "
-                f"{raw.iloc[row]!r} is not {kind}"
+                f"{_show(raw.iloc[row])} is not {kind}"
             )
         out[col] = values.astype(np.int64) if col in ints else values
     return out

@@ -40,6 +40,14 @@ __all__ = [
     "write_table",
 ]
 
+
+def _show(value: object) -> str:
+    """A cell value for an error message: strings quoted, numbers plain."""
+    if isinstance(value, str):
+        return repr(value)
+    item = getattr(value, "item", None)
+    return str(item() if callable(item) else value)
+
 #: derived and context columns, after the parameter vector
 CONTEXT_COLUMNS: tuple[str, ...] = (
     "ttc",
@@ -94,7 +102,7 @@ def validate_table(table: pd.DataFrame, where: str = "parameter table") -> pd.Da
         if not ok.all():
             row = int(np.flatnonzero(~ok)[0])
             raise FormatError(
-                f"{where}: column {col!r}, row {row}: value {table[col].iloc[row]!r} "
+                f"{where}: column {col!r}, row {row}: value {_show(table[col].iloc[row])} "
                 "is not a finite number"
             )
         out[col] = values
