@@ -17,8 +17,8 @@ from tests.datasets.highd_factory import (
     CENTRE,
     FPS,
     WIDTH,
-    changing,
     chain,
+    changing,
     make_recording,
     p_for_lane_change,
     straight,
@@ -113,7 +113,7 @@ def test_errors_name_file_column_row(tmp_path: Path, which: str, text: str,
 def test_missing_file_is_named(tmp_path: Path) -> None:
     prefix = _write_hand_files(tmp_path)
     (tmp_path / "03_tracksMeta.csv").unlink()
-    with pytest.raises(FileNotFoundError, match="03_tracksMeta.csv: missing highD file"):
+    with pytest.raises(FileNotFoundError, match=r"03_tracksMeta\.csv: missing highD file"):
         read_highd(prefix)
     with pytest.raises(FileNotFoundError, match="not a highD folder"):
         find_recordings(tmp_path / "nothing_here")
