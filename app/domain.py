@@ -307,3 +307,59 @@ def _scenario_field(message: str) -> str:
     if not head or " " in head:
         return "body"
     return f"body.{head}"
+
+
+# --------------------------------------------------------------------------- dashboard
+# Added for the dashboard (issue 6): read-only views of a model and of a scenario's risk.
+def model_features(model: Any) -> list[str]:
+    """The parameters the model's mixture covers (the others are held at fixed values)."""
+    return [str(f) for f in getattr(model, "features_", PARAM_NAMES)]
+
+
+def marginal_density(model: Any, feature: str, x: Any) -> np.ndarray:
+    """The model's marginal density of one feature in original units at the points ``x``.
+
+    Uses the model's own ``marginal_log_density(feature, x)`` when it has one. Otherwise it
+    is computed exactly from the mixture: the transforms are element-wise, so the marginal
+    of feature j is ``sum_k w_k N(z_j; mu_kj, S_kjj) |dz_j/dx_j|`` (the marginal of a
+    Gaussian mixture is the mixture of the components' marginals). Points outside the
+    transform's domain get density 0. Raises InvalidInput for a non-feature.
+    """
+    xs = np.asarray(x, dtype=np.float64)
+    own = getattr(model, "marginal_log_density", None)
+    if callable(own):
+        return np.exp(np.asarray(own(feature, xs), dtype=np.float64))
+    names = model_features(model)
+    if feature not in names:
+        raise InvalidInput(f"{feature!r} is not a feature of the model ({', '.join(names)})",
+                           field="query.feature")
+    j = names.index(feature)
+    z, logj = model.transforms_[j].forward(xs)
+    weights = np.asarray(model.weights_, dtype=np.float64)
+    mu = np.asarray(model.means_, dtype=np.float64)[:, j]
+    var = np.asarray(model.covariances_, dtype=np.float64)[:, j, j]
+    with np.errstate(invalid="ignore"):
+        dens_z = np.sum(weights[:, None] * np.exp(-0.5 * (z[None, :] - mu[:, None]) ** 2
+                                                  / var[:, None])
+                        / np.sqrt(2.0 * math.pi * var[:, None]), axis=0)
+        out = dens_z * np.exp(logj)
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def model_draws(model: Any, n: int, seed: int) -> pd.DataFrame:
+    """``n`` plain draws of the mixture (no region, no physical bounds), full parameter
+    vectors with columns ``PARAM_NAMES``."""
+    rng = np.random.default_rng(seed)
+    x = model.sample(int(n), rng)
+    return pd.DataFrame(model.params_matrix(x), columns=list(PARAM_NAMES))
+
+
+def scenario_risk_series(scenario: ConcreteScenario) -> dict[str, Any]:
+    """A scenario's risk summary and per-step series (``t``, ``r_dep``, ``r_ind``,
+    ``min_ttr``, ``ttc``, ``wttc``, ``thw``; +inf as None) without the Monte-Carlo samples."""
+    fn = _need("riskcore", "evaluate_scenario")
+    risk = fn(scenario)
+    series: dict[str, Any] = {"t": np.asarray(risk.t, dtype=np.float64)}
+    for name in ("r_dep", "r_ind", "min_ttr", "ttc", "wttc", "thw"):
+        series[name] = risk.series(name)
+    return {"summary": jsonable(dict(risk.summary())), "series": jsonable(series)}

@@ -18,7 +18,7 @@ from app import __version__
 from app.context import ServiceContext
 from app.errors import error_body, install_error_handlers
 from app.jobs.manager import JobManager
-from app.routes import catalogues, datasets, health, models, risk, scenarios
+from app.routes import catalogues, dashboard, datasets, health, models, risk, scenarios
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("scengen.app")
@@ -31,6 +31,7 @@ ROUTERS = (
     scenarios.router,
     risk.router,
     catalogues.router,
+    dashboard.router,
 )
 
 

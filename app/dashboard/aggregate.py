@@ -1,0 +1,198 @@
+"""Server-side aggregation and downsampling: what keeps the dashboard's payload bounded.
+
+Every plot of the dashboard gets a fixed-size summary, whatever the number of scenarios:
+
+* histograms are binned here (``histogram``, ``shared_edges``): at most ``MAX_BINS`` bars;
+* scatter plots are thinned here (``thin_scatter``): at most ``MAX_SCATTER`` points, chosen
+  by a documented, deterministic rule (no randomness, so the same catalogue always shows
+  the same points);
+* categorical shares are counted here (``shares``).
+
+All functions are pure numpy on plain arrays, so they are tested on hand-made data.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "GRID_CELLS",
+    "MAX_BINS",
+    "MAX_SCATTER",
+    "histogram",
+    "shared_edges",
+    "shares",
+    "thin_scatter",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+#: largest number of bars of any histogram sent to the page
+MAX_BINS = 60
+#: largest number of points of any scatter plot sent to the page
+MAX_SCATTER = 2000
+#: cells per axis of the envelope grid of ``thin_scatter``
+GRID_CELLS = 32
+
+
+def _finite(values: ArrayLike) -> FloatArray:
+    arr = np.asarray(values, dtype=np.float64).ravel()
+    return arr[np.isfinite(arr)]
+
+
+def shared_edges(samples: Sequence[ArrayLike], bins: int = 40,
+                 span: tuple[float, float] | None = None,
+                 quantiles: tuple[float, float] = (0.0, 1.0)) -> FloatArray:
+    """Common bin edges for several samples of one quantity (so overlaid bars align).
+
+    Parameters
+    ----------
+    samples : sequence of array-like
+        Non-finite values are ignored.
+    bins : int
+        Number of bins, 1 ... ``MAX_BINS``.
+    span : (lo, hi), optional
+        Fixed range; default: the ``quantiles`` of the pooled finite values (the default
+        ``(0, 1)`` is the full range; ``(0.005, 0.995)`` cuts long tails, the values outside
+        are then counted as ``below``/``above`` by ``histogram``).
+
+    Returns
+    -------
+    ndarray of shape (bins + 1,)
+        Strictly increasing. A degenerate range (one value, or no finite value) is widened
+        to ±0.5 around it (around 0 when there is none).
+    """
+    if not 1 <= bins <= MAX_BINS:
+        raise ValueError(f"bins must be in 1 ... {MAX_BINS}, got {bins}")
+    if span is not None:
+        lo, hi = float(span[0]), float(span[1])
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"span must be finite with lo < hi, got {span!r}")
+    else:
+        pooled = np.concatenate([_finite(s) for s in samples]) if samples else np.empty(0)
+        if pooled.size == 0:
+            lo, hi = -0.5, 0.5
+        else:
+            q_lo, q_hi = quantiles
+            lo, hi = (float(v) for v in np.quantile(pooled, [q_lo, q_hi]))
+            if not hi > lo:
+                lo, hi = lo - 0.5, hi + 0.5
+    return np.linspace(lo, hi, bins + 1)
+
+
+def histogram(values: ArrayLike, edges: ArrayLike) -> dict[str, Any]:
+    """Counts and density of ``values`` on ``edges`` (the last bin includes its right edge).
+
+    Returns
+    -------
+    dict
+        ``edges`` (list, len bins + 1), ``counts`` (list of int), ``density`` (counts / (n
+        finite · bin width), so the bars integrate to the share of values inside the
+        edges), ``n`` (all values), ``n_finite``, ``below`` and ``above`` (finite values
+        outside the edges), ``n_nonfinite``.
+    """
+    e = np.asarray(edges, dtype=np.float64)
+    if e.ndim != 1 or e.size < 2 or not np.all(np.diff(e) > 0):
+        raise ValueError("edges must be a strictly increasing 1-d array of >= 2 values")
+    arr = np.asarray(values, dtype=np.float64).ravel()
+    fin = arr[np.isfinite(arr)]
+    counts, _ = np.histogram(fin, bins=e)
+    widths = np.diff(e)
+    n_fin = int(fin.size)
+    density = counts / (n_fin * widths) if n_fin else np.zeros_like(widths)
+    return {
+        "edges": [float(v) for v in e],
+        "counts": [int(c) for c in counts],
+        "density": [float(d) for d in density],
+        "n": int(arr.size),
+        "n_finite": n_fin,
+        "below": int((fin < e[0]).sum()),
+        "above": int((fin > e[-1]).sum()),
+        "n_nonfinite": int(arr.size - n_fin),
+    }
+
+
+def thin_scatter(x: ArrayLike, y: ArrayLike, max_points: int = MAX_SCATTER,
+                 cells: int = GRID_CELLS) -> IntArray:
+    """Indices of at most ``max_points`` of the finite points (x, y), deterministically.
+
+    The rule (documented in docs/dashboard.md):
+
+    1. Fewer finite points than ``max_points``: all of them.
+    2. Otherwise the envelope: the plane spanned by the finite points is cut into
+       ``cells`` × ``cells`` equal cells and every occupied cell keeps its point with the
+       largest y (ties: the lowest index). Isolated points and the upper edge of the cloud
+       — the high-risk scenarios when y is the risk — are therefore always shown. When
+       the occupied cells alone exceed ``max_points``, the ones kept are those with the
+       largest y (ties: the lowest index).
+    3. The remaining budget is filled with points at evenly spaced positions of the
+       remaining indices (``floor(k · m / r)``, k = 0 … r − 1, m remaining), so the
+       density of the cloud is kept.
+
+    Returns
+    -------
+    ndarray of int, sorted
+        Indices into ``x``/``y``.
+    """
+    if max_points < 1:
+        raise ValueError(f"max_points must be >= 1, got {max_points}")
+    xa = np.asarray(x, dtype=np.float64).ravel()
+    ya = np.asarray(y, dtype=np.float64).ravel()
+    if xa.shape != ya.shape:
+        raise ValueError(f"x and y must have the same length, got {xa.size} and {ya.size}")
+    ok = np.flatnonzero(np.isfinite(xa) & np.isfinite(ya))
+    if ok.size <= max_points:
+        return ok.astype(np.int64)
+    xs, ys = xa[ok], ya[ok]
+
+    def cell(v: FloatArray) -> IntArray:
+        lo, hi = float(v.min()), float(v.max())
+        if hi <= lo:
+            return np.zeros(v.size, dtype=np.int64)
+        c = np.floor((v - lo) / (hi - lo) * cells).astype(np.int64)
+        return np.minimum(c, cells - 1)
+
+    key = cell(xs) * cells + cell(ys)
+    # sort by cell, then y descending, then index ascending: the first of each cell wins
+    order = np.lexsort((ok, -ys, key))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    envelope = order[first]
+    if envelope.size >= max_points:
+        by_y = envelope[np.lexsort((ok[envelope], -ys[envelope]))]
+        return np.sort(ok[by_y[:max_points]]).astype(np.int64)
+    chosen = np.zeros(ok.size, dtype=bool)
+    chosen[envelope] = True
+    rest = np.flatnonzero(~chosen)
+    r = max_points - envelope.size
+    picks = rest[(np.arange(r) * rest.size) // r]
+    chosen[picks] = True
+    return ok[np.flatnonzero(chosen)].astype(np.int64)
+
+
+def shares(labels: Sequence[str | None], order: Sequence[str] = (),
+           none_label: str = "no collision") -> dict[str, Any]:
+    """Counts and shares of categorical labels (None counted as ``none_label``).
+
+    Labels listed in ``order`` come first in that order (also when absent, with count 0);
+    the others follow by decreasing count, then name.
+    """
+    counts: dict[str, int] = {}
+    for lab in labels:
+        name = none_label if lab is None else str(lab)
+        counts[name] = counts.get(name, 0) + 1
+    total = sum(counts.values())
+    names = list(order) + sorted((k for k in counts if k not in order),
+                                 key=lambda k: (-counts[k], k))
+    return {
+        "labels": names,
+        "counts": [counts.get(k, 0) for k in names],
+        "shares": [counts.get(k, 0) / total if total else 0.0 for k in names],
+        "n": total,
+    }

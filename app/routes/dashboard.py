@@ -1,0 +1,119 @@
+"""The dashboard: the page (``/dashboard``, ``/dashboard/catalogues/{id}``), its static
+files (plotly.js served from the installed plotly package: no network needed) and its JSON
+views under ``/dashboard/api/`` (errors in the service's one error shape)."""
+
+from __future__ import annotations
+
+import html
+import json
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query
+from fastapi.responses import FileResponse, HTMLResponse
+
+from app.dashboard import views
+from app.db import repository as repo
+from app.deps import ContextDep
+from app.errors import NotFound, ServiceError
+from app.routes.scenarios import SEED_MAX
+
+router = APIRouter(prefix="/dashboard", tags=["dashboard"])
+
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+#: the page's own files (anything else under /dashboard/static is a 404)
+STATIC_FILES = {
+    "dashboard.js": "text/javascript; charset=utf-8",
+    "dashboard.css": "text/css; charset=utf-8",
+}
+
+
+@lru_cache(maxsize=1)
+def plotly_js_path() -> Path:
+    """plotly.min.js as shipped inside the installed plotly Python package."""
+    import plotly
+
+    path = Path(plotly.__file__).resolve().parent / "package_data" / "plotly.min.js"
+    if not path.is_file():  # pragma: no cover - a broken plotly install
+        raise ServiceError(f"plotly.min.js not found in the plotly package ({path})")
+    return path
+
+
+def _page(initial: dict[str, Any], status: int = 200) -> HTMLResponse:
+    text = (STATIC_DIR / "dashboard.html").read_text(encoding="utf-8")
+    state = html.escape(json.dumps(initial), quote=True)
+    return HTMLResponse(text.replace("{{INITIAL_STATE}}", state), status_code=status)
+
+
+# --------------------------------------------------------------------------- pages
+@router.get("", response_class=HTMLResponse, summary="The dashboard page")
+def dashboard_page() -> HTMLResponse:
+    return _page({"catalogue": None})
+
+
+@router.get("/catalogues/{catalogue_id}", response_class=HTMLResponse,
+            summary="The dashboard page opened on one catalogue (404 page when unknown)")
+def catalogue_page(catalogue_id: str, ctx: ContextDep,
+                   scenario: Annotated[int | None, Query(ge=0)] = None) -> HTMLResponse:
+    try:
+        with ctx.db.session() as s:
+            repo.get_catalogue(s, catalogue_id)
+    except NotFound as exc:
+        return _page({"catalogue": None, "error": exc.message}, status=404)
+    return _page({"catalogue": catalogue_id, "scenario": scenario})
+
+
+@router.get("/static/plotly.min.js", summary="plotly.js from the installed plotly package")
+def plotly_js() -> FileResponse:
+    return FileResponse(plotly_js_path(), media_type="text/javascript; charset=utf-8",
+                        headers={"Cache-Control": "public, max-age=86400"})
+
+
+@router.get("/static/{name}", summary="The dashboard's own script and style sheet")
+def static_file(name: str) -> FileResponse:
+    if name not in STATIC_FILES:
+        raise NotFound(f"no static file {name!r}", field="path.name")
+    return FileResponse(STATIC_DIR / name, media_type=STATIC_FILES[name],
+                        headers={"Cache-Control": "no-cache"})
+
+
+# --------------------------------------------------------------------------- JSON views
+@router.get("/api/models/{model_id}/fit", summary="Data against model: histograms with the "
+            "GMM marginal densities, corner points")
+def model_fit(model_id: str, ctx: ContextDep,
+              dataset: Annotated[str | None, Query(max_length=64)] = None) -> dict[str, Any]:
+    return views.model_fit(ctx, model_id, dataset or None)
+
+
+@router.get("/api/models/{model_id}/shift", summary="Constrained against unconstrained "
+            "samples for constraints typed in the page (not scored)")
+def model_shift(
+    model_id: str,
+    ctx: ContextDep,
+    constraints: Annotated[str, Query(max_length=500,
+                                      description="e.g. 'ttc<3; v_ego>=20'")] = "ttc<3",
+    n: Annotated[int, Query(ge=1, le=views.PREVIEW_N_LIMIT)] = 1000,
+    seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
+) -> dict[str, Any]:
+    return views.shift_preview(ctx, model_id, constraints, n, seed)
+
+
+@router.get("/api/catalogues/{catalogue_id}/shift", summary="Constrained (the catalogue's "
+            "samples) against unconstrained model samples")
+def catalogue_shift(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
+    return views.catalogue_shift(ctx, catalogue_id)
+
+
+@router.get("/api/catalogues/{catalogue_id}/risk", summary="A catalogue's risk "
+            "distributions (binned), TTC-risk scatter (thinned), P(A), diagnostics")
+def catalogue_risk(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
+    return views.catalogue_risk(ctx, catalogue_id)
+
+
+@router.get("/api/catalogues/{catalogue_id}/scenarios/{index}", summary="One scenario: "
+            "trajectories and its risk, TTC, WTTC, THW over time")
+def scenario(catalogue_id: str, index: int, ctx: ContextDep) -> dict[str, Any]:
+    if index < 0:
+        raise NotFound(f"scenario index must be >= 0, got {index}", field="path.index")
+    return views.scenario(ctx, catalogue_id, index)

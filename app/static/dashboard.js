@@ -1,0 +1,770 @@
+/* scengen dashboard: plots of the JSON views under /dashboard/api (docs/dashboard.md).
+ *
+ * Every number plotted here was aggregated on the server (histograms binned, scatter
+ * thinned), so the page stays fast for large catalogues. Each plot <div> gets
+ * data-rendered="1" and an increasing data-version after every drawing, and data-source
+ * naming what it shows (tests wait on these).
+ */
+"use strict";
+
+(function () {
+  const $ = (id) => document.getElementById(id);
+  const PARAMS = ["p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap"];
+  const COLORS = {
+    data: "#1f5fbf", model: "#e07b00", unconstrained: "#8a94a3", constrained: "#c62828",
+    r_dep: "#c62828", r_ind: "#1f5fbf", ego: "#1f5fbf", cutter: "#c62828",
+    ttc: "#2e7d32", wttc: "#6a1b9a", thw: "#e07b00",
+  };
+  const CONFIG = { displaylogo: false, responsive: true,
+                   modeBarButtonsToRemove: ["lasso2d", "select2d"] };
+  const BASE_LAYOUT = {
+    margin: { l: 48, r: 12, t: 30, b: 42 },
+    font: { size: 11 },
+    paper_bgcolor: "#fff",
+    plot_bgcolor: "#fff",
+    legend: { orientation: "h", y: 1.14, x: 0, font: { size: 10 } },
+  };
+
+  let initial = {};
+  try { initial = JSON.parse(document.body.dataset.initial || "{}"); } catch (e) { initial = {}; }
+
+  const state = {
+    datasets: [], models: [], catalogues: [],
+    dataset: null, model: null, catalogue: null,
+    cornerParams: null, fit: null,
+    scenario: null, step: 0, timer: null, poll: null,
+  };
+
+  // ------------------------------------------------------------------ API and errors
+  class ApiError extends Error {
+    constructor(status, message, field) {
+      super(message);
+      this.status = status;
+      this.field = field || null;
+    }
+  }
+
+  async function api(path, options) {
+    let response;
+    try {
+      response = await fetch(path, options);
+    } catch (e) {
+      throw new ApiError(0, "the service did not answer (" + e.message + ")");
+    }
+    let body = null;
+    try { body = await response.json(); } catch (e) { body = null; }
+    if (!response.ok) {
+      const err = body && body.error ? body.error : {};
+      throw new ApiError(response.status, err.message || response.statusText, err.field);
+    }
+    return body;
+  }
+
+  function showError(message) {
+    const el = $("error");
+    el.textContent = message;
+    el.hidden = false;
+  }
+
+  function clearError() {
+    const el = $("error");
+    el.textContent = "";
+    el.hidden = true;
+  }
+
+  function reportError(what, e) {
+    const detail = e instanceof ApiError && e.status ? " (HTTP " + e.status + ")" : "";
+    showError(what + ": " + e.message + detail);
+  }
+
+  function busy(delta) {
+    const n = Math.max(0, (parseInt(document.body.dataset.busy || "0", 10) || 0) + delta);
+    document.body.dataset.busy = String(n);
+  }
+
+  // ------------------------------------------------------------------ formatting
+  function fmt(x, digits) {
+    if (x === null || x === undefined) return "–";
+    if (typeof x !== "number") return String(x);
+    if (!isFinite(x)) return "∞";
+    const d = digits === undefined ? 3 : digits;
+    if (x !== 0 && (Math.abs(x) < 1e-3 || Math.abs(x) >= 1e5)) return x.toExponential(d - 1);
+    return Number(x.toPrecision(d)).toString();
+  }
+
+  function esc(text) {
+    const div = document.createElement("div");
+    div.textContent = text === null || text === undefined ? "" : String(text);
+    return div.innerHTML;
+  }
+
+  function table(rows) {
+    return "<table>" + rows.map(([k, v, cls]) =>
+      "<tr><th>" + esc(k) + "</th><td" + (cls ? " class=\"" + cls + "\"" : "") + ">" +
+      v + "</td></tr>").join("") + "</table>";
+  }
+
+  // ------------------------------------------------------------------ plotting
+  async function draw(div, traces, layout, source) {
+    const full = Object.assign({}, BASE_LAYOUT, layout || {});
+    await Plotly.react(div, traces, full, CONFIG);
+    div.dataset.rendered = "1";
+    div.dataset.source = source || "";
+    div.dataset.version = String((parseInt(div.dataset.version || "0", 10) || 0) + 1);
+  }
+
+  function clearPlot(div, message) {
+    Plotly.purge(div);
+    div.dataset.rendered = "0";
+    div.dataset.source = "";
+    div.innerHTML = message ? "<p class=\"note\">" + esc(message) + "</p>" : "";
+  }
+
+  function centres(edges) {
+    const out = [];
+    for (let i = 0; i + 1 < edges.length; i++) out.push(0.5 * (edges[i] + edges[i + 1]));
+    return out;
+  }
+
+  function widths(edges) {
+    const out = [];
+    for (let i = 0; i + 1 < edges.length; i++) out.push(edges[i + 1] - edges[i]);
+    return out;
+  }
+
+  function bars(hist, name, color, key, extra) {
+    return Object.assign({
+      type: "bar", name: name, x: centres(hist.edges), y: hist[key || "density"],
+      width: widths(hist.edges), marker: { color: color, line: { width: 0 } },
+      hovertemplate: "%{x:.3g}: %{y:.3g}<extra>" + name + "</extra>",
+    }, extra || {});
+  }
+
+  function cell(container, id) {
+    let div = document.getElementById(id);
+    if (!div) {
+      div = document.createElement("div");
+      div.id = id;
+      div.className = "plot";
+      container.appendChild(div);
+    }
+    return div;
+  }
+
+  // ------------------------------------------------------------------ lists
+  async function loadLists() {
+    const [ds, ms, cs] = await Promise.all([api("/datasets"), api("/models"),
+                                            api("/catalogues")]);
+    state.datasets = ds.datasets;
+    state.models = ms.models;
+    state.catalogues = cs.catalogues;
+    fillSelect($("dataset-select"), state.datasets.map((d) =>
+      [d.id, d.name + " (" + d.n_cutins + " cut-ins)"]));
+    fillSelect($("model-select"), state.models.map((m) =>
+      [m.id, m.id + (m["default"] ? " (default)" : "") + " · " + m.n_components +
+              " components · " + m.dataset]));
+    fillSelect($("catalogue-select"), [["", "— none —"]].concat(
+      state.catalogues.slice().reverse().map((c) =>
+        [c.id, c.id + " · n=" + c.n + " · seed " + c.seed + " · " + c.status])));
+  }
+
+  function fillSelect(select, options) {
+    const keep = select.value;
+    select.innerHTML = "";
+    for (const [value, label] of options) {
+      const opt = document.createElement("option");
+      opt.value = value;
+      opt.textContent = label;
+      select.appendChild(opt);
+    }
+    if (options.some(([v]) => v === keep)) select.value = keep;
+  }
+
+  function setSelect(select, value) {
+    select.value = value === null || value === undefined ? "" : value;
+  }
+
+  // ------------------------------------------------------------------ view 1
+  async function loadFit() {
+    if (!state.model) return;
+    busy(1);
+    try {
+      const q = state.dataset ? "?dataset=" + encodeURIComponent(state.dataset) : "";
+      const fit = await api("/dashboard/api/models/" + encodeURIComponent(state.model) +
+                            "/fit" + q);
+      state.fit = fit;
+      $("fit-note").textContent = "Histograms of the " + fit.n_data + " cut-ins of " +
+        fit.dataset_name + " with the marginal density of model " + fit.model + " (" +
+        fit.n_components + " Gaussian components, " + fit.density_method + ").";
+      const grid = $("fit-grid");
+      for (const p of fit.parameters) {
+        const div = cell(grid, "fit-" + p.name);
+        const traces = [bars(p.histogram, "data", COLORS.data, "density",
+                             { opacity: 0.6 })];
+        const layout = { title: { text: p.name, font: { size: 12 } },
+                         xaxis: { title: { text: p.label } },
+                         yaxis: { title: { text: "density" } }, showlegend: p.name === "p_y1",
+                         bargap: 0 };
+        if (p.density) {
+          traces.push({ type: "scatter", mode: "lines", name: "GMM marginal", x: p.density.x,
+                        y: p.density.y, line: { color: COLORS.model, width: 2 } });
+        } else {
+          layout.annotations = [{ text: "not modelled (fixed at " + fmt(p.fixed) + ")",
+                                  xref: "paper", yref: "paper", x: 0.5, y: 0.95,
+                                  showarrow: false }];
+        }
+        await draw(div, traces, layout, fit.model);
+      }
+      if (!state.cornerParams) state.cornerParams = fit.corner["default"].slice();
+      renderCornerChecks(fit);
+      await drawCorner();
+    } catch (e) {
+      reportError("data against model", e);
+    } finally {
+      busy(-1);
+    }
+  }
+
+  function renderCornerChecks(fit) {
+    const box = $("corner-params");
+    box.innerHTML = "Parameters: ";
+    for (const name of fit.corner.names) {
+      const label = document.createElement("label");
+      const input = document.createElement("input");
+      input.type = "checkbox";
+      input.value = name;
+      input.checked = state.cornerParams.includes(name);
+      input.addEventListener("change", () => {
+        state.cornerParams = Array.from(box.querySelectorAll("input:checked"))
+          .map((el) => el.value);
+        drawCorner();
+      });
+      label.appendChild(input);
+      label.appendChild(document.createTextNode(" " + name));
+      box.appendChild(label);
+    }
+  }
+
+  async function drawCorner() {
+    const fit = state.fit;
+    const div = $("corner-plot");
+    const names = PARAMS.filter((n) => state.cornerParams.includes(n));
+    if (names.length < 2) {
+      clearPlot(div, "Pick at least two parameters.");
+      return;
+    }
+    const k = names.length - 1;
+    const gap = 0.03;
+    const size = (1 - gap * (k - 1)) / k;
+    const traces = [];
+    const layout = { showlegend: true, margin: { l: 60, r: 12, t: 30, b: 50 },
+                     hovermode: "closest" };
+    let axis = 0;
+    for (let row = 0; row < k; row++) {
+      for (let col = 0; col <= row; col++) {
+        axis += 1;
+        const suffix = axis === 1 ? "" : String(axis);
+        const xName = names[col];
+        const yName = names[row + 1];
+        const x0 = col * (size + gap);
+        const y1 = 1 - row * (size + gap);
+        layout["xaxis" + suffix] = {
+          domain: [x0, x0 + size], anchor: "y" + suffix, tickfont: { size: 9 },
+          title: row === k - 1 ? { text: xName, font: { size: 11 } } : undefined,
+          showticklabels: row === k - 1,
+        };
+        layout["yaxis" + suffix] = {
+          domain: [y1 - size, y1], anchor: "x" + suffix, tickfont: { size: 9 },
+          title: col === 0 ? { text: yName, font: { size: 11 } } : undefined,
+          showticklabels: col === 0,
+        };
+        for (const [group, color, opacity] of [["model", COLORS.model, 0.35],
+                                               ["data", COLORS.data, 0.8]]) {
+          const pts = fit.corner[group].values;
+          traces.push({
+            type: "scatter", mode: "markers", name: group === "data"
+              ? "data (" + fit.corner.data.n_shown + ")"
+              : "model samples (" + fit.corner.model.n_shown + ")",
+            legendgroup: group, showlegend: axis === 1,
+            x: pts[xName], y: pts[yName], xaxis: "x" + suffix, yaxis: "y" + suffix,
+            marker: { size: 3, color: color, opacity: opacity },
+            hovertemplate: xName + " %{x:.3g}<br>" + yName + " %{y:.3g}<extra>" + group +
+              "</extra>",
+          });
+        }
+      }
+    }
+    await draw(div, traces, layout, fit.model);
+  }
+
+  // ------------------------------------------------------------------ view 2
+  async function loadShift() {
+    busy(1);
+    try {
+      let view;
+      if (state.catalogue) {
+        view = await api("/dashboard/api/catalogues/" + encodeURIComponent(state.catalogue) +
+                         "/shift");
+      } else {
+        if (!state.model) return;
+        const constraint = $("constraint-input").value;
+        const seed = parseInt($("seed-input").value, 10) || 0;
+        view = await api("/dashboard/api/models/" + encodeURIComponent(state.model) +
+                         "/shift?constraints=" + encodeURIComponent(constraint) +
+                         "&n=1000&seed=" + seed);
+      }
+      const what = view.constraints.length ? view.constraints.join(" and ") : "no constraint";
+      const pa = view.p_region && view.p_region.estimate !== undefined
+        ? "; P(A) = " + fmt(view.p_region.estimate) : "";
+      $("shift-note").textContent = (view.source === "catalogue"
+        ? "Catalogue " + view.catalogue + ": its " + view.n + " samples (" + what + ")"
+        : "Preview: " + view.n + " samples of model " + view.model + " with " + what +
+          " (not scored; draw a catalogue to score them)") +
+        " against " + view.n_reference + " model samples inside the physical bounds only" +
+        pa + ". Bars are densities on common bins.";
+      const grid = $("shift-grid");
+      const source = view.source === "catalogue" ? view.catalogue : "preview:" + what;
+      for (const p of view.parameters) {
+        const div = cell(grid, "shift-" + p.name);
+        const shift = p.mean_constrained !== null && p.mean_unconstrained !== null
+          ? " (mean " + fmt(p.mean_unconstrained) + " → " + fmt(p.mean_constrained) + ")" : "";
+        await draw(div, [
+          bars(p.unconstrained, "unconstrained", COLORS.unconstrained, "density",
+               { opacity: 0.55 }),
+          bars(p.constrained, "constrained", COLORS.constrained, "density", { opacity: 0.55 }),
+        ], {
+          barmode: "overlay", bargap: 0, showlegend: p.name === "p_y1",
+          title: { text: p.name + shift, font: { size: 11 } },
+          xaxis: { title: { text: p.label } }, yaxis: { title: { text: "density" } },
+        }, source);
+      }
+    } catch (e) {
+      reportError("constrained against unconstrained", e);
+    } finally {
+      busy(-1);
+    }
+  }
+
+  // ------------------------------------------------------------------ view 3
+  async function loadRisk() {
+    const divs = ["risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"].map($);
+    if (!state.catalogue) {
+      $("risk-note").textContent = "No catalogue selected: pick one above or draw a new " +
+        "sample (constraint, n, seed → Draw new sample).";
+      $("catalogue-info").innerHTML = "";
+      divs.forEach((d) => clearPlot(d, ""));
+      return;
+    }
+    busy(1);
+    try {
+      const id = state.catalogue;
+      const view = await api("/dashboard/api/catalogues/" + encodeURIComponent(id) + "/risk");
+      if (id !== state.catalogue) return;
+      const c = view.catalogue;
+      const d = view.diagnostics;
+      const pr = c.p_region || {};
+      $("risk-note").textContent = "Catalogue " + c.id + " (" + c.status + "): " +
+        view.n_rows + " scenarios stored, " + view.n_scored + " scored. Histograms are " +
+        "binned and the scatter is thinned on the server (" + view.scatter.n_shown + " of " +
+        view.scatter.n_plottable + " points shown: " + view.scatter.selection + ").";
+      const rows = [
+        ["constraints", esc(c.constraints.join(" and ") || "none")],
+        ["n · seed", esc(c.n + " · " + c.seed)],
+        ["model", esc(c.model)],
+        ["P(A)", esc(fmt(pr.estimate, 4) + (pr.ci ? "  (95% CI " + fmt(pr.ci[0], 3) + " – " +
+                                                     fmt(pr.ci[1], 3) + ", " +
+                                                     (pr.method || "") + ")" : ""))],
+        ["sampler", esc(c.sampler + (d.methods.length ? " → " + d.methods.join(", ") : "") +
+                        " over " + d.chunks + " chunk(s)")],
+        ["acceptance", esc("mean " + fmt(d.acceptance_mean) + ", min " +
+                           fmt(d.acceptance_min))],
+        ["τ (max)", esc(fmt(d.tau_max) + (d.tau_max === null ? " (no MCMC chain)" : ""))],
+        ["effective sample size", esc(fmt(d.ess_total, 4))],
+      ];
+      if (c.status !== "done") rows.push(["progress", esc(Math.round(100 * c.progress) + "%")]);
+      if (c.error) rows.push(["error", esc(c.error), "warn"]);
+      for (const w of d.warnings) rows.push(["warning", esc(w), "warn"]);
+      $("catalogue-info").innerHTML = table(rows);
+
+      const h = view.risk_hist;
+      await draw(divs[0], [
+        bars(h.r_dep, "r_dep (" + h.r_dep.n_finite + ")", COLORS.r_dep, "counts",
+             { opacity: 0.6 }),
+        bars(h.r_ind, "r_ind (" + h.r_ind.n_finite + ")", COLORS.r_ind, "counts",
+             { opacity: 0.5 }),
+      ], { barmode: "overlay", bargap: 0,
+           title: { text: "Scenario risk (max over time)", font: { size: 12 } },
+           xaxis: { title: { text: "risk" }, range: [0, 1] },
+           yaxis: { title: { text: "scenarios" } } }, id);
+
+      const s = view.scatter;
+      await draw(divs[1], [{
+        type: "scatter", mode: "markers", name: "scenario", x: s.ttc, y: s.risk,
+        customdata: s.index,
+        marker: { size: 7, color: s.risk, cmin: 0, cmax: 1,
+                  colorscale: [[0, "#fdd49e"], [0.5, "#fc8d59"], [1, "#b30000"]],
+                  line: { width: 0.5, color: "#555" } },
+        hovertemplate: "scenario %{customdata}<br>TTC %{x:.2f} s<br>risk %{y:.3f}" +
+          "<extra>click to open</extra>",
+      }], { title: { text: "TTC against risk (click a point)", font: { size: 12 } },
+            hovermode: "closest", showlegend: false,
+            xaxis: { title: { text: "TTC at the crossing [s]" } },
+            yaxis: { title: { text: "risk r_dep" }, range: [-0.03, 1.03] },
+            annotations: s.n_ttc_inf ? [{ text: s.n_ttc_inf + " with TTC = ∞ not shown",
+                                          xref: "paper", yref: "paper", x: 0.98, y: 0.97,
+                                          showarrow: false, xanchor: "right",
+                                          yanchor: "top" }] : [] }, id);
+      divs[1].removeAllListeners && divs[1].removeAllListeners("plotly_click");
+      divs[1].on("plotly_click", (ev) => {
+        const pt = ev && ev.points && ev.points[0];
+        if (pt && pt.customdata !== undefined) openScenario(state.catalogue, pt.customdata);
+      });
+
+      const t = view.ttr_hist;
+      await draw(divs[2], [bars(t, "min TTR", "#455a64", "counts")], {
+        bargap: 0.05, title: { text: "Minimum time-to-react per scenario", font: { size: 12 } },
+        xaxis: { title: { text: "min TTR [s] (0 = unavoidable)" } },
+        yaxis: { title: { text: "scenarios" } }, showlegend: false,
+        annotations: [{ text: view.n_no_collision + " scenario(s) without any predicted " +
+                              "collision (TTR = ∞)", xref: "paper", yref: "paper", x: 0.98,
+                        y: 0.97, showarrow: false, xanchor: "right", yanchor: "top",
+                        bgcolor: "rgba(255,255,255,0.85)" }],
+      }, id);
+
+      const ev = view.evasion;
+      await draw(divs[3], [{
+        type: "bar", x: ev.labels, y: ev.shares.map((v) => 100 * v), text: ev.counts,
+        textposition: "outside", marker: { color: "#5c6bc0" },
+        hovertemplate: "%{x}: %{y:.1f}% (%{text})<extra></extra>",
+      }], { title: { text: "Evasion giving the minimum TTR (share of scenarios)",
+                     font: { size: 12 } },
+            yaxis: { title: { text: "%" }, rangemode: "tozero" },
+            xaxis: { automargin: true }, showlegend: false }, id);
+      if (c.status === "queued" || c.status === "running") schedulePoll(id);
+    } catch (e) {
+      reportError("catalogue " + state.catalogue, e);
+      divs.forEach((d) => clearPlot(d, ""));
+    } finally {
+      busy(-1);
+    }
+  }
+
+  // ------------------------------------------------------------------ view 4
+  function box(x, y, psi, length, width) {
+    const c = Math.cos(psi);
+    const s = Math.sin(psi);
+    const pts = [[0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5], [0.5, -0.5], [0.5, 0.5]];
+    return {
+      x: pts.map(([a, b]) => x + a * length * c - b * width * s),
+      y: pts.map(([a, b]) => y + a * length * s + b * width * c),
+    };
+  }
+
+  async function openScenario(catalogue, index) {
+    stopPlay();
+    busy(1);
+    try {
+      $("scenario-note").textContent = "Loading scenario " + index + " (computing its risk " +
+        "over time)…";
+      const sc = await api("/dashboard/api/catalogues/" + encodeURIComponent(catalogue) +
+                           "/scenarios/" + encodeURIComponent(index));
+      state.scenario = sc;
+      const url = "/dashboard/catalogues/" + encodeURIComponent(catalogue) + "?scenario=" +
+        sc.index;
+      if (window.location.pathname + window.location.search !== url) {
+        window.history.replaceState(null, "", url);
+      }
+      const sm = sc.summary;
+      $("scenario-note").textContent = "Scenario " + sc.index + " of catalogue " +
+        sc.catalogue + " (" + sc.trajectory_source + ").";
+      $("scenario-info").innerHTML = table([
+        ["risk r_dep · r_ind", esc(fmt(sm.risk) + " · " + fmt(sm.risk_ind) + " (max at t = " +
+                                   fmt(sm.t_of_max_risk) + " s)")],
+        ["min TTR · TTC · WTTC · THW", esc(fmt(sm.min_ttr) + " · " + fmt(sm.min_ttc) + " · " +
+                                           fmt(sm.min_wttc) + " · " + fmt(sm.min_thw) + " s")],
+        ["evasion of the min TTR", esc(sm.min_ttr_evasion === null ? "no collision"
+          : sm.min_ttr_evasion === "none" ? "unavoidable" : sm.min_ttr_evasion)],
+        ["parameters", esc(PARAMS.map((p) => p + " " + fmt(sc.params[p])).join(", "))],
+        ["seed", esc(sc.seed)],
+      ]);
+      const slider = $("time-slider");
+      slider.max = String(sc.t.length - 1);
+      const start = Math.min(sc.t.length - 1, Math.max(0, sm.step_of_max_risk || 0));
+      slider.value = String(start);
+      $("slider-row").hidden = false;
+      await drawScenario(start);
+      $("view-scenario").scrollIntoView({ block: "start" });
+    } catch (e) {
+      reportError("scenario " + index, e);
+    } finally {
+      busy(-1);
+    }
+  }
+
+  async function drawScenario(k) {
+    const sc = state.scenario;
+    const source = sc.catalogue + "#" + sc.index;
+    const lw = sc.lane_width || 3.75;
+    const xs = [sc.ego.x].concat(sc.objects.map((o) => o.x)).flat();
+    const xmin = Math.min.apply(null, xs) - 10;
+    const xmax = Math.max.apply(null, xs) + 10;
+    const traces = [];
+    for (const [y, dash] of [[-1.5 * lw, "solid"], [-0.5 * lw, "dash"], [0.5 * lw, "dash"],
+                             [1.5 * lw, "solid"]]) {
+      traces.push({ type: "scatter", mode: "lines", x: [xmin, xmax], y: [y, y],
+                    line: { color: "#9aa3ad", width: 1, dash: dash }, hoverinfo: "skip",
+                    showlegend: false });
+    }
+    const tracks = [["ego", sc.ego, COLORS.ego]].concat(
+      sc.objects.map((o) => [o.id, o, COLORS.cutter]));
+    for (const [name, tr, color] of tracks) {
+      traces.push({ type: "scatter", mode: "lines", name: name + " path", x: tr.x, y: tr.y,
+                    line: { color: color, width: 1, dash: "dot" }, showlegend: false,
+                    hoverinfo: "skip" });
+    }
+    for (const [name, tr, color] of tracks) {
+      const b = box(tr.x[k], tr.y[k], tr.psi[k], tr.length, tr.width);
+      traces.push({ type: "scatter", mode: "lines", name: name, x: b.x, y: b.y,
+                    fill: "toself", fillcolor: color, line: { color: color, width: 1 },
+                    hovertemplate: name + " v %{customdata:.1f} m/s<extra></extra>",
+                    customdata: b.x.map(() => tr.v[k]) });
+    }
+    const cx = sc.ego.x[k];
+    await draw($("topdown-plot"), traces, {
+      title: { text: "Top-down view at t = " + fmt(sc.t[k]) + " s", font: { size: 12 } },
+      xaxis: { title: { text: "x along the road [m]" }, range: [cx - 35, cx + 85] },
+      yaxis: { title: { text: "y [m]" }, range: [-2 * lw, 2 * lw], scaleanchor: "x",
+               scaleratio: 1 },
+      margin: { l: 48, r: 12, t: 30, b: 40 }, showlegend: true,
+    }, source);
+
+    const s = sc.series;
+    const cap = (arr) => arr.map((v) => (v === null ? null : Math.min(v, 10)));
+    await draw($("series-plot"), [
+      { type: "scatter", mode: "lines", name: "risk r_dep", x: s.t, y: s.r_dep,
+        line: { color: COLORS.r_dep, width: 2.5 } },
+      { type: "scatter", mode: "lines", name: "risk r_ind", x: s.t, y: s.r_ind,
+        line: { color: COLORS.r_ind, width: 1.5, dash: "dot" } },
+      { type: "scatter", mode: "lines", name: "TTC", x: s.t, y: cap(s.ttc), yaxis: "y2",
+        line: { color: COLORS.ttc } },
+      { type: "scatter", mode: "lines", name: "WTTC", x: s.t, y: cap(s.wttc), yaxis: "y2",
+        line: { color: COLORS.wttc } },
+      { type: "scatter", mode: "lines", name: "THW", x: s.t, y: cap(s.thw), yaxis: "y2",
+        line: { color: COLORS.thw } },
+    ], {
+      title: { text: "Risk against TTC, WTTC and THW over time (TTX capped at 10 s; gaps: " +
+                     "not defined)", font: { size: 12 } },
+      xaxis: { title: { text: "t [s]" } },
+      yaxis: { title: { text: "risk" }, range: [0, 1.02] },
+      yaxis2: { title: { text: "TTX [s]" }, overlaying: "y", side: "right", range: [0, 10.2] },
+      margin: { l: 48, r: 48, t: 30, b: 42 },
+      shapes: [{ type: "line", x0: s.t[k], x1: s.t[k], yref: "paper", y0: 0, y1: 1,
+                 line: { color: "#333", width: 1, dash: "dash" } }],
+    }, source);
+    state.step = k;
+    $("time-label").textContent = "t = " + fmt(sc.t[k]) + " s · risk " + fmt(s.r_dep[k]) +
+      " · TTC " + fmt(s.ttc[k]) + " s";
+  }
+
+  function stopPlay() {
+    if (state.timer) {
+      clearInterval(state.timer);
+      state.timer = null;
+    }
+    $("play-button").textContent = "▶ Play";
+  }
+
+  function togglePlay() {
+    if (!state.scenario) return;
+    if (state.timer) {
+      stopPlay();
+      return;
+    }
+    const slider = $("time-slider");
+    if (+slider.value >= +slider.max) slider.value = "0";
+    $("play-button").textContent = "❚❚ Pause";
+    let drawing = false;
+    state.timer = setInterval(async () => {
+      if (drawing) return;
+      const next = +slider.value + 1;
+      if (next > +slider.max) {
+        stopPlay();
+        return;
+      }
+      slider.value = String(next);
+      drawing = true;
+      try { await drawScenario(next); } finally { drawing = false; }
+    }, 100);
+  }
+
+  // ------------------------------------------------------------------ drawing a sample
+  function parseCount(input, min, what) {
+    const text = input.value.trim();
+    if (!/^\d+$/.test(text) || parseInt(text, 10) < min) {
+      input.classList.add("invalid");
+      throw new ApiError(0, what + " must be a whole number ≥ " + min + ", got '" + text + "'");
+    }
+    input.classList.remove("invalid");
+    return parseInt(text, 10);
+  }
+
+  function splitConstraints(text) {
+    return text.replace(/&/g, ";").replace(/,/g, ";").split(";").map((s) => s.trim())
+      .filter((s) => s.length > 0);
+  }
+
+  async function drawSample(event) {
+    event.preventDefault();
+    clearError();
+    const button = $("draw-button");
+    const status = $("draw-status");
+    let body;
+    try {
+      body = {
+        model: state.model || "default",
+        constraints: splitConstraints($("constraint-input").value),
+        n: parseCount($("n-input"), 1, "n"),
+        seed: parseCount($("seed-input"), 0, "seed"),
+        sampler: $("sampler-select").value,
+      };
+    } catch (e) {
+      showError("draw a new sample: " + e.message);
+      return;
+    }
+    button.disabled = true;
+    busy(1);
+    try {
+      status.textContent = "starting…";
+      const created = await api("/catalogues", {
+        method: "POST", headers: { "Content-Type": "application/json" },
+        body: JSON.stringify(body),
+      });
+      $("constraint-input").classList.remove("invalid");
+      const info = await waitFor(created.id, status);
+      if (info.status !== "done") {
+        throw new ApiError(0, "catalogue " + created.id + " " + info.status +
+                              (info.error ? ": " + info.error : ""));
+      }
+      status.textContent = "catalogue " + created.id + " done (" + info.n + " scenarios)";
+      await loadLists();
+      await selectCatalogue(created.id, true);
+    } catch (e) {
+      if (e.field && e.field.indexOf("constraints") >= 0) {
+        $("constraint-input").classList.add("invalid");
+      }
+      status.textContent = "";
+      reportError("draw a new sample", e);
+    } finally {
+      button.disabled = false;
+      busy(-1);
+    }
+  }
+
+  function waitFor(id, status) {
+    return new Promise((resolve, reject) => {
+      const tick = async () => {
+        try {
+          const info = await api("/catalogues/" + encodeURIComponent(id));
+          status.textContent = "catalogue " + id + ": " + info.status + " " +
+            Math.round(100 * info.progress) + "% (" + info.scenarios_stored + " of " + info.n +
+            " scenarios)";
+          if (info.status === "queued" || info.status === "running") {
+            setTimeout(tick, 400);
+          } else {
+            resolve(info);
+          }
+        } catch (e) {
+          reject(e);
+        }
+      };
+      tick();
+    });
+  }
+
+  function schedulePoll(id) {
+    if (state.poll) clearTimeout(state.poll);
+    state.poll = setTimeout(() => {
+      state.poll = null;
+      if (state.catalogue === id) { loadRisk(); loadShift(); }
+    }, 1500);
+  }
+
+  // ------------------------------------------------------------------ selection
+  async function selectCatalogue(id, push) {
+    state.catalogue = id || null;
+    setSelect($("catalogue-select"), state.catalogue);
+    const cat = state.catalogues.find((c) => c.id === state.catalogue);
+    const tasks = [loadShift(), loadRisk()];
+    if (cat && cat.model !== state.model) {
+      state.model = cat.model;
+      setSelect($("model-select"), state.model);
+      tasks.push(loadFit());
+    }
+    if (push) {
+      const url = state.catalogue ? "/dashboard/catalogues/" +
+        encodeURIComponent(state.catalogue) : "/dashboard";
+      window.history.pushState(null, "", url);
+    }
+    await Promise.all(tasks);
+  }
+
+  async function init() {
+    $("draw-form").addEventListener("submit", drawSample);
+    $("play-button").addEventListener("click", togglePlay);
+    $("time-slider").addEventListener("input", (e) => {
+      stopPlay();
+      drawScenario(parseInt(e.target.value, 10));
+    });
+    $("model-select").addEventListener("change", async (e) => {
+      clearError();
+      state.model = e.target.value;
+      const cat = state.catalogues.find((c) => c.id === state.catalogue);
+      const tasks = [loadFit()];
+      if (cat && cat.model !== state.model) {
+        tasks.push(selectCatalogue(null, true));
+      } else if (!state.catalogue) {
+        tasks.push(loadShift());
+      }
+      await Promise.all(tasks);
+    });
+    $("dataset-select").addEventListener("change", (e) => {
+      clearError();
+      state.dataset = e.target.value;
+      loadFit();
+    });
+    $("catalogue-select").addEventListener("change", (e) => {
+      clearError();
+      selectCatalogue(e.target.value, true);
+    });
+    $("constraint-input").addEventListener("change", () => {
+      if (!state.catalogue) loadShift();
+    });
+    if (initial.error) showError(initial.error);
+    busy(1);
+    try {
+      await loadLists();
+      const cat = state.catalogues.find((c) => c.id === initial.catalogue);
+      const def = state.models.find((m) => m["default"]) || state.models[0];
+      state.catalogue = cat ? cat.id : null;
+      state.model = cat ? cat.model : def ? def.id : null;
+      const model = state.models.find((m) => m.id === state.model);
+      state.dataset = model ? model.dataset : (state.datasets[0] || {}).id || null;
+      setSelect($("model-select"), state.model);
+      setSelect($("dataset-select"), state.dataset);
+      setSelect($("catalogue-select"), state.catalogue);
+      if (!state.model) showError("no fitted model is available yet (see /health)");
+      await Promise.all([loadFit(), loadShift(), loadRisk()]);
+      if (state.catalogue && initial.scenario !== null && initial.scenario !== undefined) {
+        await openScenario(state.catalogue, initial.scenario);
+      }
+    } catch (e) {
+      reportError("loading the dashboard", e);
+    } finally {
+      busy(-1);
+      document.body.dataset.ready = "1";
+    }
+  }
+
+  window.addEventListener("popstate", () => window.location.reload());
+  init();
+})();
