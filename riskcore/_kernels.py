@@ -130,45 +130,31 @@ def ego_poses(x: FloatArray, y: FloatArray, psi: FloatArray) -> FloatArray:  # p
 
 
 @njit(cache=True)
-def evasions(x: FloatArray, y: FloatArray, psi: FloatArray, v: FloatArray,
-             man_a: FloatArray, man_w: FloatArray, dt: float) -> FloatArray:  # pragma: no cover
-    """The ego's evasive trajectories, once per scene.
+def fill_evasion(ego: FloatArray, v: FloatArray, man_a: FloatArray, man_w: FloatArray,
+                 dt: float, j: int, m: int, eva: FloatArray) -> None:  # pragma: no cover
+    """The ego's evasive trajectory for reaction step j and manoeuvre m, into ``eva[j, m]``.
 
     Parameters
     ----------
-    x, y, psi, v : ndarray of shape (N + 1,)
-        The ego's known future on the prediction grid.
+    ego : ndarray of shape (N + 1, 4)
+        The ego's known poses ``[x, y, cos ψ, sin ψ]``.
+    v : ndarray of shape (N + 1,)
+        The ego's known speeds in m/s.
     man_a, man_w : ndarray of shape (N, M)
         Inputs (m/s², rad/s) of manoeuvre m when started at reaction step j.
     dt : float
-
-    Returns
-    -------
-    ndarray of shape (N, M, N + 1, 4)
-        ``[j, m, n]`` is the ego's pose at step n after leaving the known trajectory at
-        step j with manoeuvre m (for n ≤ j: the known pose).
+    j, m : int
+    eva : ndarray of shape (N, M, N + 1, 4)
+        ``eva[j, m, n]`` for n > j becomes the pose at step n after leaving the known
+        trajectory at step j with manoeuvre m (CTRA from the known state at step j).
     """
-    n_react = man_a.shape[0]
-    n_man = man_a.shape[1]
-    n_pts = x.shape[0]
-    out = np.empty((n_react, n_man, n_pts, 4))
-    cps = np.cos(psi)
-    sps = np.sin(psi)
-    for j in range(n_react):
-        for m in range(n_man):
-            for n in range(j + 1):
-                out[j, m, n, 0] = x[n]
-                out[j, m, n, 1] = y[n]
-                out[j, m, n, 2] = cps[n]
-                out[j, m, n, 3] = sps[n]
-            for n in range(j + 1, n_pts):
-                px, py, pc, ps, _, _ = ctra_pose_cs(x[j], y[j], cps[j], sps[j], v[j],
-                                                    man_a[j, m], man_w[j, m], (n - j) * dt)
-                out[j, m, n, 0] = px
-                out[j, m, n, 1] = py
-                out[j, m, n, 2] = pc
-                out[j, m, n, 3] = ps
-    return out
+    for n in range(j + 1, ego.shape[0]):
+        px, py, pc, ps, _, _ = ctra_pose_cs(ego[j, 0], ego[j, 1], ego[j, 2], ego[j, 3], v[j],
+                                            man_a[j, m], man_w[j, m], (n - j) * dt)
+        eva[j, m, n, 0] = px
+        eva[j, m, n, 1] = py
+        eva[j, m, n, 2] = pc
+        eva[j, m, n, 3] = ps
 
 
 @njit(cache=True)
@@ -217,14 +203,20 @@ def overlap_many(a: FloatArray, b: FloatArray) -> NDArray[np.bool_]:  # pragma: 
 
 
 @njit(cache=True)
-def _avoids(eva: FloatArray, j: int, m: int, traj: FloatArray, i: int, c: int,
-            ehl: float, ehw: float, er: float, ohl: float, ohw: float,
+def _avoids(ego: FloatArray, v: FloatArray, man_a: FloatArray, man_w: FloatArray, dt: float,
+            eva: FloatArray, done: NDArray[np.bool_], j: int, m: int, traj: FloatArray, i: int,
+            c: int, ehl: float, ehw: float, er: float, ohl: float, ohw: float,
             orad: float) -> bool:  # pragma: no cover - jit
     """Does manoeuvre m started at step j stay clear of trajectory i on steps j+1..N?
 
-    Steps c.. N are checked first (where the known trajectory collided), then j+1 .. c-1:
-    a failing manoeuvre is usually found at once. The answer does not depend on the order.
+    The evasive trajectory is computed on first use and kept in ``eva`` (``done[j, m]``),
+    for all objects of the scene. Steps c..N are checked first (where the known trajectory
+    collided), then j+1..c-1: a failing manoeuvre is usually found at once. The answer does
+    not depend on the order.
     """
+    if not done[j, m]:
+        fill_evasion(ego, v, man_a, man_w, dt, j, m, eva)
+        done[j, m] = True
     n_pts = traj.shape[1]
     for n in range(c, n_pts):
         if overlap(eva[j, m, n, 0], eva[j, m, n, 1], eva[j, m, n, 2], eva[j, m, n, 3],
@@ -240,9 +232,11 @@ def _avoids(eva: FloatArray, j: int, m: int, traj: FloatArray, i: int, c: int,
 
 
 @njit(cache=True)
-def ttr_scan(traj: FloatArray, ohl: float, ohw: float, ego: FloatArray, ehl: float,
-             ehw: float, eva: FloatArray) -> tuple[NDArray[np.int64], NDArray[np.int64],
-                                                   NDArray[np.int64]]:  # pragma: no cover
+def ttr_scan(traj: FloatArray, ohl: float, ohw: float, ego: FloatArray, v: FloatArray,
+             ehl: float, ehw: float, man_a: FloatArray, man_w: FloatArray, dt: float,
+             eva: FloatArray, done: NDArray[np.bool_]
+             ) -> tuple[NDArray[np.int64], NDArray[np.int64],
+                        NDArray[np.int64]]:  # pragma: no cover - jit
     """First collision, reaction step and evasion mask of every predicted trajectory.
 
     Parameters
@@ -253,10 +247,17 @@ def ttr_scan(traj: FloatArray, ohl: float, ohw: float, ego: FloatArray, ehl: flo
         The object's half length and half width in m.
     ego : ndarray of shape (N + 1, 4)
         The ego's known poses.
+    v : ndarray of shape (N + 1,)
+        The ego's known speeds in m/s.
     ehl, ehw : float
         The ego's half length and half width in m.
-    eva : ndarray of shape (N, M, N + 1, 4)
-        The ego's evasive poses (:func:`evasions`).
+    man_a, man_w : ndarray of shape (N, M)
+        The manoeuvres' inputs per reaction step.
+    dt : float
+        Prediction step in s.
+    eva, done : ndarray of shape (N, M, N + 1, 4) and (N, M)
+        The ego's evasive poses, filled on demand (:func:`fill_evasion`), shared by all
+        objects of a scene; ``done[j, m]`` marks the filled ones.
 
     Returns
     -------
@@ -270,7 +271,7 @@ def ttr_scan(traj: FloatArray, ohl: float, ohw: float, ego: FloatArray, ehl: flo
     """
     n_smp = traj.shape[0]
     n_pts = traj.shape[1]
-    n_man = eva.shape[1]
+    n_man = man_a.shape[1]
     er = math.hypot(ehl, ehw)
     orad = math.hypot(ohl, ohw)
     first = np.full(n_smp, -1, dtype=np.int64)
@@ -290,7 +291,8 @@ def ttr_scan(traj: FloatArray, ohl: float, ohw: float, ego: FloatArray, ehl: flo
         for j in range(c - 1, -1, -1):
             mk = 0
             for m in range(n_man):
-                if _avoids(eva, j, m, traj, i, c, ehl, ehw, er, ohl, ohw, orad):
+                if _avoids(ego, v, man_a, man_w, dt, eva, done, j, m, traj, i, c, ehl, ehw, er,
+                           ohl, ohw, orad):
                     mk |= 1 << m
             if mk != 0:
                 react[i] = j

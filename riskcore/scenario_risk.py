@@ -293,13 +293,13 @@ def evaluate_scenario(scenario: ConcreteScenario, settings: RiskSettings | None 
     scenes = []
     for k in range(t.shape[0]):
         ego = futures[k]
-        poses, eva = engine.ego_arrays(ego)
+        arrays = engine.ego_arrays(ego)
         results = []
         for track, a0, w0, mean_a, std_a, mean_w, std_w in per_object:
             state = ObjectState(id=track.id, x=track.x[k], y=track.y[k], psi=track.psi[k],
                                 v=track.v[k], a0=a0[k], omega0=w0[k], length=track.length,
                                 width=track.width)
-            results.append(engine.object(ego, poses, eva, state,
+            results.append(engine.object(ego, arrays, state,
                                          (float(mean_a[k]), float(std_a[k]),
                                           float(mean_w[k]), float(std_w[k]))))
         scenes.append(engine.consolidate(tuple(results)))

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -278,6 +278,15 @@ class SceneResult:
         return self._min("thw")
 
 
+class _EgoArrays(NamedTuple):
+    poses: FloatArray  # (N + 1, 4) known poses [x, y, cos ψ, sin ψ]
+    v: FloatArray  # (N + 1,) known speeds
+    man_a: FloatArray  # (N, M) manoeuvre accelerations per reaction step
+    man_w: FloatArray  # (N, M) manoeuvre turn rates per reaction step
+    eva: FloatArray  # (N, M, N + 1, 4) evasive poses, filled on demand
+    done: NDArray[np.bool_]  # (N, M) which evasive trajectories are filled
+
+
 class _Engine:
     """Evaluates scenes with fixed settings, surfaces and manoeuvres (no validation)."""
 
@@ -294,24 +303,28 @@ class _Engine:
         self._za, self._zw, self._weight = za, zw, weight
         self._weight_sum = float(np.sum(weight))
 
-    def ego_arrays(self, ego: EgoFuture) -> tuple[FloatArray, FloatArray]:
+    def ego_arrays(self, ego: EgoFuture) -> _EgoArrays:
+        """Per-scene arrays of the ego: poses, manoeuvre inputs, the evasion buffer."""
         s = self.settings
         n = s.n_steps
         if ego.x.shape[0] != n + 1:
             raise SceneError(f"ego.x: has {ego.x.shape[0]} values, the prediction grid has "
                              f"N + 1 = {n + 1} (horizon {s.horizon} s / dt {s.dt} s)")
         v_react = ego.v[:n]
-        man_a = np.empty((n, len(self.manoeuvres)))
-        man_w = np.empty((n, len(self.manoeuvres)))
+        n_man = len(self.manoeuvres)
+        man_a = np.empty((n, n_man))
+        man_w = np.empty((n, n_man))
         for k, man in enumerate(self.manoeuvres):
             a, w = man.inputs(v_react, s)
             man_a[:, k] = a
             man_w[:, k] = w
         poses = _kernels.ego_poses(ego.x, ego.y, ego.psi)
-        eva = _kernels.evasions(ego.x, ego.y, ego.psi, ego.v, man_a, man_w, s.dt)
-        return poses, eva
+        # evasive trajectories: computed on demand by the scan, shared by all objects
+        eva = np.empty((n, n_man, n + 1, 4))
+        done = np.zeros((n, n_man), dtype=np.bool_)
+        return _EgoArrays(poses, ego.v, man_a, man_w, eva, done)
 
-    def object(self, ego: EgoFuture, poses: FloatArray, eva: FloatArray, obj: ObjectState,
+    def object(self, ego: EgoFuture, arrays: _EgoArrays, obj: ObjectState,
                dist: tuple[float, float, float, float] | None = None) -> ObjectRisk:
         s = self.settings
         if dist is None:
@@ -323,8 +336,10 @@ class _Engine:
         w = mean_w + std_w * self._zw
         weight = self._weight
         traj = _kernels.predict(obj.x, obj.y, obj.psi, obj.v, a, w, s.n_steps, s.dt)
-        first, react, mask = _kernels.ttr_scan(traj, 0.5 * obj.length, 0.5 * obj.width,
-                                               poses, 0.5 * ego.length, 0.5 * ego.width, eva)
+        first, react, mask = _kernels.ttr_scan(
+            traj, 0.5 * obj.length, 0.5 * obj.width, arrays.poses, arrays.v,
+            0.5 * ego.length, 0.5 * ego.width, arrays.man_a, arrays.man_w, s.dt, arrays.eva,
+            arrays.done)
         ttr, coll_t, g, risk = _kernels.finish(first, react, s.dt, s.t_pnr, s.t_max, s.m,
                                                weight)
         ttc = _kernels.ttc_cv(ego.x[0], ego.y[0], ego.psi[0], ego.length, ego.width, ego.v[0],
@@ -386,7 +401,7 @@ def evaluate_scene(ego: EgoFuture, objects: Sequence[ObjectState],
         raise SceneError("objects: ids must be unique")
     engine = _Engine(settings or RiskSettings(), surfaces or default_surfaces(),
                      manoeuvres or MANOEUVRES)
-    poses, eva = engine.ego_arrays(ego)
-    results = tuple(engine.object(ego, poses, eva, o) for o in objs)
+    arrays = engine.ego_arrays(ego)
+    results = tuple(engine.object(ego, arrays, o) for o in objs)
     return engine.consolidate(results)
 
