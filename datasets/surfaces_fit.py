@@ -17,10 +17,12 @@ spacings. The mean is local-linear: weighted least squares of
 y ~ c + b_x (x0 - x0_j) + b_v (v0 - v0_i), mean = c (a local constant, sum(w y) / sum(w),
 would mix the slope of the mean into the spread); the std is the weighted ML estimate
 sqrt(sum(w r^2) / sum(w)) of the residuals r of that fit. Where the 3x3 normal equations
-are singular (no spread of the samples), the local constant is used. The effective count
-n_eff = (sum w)^2 / sum(w^2) is stored in ``count``. A node with n_eff < ``min_count`` is
-sparse: it is filled with the mean and std of the nearest node that is not (distance in
-grid steps), and its count is 0.
+are singular (no spread of the samples), the local constant is used. The kernel-weighted
+count n_w = sum(w) (each weight <= 1: a sample on the node counts 1, one a grid step away
+in one axis 0.61) is stored in ``count``. A node with n_w < ``min_count`` is sparse: it is
+filled with the mean and std of the nearest node that is not (distance in grid steps), and
+its count is 0. Samples of one trajectory are correlated, so n_w overstates the number of
+independent observations.
 The std has a floor (``std_floor``) so no cell is degenerate.
 
 Mirror symmetry of the turn surface (the risk engine's left/right invariance needs it):
@@ -178,8 +180,7 @@ def fit_surface(
         kv = np.exp(-0.5 * (dv / hv) ** 2)
         w = kx * kv[None, :]  # (n_x, n)
         sw = w.sum(axis=1)
-        sw2 = (w * w).sum(axis=1)
-        count[i] = np.where(sw2 > 0, sw * sw / np.where(sw2 > 0, sw2, 1.0), 0.0)
+        count[i] = sw
         # local-linear weighted least squares y ~ c + b_x (x0 - x_j) + b_v (v0 - v_i)
         basis = np.stack([np.ones_like(dx), dx, np.broadcast_to(dv, dx.shape)], axis=-1)
         wb = w[..., None] * basis  # (n_x, n, 3)
@@ -201,7 +202,7 @@ def fit_surface(
     observed = count >= min_count
     if not observed.any():
         raise DatasetError(
-            f"surface fit: no grid node has {min_count:g} effective samples; "
+            f"surface fit: no grid node has a kernel-weighted count of {min_count:g}; "
             "use more data or a lower min_count"
         )
     ii, jj = np.nonzero(observed)
@@ -245,8 +246,8 @@ def fit_surfaces(
         f"kernel-weighted ML Gaussians of the mean input over the next {grid.horizon:g} s "
         f"({len(acc)} acceleration samples, {len(turn)} turn samples x2 mirrored, "
         f"{grid.rate:g} Hz); local-linear fit with a Gaussian kernel of one grid step; "
-        f"nodes with fewer than "
-        f"{grid.min_count:g} effective samples filled from the nearest node (count 0); "
+        f"nodes with kernel-weighted counts below "
+        f"{grid.min_count:g} filled from the nearest node (count 0); "
         f"std floors {grid.accel_std_floor:g} m/s^2 and {grid.turn_std_floor:g} rad/s; "
         "turn surface mirror-symmetric. Method: datasets.surfaces_fit, docs/datasets.md."
     )
