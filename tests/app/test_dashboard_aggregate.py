@@ -1,0 +1,171 @@
+"""The dashboard's server-side aggregation on hand-made data (app.dashboard.aggregate,
+app.domain.marginal_density, app.dashboard.views.split_constraints)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from app import domain
+from app.dashboard.aggregate import histogram, shared_edges, shares, thin_scatter
+from app.dashboard.views import split_constraints
+from app.errors import InvalidInput
+from sampler.model import CutInGMM
+
+
+# --------------------------------------------------------------------------- histogram
+def test_histogram_counts_density_and_overflow_by_hand() -> None:
+    values = [0.0, 0.5, 1.0, 1.5, 2.0, math.inf, math.nan, 5.0, -1.0]
+    h = histogram(values, [0.0, 1.0, 2.0])
+    # [0, 1): 0, 0.5   [1, 2]: 1, 1.5, 2 (last bin closed); 5 above, -1 below
+    assert h["counts"] == [2, 3]
+    assert h["n"] == 9 and h["n_finite"] == 7 and h["n_nonfinite"] == 2
+    assert h["below"] == 1 and h["above"] == 1
+    assert h["density"] == pytest.approx([2 / 7, 3 / 7])
+    assert h["edges"] == [0.0, 1.0, 2.0]
+
+
+def test_histogram_of_nothing_is_zero_not_nan() -> None:
+    h = histogram([], [0.0, 0.5, 1.0])
+    assert h["counts"] == [0, 0] and h["density"] == [0.0, 0.0] and h["n"] == 0
+
+
+def test_histogram_rejects_bad_edges() -> None:
+    with pytest.raises(ValueError, match="strictly increasing"):
+        histogram([1.0], [1.0, 1.0])
+
+
+def test_shared_edges_cover_all_samples_or_the_given_span() -> None:
+    assert list(shared_edges([[1.0, 3.0], [2.0, 5.0, math.inf]], bins=4)) == \
+        [1.0, 2.0, 3.0, 4.0, 5.0]
+    assert list(shared_edges([], bins=2, span=(0.0, 1.0))) == [0.0, 0.5, 1.0]
+    assert list(shared_edges([[2.0, 2.0]], bins=2)) == [1.5, 2.0, 2.5]
+    assert list(shared_edges([[]], bins=1)) == [-0.5, 0.5]
+    with pytest.raises(ValueError, match="bins"):
+        shared_edges([[1.0]], bins=61)
+    with pytest.raises(ValueError, match="span"):
+        shared_edges([[1.0]], bins=3, span=(1.0, 1.0))
+
+
+def test_shared_edges_quantiles_cut_the_tails() -> None:
+    values = np.concatenate([np.arange(100.0), [1e6]])
+    edges = shared_edges([values], bins=10, quantiles=(0.0, 0.99))
+    # 101 values: the 0.99 quantile sits at position 0.99 * 100 = 99, the value 99
+    assert edges[-1] == pytest.approx(99.0)
+    assert histogram(values, edges)["above"] == 1
+
+
+# --------------------------------------------------------------------------- scatter
+def test_thin_scatter_keeps_every_finite_point_under_the_budget() -> None:
+    x = [0.0, 1.0, math.inf, 3.0, 4.0]
+    y = [1.0, math.nan, 2.0, 3.0, 4.0]
+    assert thin_scatter(x, y, max_points=10).tolist() == [0, 3, 4]
+
+
+def test_thin_scatter_bounds_the_points_and_keeps_outliers_and_the_top() -> None:
+    rng = np.random.default_rng(3)
+    x = rng.normal(0.0, 1.0, 10_000)
+    y = rng.uniform(0.0, 0.5, 10_000)
+    x[1234], y[1234] = 40.0, 0.1  # an isolated point far right
+    y[777] = 0.99  # the highest y
+    keep = thin_scatter(x, y, max_points=500, cells=16)
+    assert keep.size == 500
+    assert 1234 in keep and 777 in keep
+    assert np.all(np.diff(keep) > 0)
+    assert thin_scatter(x, y, max_points=500, cells=16).tolist() == keep.tolist()
+
+
+def test_thin_scatter_with_more_cells_than_budget_keeps_the_highest() -> None:
+    x = np.arange(100.0)
+    y = np.arange(100.0) / 100.0
+    keep = thin_scatter(x, y, max_points=5, cells=50)
+    # on the diagonal each cell (width 99/50) holds two neighbours, e.g. {98, 99}, {96, 97},
+    # {94, 95}, {92, 93}, {90, 91}: each keeps its upper one; the five highest of those
+    assert keep.tolist() == [91, 93, 95, 97, 99]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(allow_nan=True, allow_infinity=True, width=32),
+                          st.floats(allow_nan=True, allow_infinity=True, width=32)),
+                max_size=300),
+       st.integers(min_value=1, max_value=50))
+def test_thin_scatter_properties(points: list[tuple[float, float]], budget: int) -> None:
+    x = np.array([p[0] for p in points], dtype=np.float64)
+    y = np.array([p[1] for p in points], dtype=np.float64)
+    keep = thin_scatter(x, y, max_points=budget, cells=8)
+    finite = int((np.isfinite(x) & np.isfinite(y)).sum())
+    assert keep.size == min(budget, finite)
+    assert len(set(keep.tolist())) == keep.size
+    assert np.all(np.isfinite(x[keep])) and np.all(np.isfinite(y[keep]))
+
+
+# --------------------------------------------------------------------------- shares
+def test_shares_count_none_and_order() -> None:
+    out = shares(["brake", None, "brake", "steer_left", "none"], order=["steer_left"],
+                 none_label="no collision")
+    assert out["labels"] == ["steer_left", "brake", "no collision", "none"]
+    assert out["counts"] == [1, 2, 1, 1]
+    assert out["shares"] == pytest.approx([0.2, 0.4, 0.2, 0.2])
+    assert out["n"] == 5
+
+
+def test_split_constraints() -> None:
+    assert split_constraints(" ttc<3; v_ego>=20 ,gap>1 & dv>0;; ") == \
+        ["ttc<3", "v_ego>=20", "gap>1", "dv>0"]
+    assert split_constraints("   ") == []
+
+
+# --------------------------------------------------------------------------- marginal
+def _two_component_model() -> CutInGMM:
+    """A hand-made mixture over (dv, gap): dv identity (loc 1, scale 2), gap log (loc 3,
+    scale 0.5); the other parameters fixed."""
+    return CutInGMM.from_dict({
+        "format": "scengen.cutin-gmm/1",
+        "features": ["dv", "gap"],
+        "transforms": [
+            {"feature": "dv", "kind": "identity", "shift": 0.0, "loc": 1.0, "scale": 2.0},
+            {"feature": "gap", "kind": "log", "shift": 0.0, "loc": 3.0, "scale": 0.5},
+        ],
+        "fixed": {"p_y1": 0.04, "p_t": 2.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
+                  "p_v0": 25.0},
+        "weights": [0.3, 0.7],
+        "means": [[-1.0, 0.5], [1.0, -0.5]],
+        "covariances": [[[0.25, 0.1], [0.1, 1.0]], [[1.0, -0.3], [-0.3, 0.64]]],
+    })
+
+
+def test_marginal_density_is_the_mixture_of_the_component_marginals() -> None:
+    model = _two_component_model()
+    dv = np.array([-3.0, 0.0, 1.0, 2.5])
+    z = (dv - 1.0) / 2.0
+    want_dv = (0.3 * stats.norm.pdf(z, -1.0, 0.5) + 0.7 * stats.norm.pdf(z, 1.0, 1.0)) / 2.0
+    assert domain.marginal_density(model, "dv", dv) == pytest.approx(want_dv, rel=1e-12)
+    gap = np.array([5.0, 20.0, 40.0])
+    zg = (np.log(gap) - 3.0) / 0.5
+    want_gap = (0.3 * stats.norm.pdf(zg, 0.5, 1.0) + 0.7 * stats.norm.pdf(zg, -0.5, 0.8)) \
+        / (0.5 * gap)
+    assert domain.marginal_density(model, "gap", gap) == pytest.approx(want_gap, rel=1e-12)
+    # outside the log transform's domain: density 0
+    assert domain.marginal_density(model, "gap", np.array([-1.0, 0.0])).tolist() == [0.0, 0.0]
+
+
+def test_marginal_density_integrates_to_one_and_matches_the_joint() -> None:
+    model = _two_component_model()
+    grid = np.linspace(-15.0, 17.0, 4001)
+    assert np.trapezoid(domain.marginal_density(model, "dv", grid), grid) == \
+        pytest.approx(1.0, abs=1e-6)
+    # numerical integral of the joint density over gap at dv = 0.5
+    gaps = np.exp(np.linspace(np.log(0.05), np.log(5000.0), 20001))
+    joint = np.exp(model.log_density(np.column_stack([np.full_like(gaps, 0.5), gaps])))
+    assert np.trapezoid(joint, gaps) == pytest.approx(
+        float(domain.marginal_density(model, "dv", np.array([0.5]))[0]), rel=1e-4)
+
+
+def test_marginal_density_of_a_fixed_parameter_is_an_error() -> None:
+    with pytest.raises(InvalidInput, match="not a feature"):
+        domain.marginal_density(_two_component_model(), "p_v0", np.array([1.0]))
