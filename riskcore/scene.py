@@ -18,6 +18,7 @@ Seed 000, sections II-III, as DESIGN.md "riskcore" describes:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -278,6 +279,16 @@ class SceneResult:
         return self._min("thw")
 
 
+@functools.lru_cache(maxsize=64)
+def _standard_inputs(n_a: int, n_omega: int, sigma_range: float
+                     ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """The grid in standard scores (z_a, z_ω repeated as in input_grid) and its weights."""
+    za, zw, weight = input_grid(0.0, 1.0, 0.0, 1.0, n_a, n_omega, sigma_range)
+    for arr in (za, zw, weight):
+        arr.setflags(write=False)
+    return za, zw, weight, float(np.sum(weight))
+
+
 class _EgoArrays(NamedTuple):
     poses: FloatArray  # (N + 1, 4) known poses [x, y, cos ψ, sin ψ]
     v: FloatArray  # (N + 1,) known speeds
@@ -298,10 +309,8 @@ class _Engine:
         self.surfaces = surfaces
         self.manoeuvres = tuple(manoeuvres)
         # The grid in standard scores and its weights depend on the settings only.
-        za, zw, weight = input_grid(0.0, 1.0, 0.0, 1.0, settings.n_a, settings.n_omega,
-                                    settings.sigma_range)
-        self._za, self._zw, self._weight = za, zw, weight
-        self._weight_sum = float(np.sum(weight))
+        self._za, self._zw, self._weight, self._weight_sum = _standard_inputs(
+            settings.n_a, settings.n_omega, settings.sigma_range)
 
     def ego_arrays(self, ego: EgoFuture) -> _EgoArrays:
         """Per-scene arrays of the ego: poses, manoeuvre inputs, the evasion buffer."""
@@ -328,8 +337,8 @@ class _Engine:
                dist: tuple[float, float, float, float] | None = None) -> ObjectRisk:
         s = self.settings
         if dist is None:
-            mean_a, std_a = (float(q) for q in self.surfaces.accel(obj.v, obj.a0))
-            mean_w, std_w = (float(q) for q in self.surfaces.turn(obj.v, obj.omega0))
+            mean_a, std_a = self.surfaces.accel.at(obj.v, obj.a0)
+            mean_w, std_w = self.surfaces.turn.at(obj.v, obj.omega0)
         else:
             mean_a, std_a, mean_w, std_w = dist
         a = mean_a + std_a * self._za

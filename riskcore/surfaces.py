@@ -27,6 +27,7 @@ The packaged default lives in ``riskcore/data/input_surfaces.json`` and is what
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
@@ -181,6 +182,14 @@ class Surface:
         mean = _kernels.bilinear(self.v0, self.x0, self.mean, vf, xf).reshape(v.shape)
         std = _kernels.bilinear(self.v0, self.x0, self.std, vf, xf).reshape(v.shape)
         return mean, std
+
+    def at(self, v0: float, x0: float) -> tuple[float, float]:
+        """(mean, std) at one point; the same interpolation as calling the surface."""
+        if not (math.isfinite(v0) and math.isfinite(x0)):
+            raise SurfaceError("surface lookup: v0 and x0 must be finite")
+        m, sd = _kernels.bilinear_pair(self.v0, self.x0, self.mean, self.std, float(v0),
+                                       float(x0))
+        return float(m), float(sd)
 
     def mirrored(self) -> Surface:
         """The surface of the mirrored input x → -x: mean(v, -x) → -mean(v, x), same std."""

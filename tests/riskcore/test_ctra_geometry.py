@@ -211,3 +211,24 @@ def test_time_headway_hand_cases() -> None:
     # a lead turned by 90°: its half extent along the ego is 0.9 m
     assert math.isclose(float(time_headway(ego, 20.0, (34.5, 0.0, math.pi / 2, 4.5, 1.8))),
                         (34.5 - 0.9 - 2.25) / 20.0, rel_tol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(psi0=st.floats(-3, 3, **finite), v0=st.floats(0, 40, **finite),
+       a=st.lists(st.floats(-9, 4, **finite), min_size=1, max_size=6),
+       w=st.floats(-1, 1, **finite))
+def test_the_batch_rollout_matches_the_closed_form(psi0: float, v0: float, a: list[float],
+                                                   w: float) -> None:
+    """The engine's batch rollout (angle-addition recurrence) vs ctra_states per step."""
+    from riskcore import _kernels
+
+    a_arr = np.array(a)
+    w_arr = np.full(a_arr.shape, w)
+    poses = _kernels.predict(1.0, 2.0, psi0, v0, a_arr, w_arr, 30, 0.1)
+    tau = np.arange(31) * 0.1
+    for i, ai in enumerate(a):
+        x, y, psi, _ = ctra_states(1.0, 2.0, psi0, v0, ai, w, tau)
+        np.testing.assert_allclose(poses[i, :, 0], x, rtol=0, atol=1e-11)
+        np.testing.assert_allclose(poses[i, :, 1], y, rtol=0, atol=1e-11)
+        np.testing.assert_allclose(poses[i, :, 2], np.cos(psi), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(poses[i, :, 3], np.sin(psi), rtol=0, atol=1e-13)
