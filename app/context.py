@@ -61,46 +61,56 @@ class ServiceContext:
 
     # ----------------------------------------------------------------- defaults
     def load_defaults(self) -> None:
-        table = domain.embedded_parameter_table()
-        data_hash = domain.table_hash(table)
-        table_rel = f"datasets/{EMBEDDED_ID}/table-{data_hash[:16]}.parquet"
+        """Register the embedded dataset and the default model (fit or load the cache)."""
+        source = domain.embedded_source_hash()
+        table_rel = f"datasets/{EMBEDDED_ID}/table-{source[:16]}.parquet"
         table_path = self.data_dir / table_rel
         if not table_path.exists():
+            log.info("extracting the embedded TNO cut-ins (first start for this data)")
+            fresh = domain.embedded_parameter_table()
             table_path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = table_path.with_suffix(".tmp")
-            table.to_parquet(tmp, index=False)
+            tmp = table_path.with_name(f".{table_path.name}.tmp")
+            fresh.to_parquet(tmp, index=False)
             tmp.replace(table_path)
+        table = pd.read_parquet(table_path)
+        data_hash = domain.table_hash(table)
         with self.db.session() as s:
             row = s.get(DatasetRow, EMBEDDED_ID)
             if row is None:
                 row = DatasetRow(id=EMBEDDED_ID, name=EMBEDDED_NAME, kind="embedded",
                                  embedded=True, data_hash=data_hash, n_cutins=len(table),
                                  table_path=table_rel,
-                                 report={"source": "datasets.embedded (TNO cut-in.json)",
-                                         "licence": "MIT"})
+                                 report={"source": "datasets.embedded (TNO cut-in.json, "
+                                         "de Gelder et al. 2021)", "licence": "MIT",
+                                         "provenance": "datasets/data/tno_cutin/PROVENANCE.md"})
                 s.add(row)
             else:
                 row.data_hash, row.n_cutins, row.table_path = data_hash, len(table), table_rel
         self.default_dataset_id = EMBEDDED_ID
 
-        cache = self.data_dir / "models" / f"default-{data_hash[:16]}.json"
+        options = dict(self.settings.default_model_options)
+        key = data_hash[:16] + (f"-{domain.options_hash(options)[:8]}" if options else "")
+        cache = self.data_dir / "models" / f"default-{key}.json"
         if cache.exists():
             log.info("loading the cached default model %s", cache)
             fitted = domain.describe_model(cache.read_text())
         else:
             log.info("first start for this data (hash %s): fitting the default model on "
-                     "%d cut-ins", data_hash[:12], len(table))
-            fitted = domain.fit_model(table, {})
+                     "%d cut-ins (takes a minute or two)", data_hash[:12], len(table))
+            fitted = domain.fit_model(table, options, source=EMBEDDED_ID)
             cache.parent.mkdir(parents=True, exist_ok=True)
             repo.write_file_atomic(cache, fitted.model_json.encode())
             log.info("fitted %d components; cached at %s", fitted.n_components, cache)
-        model_id = f"default-{data_hash[:12]}"
+        model_id = f"default-{key[:12]}" + (key[16:] if options else "")
         with self.db.session() as s:
             for other in repo.list_models(s):
                 if other.is_default and other.id != model_id:
                     other.is_default = False
-            if s.get(ModelRow, model_id) is None:
-                s.add(self.model_row(model_id, EMBEDDED_ID, fitted, {}, is_default=True))
+            existing = s.get(ModelRow, model_id)
+            if existing is None:
+                s.add(self.model_row(model_id, EMBEDDED_ID, fitted, options, is_default=True))
+            else:
+                existing.is_default = True
         self._models[model_id] = fitted.model
         self.default_model_id = model_id
 

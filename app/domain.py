@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import io
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -151,6 +152,29 @@ def embedded_parameter_table() -> pd.DataFrame:
     return table
 
 
+#: modules whose code turns the embedded events into the parameter table
+_EXTRACTION_MODULES = ("datasets.cutin_model", "datasets.egocentric", "datasets.extract",
+                       "datasets.embedded")
+
+
+def embedded_source_hash() -> str:
+    """sha256 of the embedded events file and of the extraction code: the key of the
+    cached embedded parameter table (extraction takes tens of seconds)."""
+    path = _need("datasets.embedded", "DEFAULT_EVENTS_PATH")
+    digest = hashlib.sha256()
+    try:
+        digest.update(Path(path).read_bytes())
+        for name in _EXTRACTION_MODULES:
+            digest.update(Path(_need(name).__file__).read_bytes())
+    except OSError as exc:
+        raise DomainUnavailable(f"embedded data not readable: {exc}") from None
+    return digest.hexdigest()
+
+
+def options_hash(options: Mapping[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(jsonable(options), sort_keys=True).encode()).hexdigest()
+
+
 def table_hash(table: pd.DataFrame) -> str:
     """sha256 of a parameter table's content (columns, order, values): the data hash."""
     buf = io.StringIO()
@@ -171,7 +195,28 @@ def dataset_from_files(kind: str, paths: Sequence[Path]) -> tuple[pd.DataFrame, 
     if kind not in DATASET_KINDS:
         raise InvalidInput(f"unknown dataset kind {kind!r}; choose one of "
                            f"{', '.join(DATASET_KINDS)}", field="body.kind")
-    raise DomainUnavailable(f"reading {kind} uploads: datasets readers are not integrated yet")
+    extract = _need("datasets.extract", "extract_cutins")
+    if kind == "egocentric":
+        if len(paths) != 1:
+            raise InvalidInput(f"the ego-centric format is one CSV or Parquet file, got "
+                               f"{len(paths)} files", field="body.files")
+        target: Path = paths[0]
+    else:
+        folder = {p.parent for p in paths}
+        if len(folder) != 1:
+            raise InvalidInput("highD files must be uploaded together", field="body.files")
+        target = folder.pop()
+    try:
+        result = extract(target, kind)
+    except NotImplementedError as exc:
+        raise DomainUnavailable(f"reading {kind} files: {exc}") from None
+    except (ValueError, OSError, KeyError) as exc:
+        # a malformed upload (pyarrow and pandas raise their own ValueError/OSError kinds)
+        raise InvalidInput(f"{kind} upload: {exc}", field="body.files") from None
+    skipped = [{"event_id": e, "reason": r} for e, r in result.skipped]
+    report = {"n_cutins": len(result.table), "n_skipped": len(skipped),
+              "skipped": skipped[:200], "files": [p.name for p in paths]}
+    return result.table, report
 
 
 # --------------------------------------------------------------------------- models
@@ -185,15 +230,19 @@ class FittedModel:
     fit_report: dict[str, Any]
 
 
-def fit_model(table: pd.DataFrame, options: Mapping[str, Any]) -> FittedModel:
+def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
+              source: str | None = None) -> FittedModel:
     """Fit the cut-in GMM on a parameter table with the sampler's options."""
     cls = _need("sampler.model", "CutInGMM")
+    kwargs = dict(options)
+    if isinstance(kwargs.get("k_range"), list):
+        kwargs["k_range"] = tuple(kwargs["k_range"])
     try:
-        model = cls(**dict(options))
+        model = cls(**kwargs)
     except TypeError as exc:
         raise InvalidInput(f"model options: {exc}", field="body.options") from None
     try:
-        model.fit(table)
+        model.fit(table, source=source)
     except ValueError as exc:
         raise InvalidInput(f"fitting the model failed: {exc}", field="body.options") from None
     return _describe(model)
@@ -221,17 +270,18 @@ def describe_model(model_json: str) -> FittedModel:
 
 
 def model_components(model: Any) -> list[dict[str, Any]]:
-    """Weights, means and covariances of the mixture's components (parameter order)."""
+    """Weight, mean and covariance of each mixture component, in the model's z-space
+    (each feature transformed and standardised; see the model's ``transforms``)."""
     weights = np.asarray(getattr(model, "weights_", []), dtype=float)
     means = np.asarray(getattr(model, "means_", []), dtype=float)
     covs = np.asarray(getattr(model, "covariances_", []), dtype=float)
-    names = list(getattr(model, "feature_names_", PARAM_NAMES))
+    names = [str(n) for n in getattr(model, "features_", PARAM_NAMES)]
     out = []
     for k in range(len(weights)):
         out.append({
             "weight": float(weights[k]),
-            "mean": {n: float(m) for n, m in zip(names, means[k], strict=False)},
-            "covariance": jsonable(covs[k]) if covs.size else None,
+            "mean_z": {n: float(m) for n, m in zip(names, means[k], strict=False)},
+            "covariance_z": jsonable(covs[k]) if covs.size else None,
         })
     return out
 
@@ -258,19 +308,44 @@ class SampleResult:
     diagnostics: dict[str, Any]
 
 
-def sample(model: Any, constraints: Sequence[Any], n: int, seed: int,
-           method: str = "auto") -> SampleResult:
-    fn = _need("sampler", "sample")
+def _region_dict(pr: Any) -> dict[str, Any]:
+    """A PRegion as JSON: its fields plus ``ci`` = [ci_low, ci_high]."""
+    out = dict(pr.to_dict())
+    out["ci"] = [out.get("ci_low"), out.get("ci_high")]
+    return out
+
+
+def _sampler_call(fn: Any, *args: Any, **kwargs: Any) -> Any:
+    empty = _need("sampler", "EmptyRegionError")
     try:
-        ss = fn(model, constraints, n, seed, method=method)
+        return fn(*args, **kwargs)
+    except empty as exc:
+        raise InvalidInput(f"the region is (practically) empty: {exc}",
+                           field="body.constraints") from None
     except ValueError as exc:
         raise InvalidInput(f"sampling failed: {exc}", field="body") from None
-    raise DomainUnavailable(f"adapter for SampleSet not written yet ({type(ss).__name__})")
+
+
+def sample(model: Any, constraints: Sequence[Any], n: int, seed: int,
+           method: str = "auto") -> SampleResult:
+    """``n`` samples of ``model`` in the region (``sampler.sample``)."""
+    fn = _need("sampler.sampleset", "sample")
+    ss = _sampler_call(fn, model, list(constraints), n, seed, method)
+    diagnostics = dict(ss.diagnostics)
+    diagnostics["method"] = ss.method
+    diagnostics["requested_method"] = ss.requested
+    return SampleResult(
+        params=ss.params,
+        weights=np.asarray(ss.exposure_weights, dtype=np.float64),
+        p_region=_region_dict(ss.p_region),
+        diagnostics=diagnostics,
+    )
 
 
 def estimate_region(model: Any, constraints: Sequence[Any], seed: int) -> dict[str, Any]:
     """P(A) of the constraint region under the model: ``{"estimate", "ci": [lo, hi], ...}``."""
-    raise DomainUnavailable("P(A) estimation: sampler integration is not written yet")
+    fn = _need("sampler.sampleset", "estimate_p_region")
+    return _region_dict(_sampler_call(fn, model, list(constraints), seed))
 
 
 def ttc_of(params: Mapping[str, float]) -> float:
@@ -278,9 +353,14 @@ def ttc_of(params: Mapping[str, float]) -> float:
 
 
 # --------------------------------------------------------------------------- scenarios
-def build_scenario(params: Mapping[str, float], seed: int) -> ConcreteScenario:
+def build_scenario(params: Mapping[str, float], seed: int,
+                   provenance: Mapping[str, Any] | None = None) -> ConcreteScenario:
+    """The concrete scenario of one parameter vector (``sampler.build_scenario``)."""
     fn = _need("sampler.builder", "build_scenario")
-    result: ConcreteScenario = fn(dict(params), seed=seed)
+    try:
+        result: ConcreteScenario = fn(dict(params), seed=seed, provenance=provenance)
+    except ValueError as exc:
+        raise InvalidInput(f"building the scenario failed: {exc}", field="params") from None
     return result
 
 
@@ -298,13 +378,16 @@ def score_posted(data: Any) -> dict[str, Any]:
     except ScenarioError as exc:
         raise InvalidInput(str(exc), field=_scenario_field(str(exc))) from None
     fn = _need("riskcore", "evaluate_scenario")
-    risk = fn(scenario)
+    try:
+        risk = fn(scenario)
+    except ValueError as exc:  # riskcore's errors name the field (e.g. "ego.v[3]: ...")
+        raise InvalidInput(str(exc), field=_scenario_field(str(exc))) from None
     return {"summary": jsonable(dict(risk.summary())), "risk": jsonable(risk.to_dict())}
 
 
 def _scenario_field(message: str) -> str:
     head = message.split(":", 1)[0].strip()
-    if not head or " " in head:
+    if not head or " " in head or head == "scenario":
         return "body"
     return f"body.{head}"
 

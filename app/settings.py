@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -47,6 +48,12 @@ class Settings(BaseSettings):
         default=True,
         description="keep each catalogue scenario's trajectories in per-chunk files; when "
         "false they are rebuilt from the stored parameters and seed on export",
+    )
+    default_model_options: dict[str, Any] = Field(
+        default_factory=dict,
+        description="keyword options of sampler.model.CutInGMM for the default model fitted "
+        "on the embedded data at first start (JSON in SCENGEN_DEFAULT_MODEL_OPTIONS); the "
+        "cached model is keyed by the data hash and these options",
     )
     resume_jobs: bool = Field(
         default=True, description="resume unfinished catalogue jobs when the service starts"

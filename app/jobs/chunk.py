@@ -56,6 +56,8 @@ class CatalogueSpec:
     method: str = "auto"
     score: bool = True
     store_trajectories: bool = True
+    #: the catalogue's P(A) estimate: each scenario's exposure weight is p_region / n
+    p_region: float | None = None
 
     @property
     def n_chunks(self) -> int:
@@ -108,7 +110,10 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
         idx = start + k
         params = {name: float(table[k, j]) for j, name in enumerate(names)}
         seed = scenario_seed(spec.seed, idx)
-        scenario = domain.build_scenario(params, seed)
+        scenario = domain.build_scenario(
+            params, seed, provenance={"catalogue_index": idx, "chunk": index,
+                                      "sampler": str(drawn.diagnostics.get("method")),
+                                      "constraints": list(spec.constraints)})
         summary = domain.score_scenario(scenario) if spec.score else {}
         risk = summary.get("risk")
         rows.append({
@@ -118,7 +123,8 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
             "params": params,
             "ttc": domain.ttc_of(params),
             "risk": None if risk is None else float(risk),
-            "exposure_weight": float(drawn.weights[k]),
+            "exposure_weight": (spec.p_region / spec.n if spec.p_region is not None
+                                else float(drawn.weights[k])),
             "summary": domain.encode_floats(summary),
         })
         if spec.store_trajectories:

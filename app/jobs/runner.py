@@ -39,13 +39,16 @@ class _Either:
 
 
 def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
-    """The executor-side spec of a catalogue row (adds the model's JSON)."""
+    """The executor-side spec of a catalogue row (adds the model's JSON and P(A))."""
     spec = dict(row.spec)
+    p_region = domain.decode_floats(row.p_region) if row.p_region else None
+    estimate = p_region.get("estimate") if isinstance(p_region, dict) else None
     return CatalogueSpec(
         n=row.n, seed=row.seed, chunk_size=row.chunk_size, model_json=model_json,
         constraints=tuple(spec.get("constraints", ())), method=spec.get("method", "auto"),
         score=bool(spec.get("score", True)),
         store_trajectories=bool(spec.get("store_trajectories", True)),
+        p_region=None if estimate is None else float(estimate),
     )
 
 
@@ -96,6 +99,7 @@ class CatalogueRunner:
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region
+                    spec = worker_spec(row, model_json)
             todo = [i for i in range(total) if i not in done]
             stored = len(done)
             for result in self.executor.run(spec, todo, halt):

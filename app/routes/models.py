@@ -67,7 +67,7 @@ def fit(body: FitRequest, ctx: ContextDep) -> dict[str, Any]:
     except OSError as exc:
         raise InvalidInput(f"dataset {body.dataset!r} has no readable table: {exc}",
                                   field="body.dataset") from None
-    fitted = domain.fit_model(table, body.options)
+    fitted = domain.fit_model(table, body.options, source=dataset.id)
     row = ServiceContext.model_row(repo.new_id("mdl"), dataset.id, fitted, body.options)
     with ctx.db.session() as s:
         s.add(row)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -21,3 +22,33 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
                     "(run scripts/ensure-services.sh)")
     with pg_database() as url:
         yield url
+
+
+@pytest.fixture(scope="session")
+def model_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A data dir whose default model is fitted once per test process (then copied)."""
+    from app.context import ServiceContext
+    from tests.app.factories import make_settings
+
+    data_dir = tmp_path_factory.mktemp("model-cache")
+    ctx = ServiceContext.open(make_settings(data_dir))
+    try:
+        if ctx.startup_error:
+            pytest.fail(f"the default model cannot be built: {ctx.startup_error}")
+    finally:
+        ctx.close()
+    return data_dir
+
+
+@pytest.fixture(scope="module")
+def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+    """A TestClient on a private SQLite store (module-scoped: one app start per file)."""
+    from fastapi.testclient import TestClient
+
+    from tests.app.factories import copy_model_cache, make_app, make_settings
+
+    data_dir = tmp_path_factory.mktemp("service")
+    copy_model_cache(model_cache_dir, data_dir)
+    app = make_app(make_settings(data_dir, sync_n_limit=50, upload_limit_bytes=300_000))
+    with TestClient(app) as test_client:
+        yield test_client

@@ -2,28 +2,55 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import socket
+import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import psycopg
+from fastapi import FastAPI
 from sqlalchemy.engine import make_url
 
-from app.settings import Settings
+from app.main import create_app
+from app.settings import Settings, get_settings
 
 PG_ADMIN_URL = os.environ.get("SCENGEN_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 
 
+#: a quicker fit of the default model than the production options (same data, same code)
+TEST_MODEL_OPTIONS: dict[str, Any] = {"n_init": 1, "cv_folds": 2, "n_report_samples": 2000,
+                                      "k_range": [1, 4]}
+
+
 def make_settings(data_dir: Path, **overrides: Any) -> Settings:
     """Settings for a private store under ``data_dir`` (SQLite unless database_url given)."""
-    values: dict[str, Any] = {"data_dir": data_dir, "local_workers": 0, "chunk_size": 5}
+    values: dict[str, Any] = {"data_dir": data_dir, "local_workers": 0, "chunk_size": 5,
+                              "default_model_options": TEST_MODEL_OPTIONS}
     values.update(overrides)
     return Settings(**values)
+
+
+def make_app(settings: Settings) -> FastAPI:
+    """The service app with its settings overridden (the lifespan reads the override)."""
+    app = create_app()
+    app.dependency_overrides[get_settings] = lambda: settings
+    return app
+
+
+def wait_for(predicate: Callable[[], bool], what: str, attempts: int = 600,
+             pause: float = 0.1) -> None:
+    """Poll ``predicate`` (bounded number of attempts; no wall-clock assertions)."""
+    for _ in range(attempts):
+        if predicate():
+            return
+        time.sleep(pause)
+    raise AssertionError(f"gave up waiting for {what}")
 
 
 def pg_available() -> bool:
@@ -60,11 +87,22 @@ def free_port() -> int:
         return port
 
 
+def service_env(data_dir: Path, **settings: str) -> dict[str, str]:
+    """Environment of a service/CLI subprocess on the store in ``data_dir``."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SCENGEN_")}
+    env["SCENGEN_DATA_DIR"] = str(data_dir)
+    env["SCENGEN_DEFAULT_MODEL_OPTIONS"] = json.dumps(TEST_MODEL_OPTIONS)
+    env.update({f"SCENGEN_{k.upper()}": v for k, v in settings.items()})
+    return env
+
+
 def copy_model_cache(src_data_dir: Path, dst_data_dir: Path) -> None:
-    """Reuse a fitted default model (the cache is keyed by the data hash)."""
-    src = src_data_dir / "models"
-    if src.is_dir():
-        shutil.copytree(src, dst_data_dir / "models", dirs_exist_ok=True)
+    """Reuse the extracted embedded table and the fitted default model (both caches are
+    keyed by the data's hash)."""
+    for sub in ("models", "datasets"):
+        src = src_data_dir / sub
+        if src.is_dir():
+            shutil.copytree(src, dst_data_dir / sub, dirs_exist_ok=True)
 
 
 def scenario_rows(chunk_index: int, start: int, count: int) -> list[dict[str, Any]]:

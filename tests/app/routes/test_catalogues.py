@@ -1,0 +1,145 @@
+"""Catalogues over HTTP: 202 + id, status with progress/counts/P(A)/statistics, paging and
+filters, every export format, delete, and the errors."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import zipfile
+from typing import Any
+
+import pyarrow.parquet as pq
+import pytest
+
+from tests.app.factories import wait_for
+
+N = 12
+
+
+def _finished(client: Any, cid: str) -> dict[str, Any]:
+    state: dict[str, Any] = {}
+
+    def done() -> bool:
+        state.update(client.get(f"/catalogues/{cid}").json())
+        return state["status"] in ("done", "failed")
+
+    wait_for(done, f"catalogue {cid}")
+    return state
+
+
+@pytest.fixture(scope="module")
+def catalogue(client: Any) -> dict[str, Any]:
+    r = client.post("/catalogues", json={"n": N, "seed": 9, "constraints": ["ttc<3"],
+                                         "chunk_size": 5})
+    assert r.status_code == 202, r.text
+    body = r.json()
+    assert body["status"] == "queued" and body["href"] == f"/catalogues/{body['id']}"
+    return _finished(client, body["id"])
+
+
+def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> None:
+    assert catalogue["status"] == "done", catalogue["error"]
+    assert catalogue["n"] == N and catalogue["scenarios_stored"] == N
+    assert catalogue["chunks"] == {"total": 3, "done": 3} and catalogue["progress"] == 1.0
+    p = catalogue["p_region"]
+    assert 0.0 < p["estimate"] < 1.0 and p["ci"][0] <= p["estimate"] <= p["ci"][1]
+    risk = catalogue["summary"]["risk"]
+    assert risk["count"] == N and 0.0 <= risk["min"] <= risk["p50"] <= risk["max"] <= 1.0
+    assert catalogue["summary"]["ttc"]["max"] < 3.0
+    assert catalogue["finished_at"] is not None
+
+
+def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> None:
+    cid = catalogue["id"]
+    all_rows = client.get(f"/catalogues/{cid}/scenarios", params={"limit": 100}).json()
+    assert all_rows["total"] == N
+    assert [s["index"] for s in all_rows["scenarios"]] == list(range(N))
+    page = client.get(f"/catalogues/{cid}/scenarios", params={"offset": 10, "limit": 5}).json()
+    assert [s["index"] for s in page["scenarios"]] == [10, 11]
+    ttcs = sorted(s["ttc"] for s in all_rows["scenarios"])
+    cut = ttcs[N // 2]
+    low = client.get(f"/catalogues/{cid}/scenarios", params={"ttc_max": cut}).json()
+    assert low["total"] == sum(1 for t in ttcs if t <= cut)
+    assert all(s["ttc"] <= cut for s in low["scenarios"])
+    risks = sorted(s["risk"] for s in all_rows["scenarios"])
+    high = client.get(f"/catalogues/{cid}/scenarios", params={"risk_min": risks[-3]}).json()
+    assert high["total"] == sum(1 for r in risks if r >= risks[-3])
+    for s in all_rows["scenarios"]:
+        assert s["params"]["gap"] / s["params"]["dv"] == pytest.approx(s["ttc"])
+        assert s["summary"]["risk"] == s["risk"]
+
+
+def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
+    cid = catalogue["id"]
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "jsonl"})
+    assert r.status_code == 200
+    lines = [json.loads(line) for line in r.text.splitlines() if line.strip()]
+    assert lines[0]["kind"] == "manifest" and lines[0]["manifest"]["seed"] == 9
+    assert lines[0]["manifest"]["constraints"] == ["ttc<3"]
+    scenarios = [x for x in lines if x["kind"] == "scenario"]
+    assert len(scenarios) == N
+    rows = client.get(f"/catalogues/{cid}/scenarios", params={"limit": 100}).json()
+    for line, row in zip(scenarios, rows["scenarios"], strict=True):
+        assert line["scenario"]["params"] == pytest.approx(row["params"])
+        assert line["summary"]["risk"] == row["risk"]
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "csv"})
+    assert r.status_code == 200
+    assert len(list(csv.DictReader(io.StringIO(r.text)))) == N
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "parquet"})
+    assert r.status_code == 200
+    assert pq.read_table(io.BytesIO(r.content)).num_rows == N
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "xosc"})
+    assert r.status_code == 200
+    names = zipfile.ZipFile(io.BytesIO(r.content)).namelist()
+    assert sum(name.endswith(".xosc") for name in names) == N
+
+
+def test_list_and_delete(client: Any) -> None:
+    r = client.post("/catalogues", json={"n": 3, "seed": 1, "score": False})
+    cid = r.json()["id"]
+    assert cid in [c["id"] for c in client.get("/catalogues").json()["catalogues"]]
+    _finished(client, cid)
+    assert client.delete(f"/catalogues/{cid}").status_code == 204
+    for path in (f"/catalogues/{cid}", f"/catalogues/{cid}/scenarios",
+                 f"/catalogues/{cid}/export"):
+        r = client.get(path)
+        assert r.status_code == 404 and r.json()["error"]["field"] == "path.catalogue_id"
+    assert client.delete(f"/catalogues/{cid}").status_code == 404
+    data_dir = client.app.state.ctx.data_dir
+    assert not (data_dir / "catalogues" / cid).exists()
+
+
+@pytest.mark.parametrize(("body", "status", "field"), [
+    ({}, 422, "body.n"),
+    ({"n": 0}, 422, "body.n"),
+    ({"n": 2_000_000}, 422, "body.n"),
+    ({"n": 5, "constraints": ["ttc<"]}, 422, "body.constraints.0"),
+    ({"n": 5, "sampler": "x"}, 422, "body.sampler"),
+    ({"n": 5, "chunk_size": 0}, 422, "body.chunk_size"),
+    ({"n": 5, "model": "nope"}, 404, "body.model"),
+])
+def test_create_errors(client: Any, body: dict[str, Any], status: int, field: str) -> None:
+    r = client.post("/catalogues", json=body)
+    assert r.status_code == status, r.text
+    assert r.json()["error"]["field"] == field
+
+
+def test_export_and_paging_errors(client: Any, catalogue: dict[str, Any]) -> None:
+    cid = catalogue["id"]
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "pdf"})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.format"
+    r = client.get(f"/catalogues/{cid}/scenarios", params={"ttc_max": "inf"})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.ttc_max"
+    r = client.get(f"/catalogues/{cid}/scenarios", params={"limit": 5000})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.limit"
+
+
+def test_export_of_an_unfinished_catalogue_is_409(client: Any) -> None:
+    from app import catalogues
+
+    ctx = client.app.state.ctx
+    row = catalogues.create(ctx, n=3, seed=2, constraints=["ttc<3"])  # queued, never run
+    r = client.get(f"/catalogues/{row.id}/export")
+    assert r.status_code == 409 and "queued" in r.json()["error"]["message"]
+    assert client.get(f"/catalogues/{row.id}").json()["progress"] == 0.0

@@ -1,0 +1,109 @@
+"""Datasets: the embedded data first, show, paged parameter table (JSON/CSV), uploads with
+a size limit; a bad or oversized upload stores nothing."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from datasets.cutin_model import PARAM_NAMES
+from datasets.embedded import default_parameter_table, load_default_events
+
+
+def _ids(client: Any) -> list[str]:
+    return [d["id"] for d in client.get("/datasets").json()["datasets"]]
+
+
+def test_list_starts_with_the_embedded_real_data(client: Any) -> None:
+    r = client.get("/datasets")
+    assert r.status_code == 200
+    first = r.json()["datasets"][0]
+    assert first["id"] == "tno-cutin" and first["embedded"] is True
+    assert first["n_cutins"] == len(default_parameter_table())
+    assert client.get("/datasets/tno-cutin").json()["kind"] == "embedded"
+
+
+def test_unknown_dataset_is_404(client: Any) -> None:
+    for path in ("/datasets/nope", "/datasets/nope/parameters"):
+        r = client.get(path)
+        assert r.status_code == 404
+        assert r.json()["error"]["field"] == "path.dataset_id"
+
+
+def test_parameter_table_pages_as_json_and_csv(client: Any) -> None:
+    table = default_parameter_table()
+    r = client.get("/datasets/tno-cutin/parameters", params={"offset": 3, "limit": 4})
+    assert r.status_code == 200
+    body = r.json()
+    assert body["total"] == len(table) and len(body["rows"]) == 4
+    for name in PARAM_NAMES:
+        assert body["rows"][0][name] == pytest.approx(float(table[name].iloc[3]), rel=1e-12)
+    r = client.get("/datasets/tno-cutin/parameters",
+                   params={"offset": 0, "limit": 5, "format": "csv"})
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    assert len(rows) == 5 and float(rows[2]["gap"]) == pytest.approx(table["gap"].iloc[2])
+    assert r.headers["x-total-count"] == str(len(table))
+
+
+@pytest.mark.parametrize(("params", "field"), [
+    ({"limit": 0}, "query.limit"),
+    ({"offset": -1}, "query.offset"),
+    ({"format": "xml"}, "query.format"),
+])
+def test_bad_paging_is_422_naming_the_field(client: Any, params: dict[str, Any],
+                                            field: str) -> None:
+    r = client.get("/datasets/tno-cutin/parameters", params=params)
+    assert r.status_code == 422 and r.json()["error"]["field"] == field
+
+
+def _egocentric_csv(tmp_path: Path, n_events: int) -> Path:
+    events = load_default_events()
+    keep = events["event_id"].drop_duplicates().iloc[:n_events]
+    path = tmp_path / "drives.csv"
+    events[events["event_id"].isin(keep)].to_csv(path, index=False)
+    return path
+
+
+def test_upload_an_egocentric_file(client: Any, tmp_path: Path) -> None:
+    path = _egocentric_csv(tmp_path, 12)
+    with open(path, "rb") as fh:
+        r = client.post("/datasets", data={"kind": "egocentric", "name": "my drives"},
+                        files=[("files", ("drives.csv", fh, "text/csv"))])
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert body["name"] == "my drives" and body["kind"] == "egocentric"
+    assert 0 < body["n_cutins"] <= 12
+    assert body["n_cutins"] + body["report"]["n_skipped"] == 12
+    ids = _ids(client)
+    assert ids[0] == "tno-cutin" and body["id"] in ids
+    page = client.get(f"/datasets/{body['id']}/parameters").json()
+    assert page["total"] == body["n_cutins"]
+
+
+def test_bad_uploads_store_nothing(client: Any, tmp_path: Path) -> None:
+    before = _ids(client)
+    garbage = client.post("/datasets", data={"kind": "egocentric"},
+                          files=[("files", ("x.csv", b"not,a\n1,ego-centric file\n", "text/csv"))])
+    assert garbage.status_code == 422 and garbage.json()["error"]["field"] == "body.files"
+    wrong_kind = client.post("/datasets", data={"kind": "video"},
+                             files=[("files", ("x.csv", b"a", "text/csv"))])
+    assert wrong_kind.status_code == 422 and wrong_kind.json()["error"]["field"] == "body.kind"
+    no_file = client.post("/datasets", data={"kind": "egocentric"})
+    assert no_file.status_code == 422 and no_file.json()["error"]["field"] == "body.files"
+    bad_name = client.post("/datasets", data={"kind": "egocentric"},
+                           files=[("files", ("../../etc/x;.csv", b"a", "text/csv"))])
+    assert bad_name.status_code == 422
+    big = b"x" * 400_000  # the test client's limit is 300,000 bytes
+    too_large = client.post("/datasets", data={"kind": "egocentric"},
+                            files=[("files", ("big.csv", big, "text/csv"))])
+    assert too_large.status_code == 413
+    assert too_large.json()["error"]["status"] == 413
+    assert "300000" in too_large.json()["error"]["message"]
+    assert _ids(client) == before
+    staging = Path(client.app.state.ctx.data_dir) / "tmp"
+    assert not any(staging.glob("upload-*"))

@@ -1,0 +1,41 @@
+"""GET /health, GET /version, the OpenAPI docs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from app import __version__
+
+
+def test_health_reports_the_store_and_the_default_model(client: Any) -> None:
+    r = client.get("/health")
+    assert r.status_code == 200
+    body = r.json()
+    assert body["status"] == "ok"
+    assert body["database"] == "sqlite"
+    assert body["default_model"].startswith("default-")
+    assert body["default_dataset"] == "tno-cutin"
+    assert body["startup_error"] is None
+
+
+def test_version(client: Any) -> None:
+    r = client.get("/version")
+    assert r.status_code == 200
+    assert r.json()["versions"]["scengen"] == __version__
+
+
+def test_openapi_docs_list_every_resource(client: Any) -> None:
+    assert client.get("/docs").status_code == 200
+    paths = set(client.get("/openapi.json").json()["paths"])
+    assert {"/health", "/version", "/datasets", "/datasets/{dataset_id}",
+            "/datasets/{dataset_id}/parameters", "/models", "/models/{model_id}",
+            "/scenarios", "/risk", "/catalogues", "/catalogues/{catalogue_id}",
+            "/catalogues/{catalogue_id}/scenarios",
+            "/catalogues/{catalogue_id}/export"} <= paths
+
+
+def test_unknown_path_and_method_use_the_error_shape(client: Any) -> None:
+    r = client.get("/no/such/thing")
+    assert r.status_code == 404 and r.json()["error"]["status"] == 404
+    r = client.put("/health")
+    assert r.status_code == 405 and r.json()["error"]["status"] == 405

@@ -1,0 +1,87 @@
+"""POST /scenarios: sampled cut-ins inside the region, scored, reproducible, with limits."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from riskcore.scenario import ConcreteScenario
+
+
+def test_ten_cutins_with_ttc_below_3(client: Any) -> None:
+    r = client.post("/scenarios", json={"n": 10, "seed": 1, "constraints": ["ttc<3"],
+                                        "score": True})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["n"] == 10 and len(body["scenarios"]) == 10
+    assert 0.0 < body["p_region"]["estimate"] < 1.0
+    lo, hi = body["p_region"]["ci"]
+    assert lo <= body["p_region"]["estimate"] <= hi
+    assert isinstance(body["diagnostics"], dict) and body["diagnostics"]
+    for item in body["scenarios"]:
+        p = item["params"]
+        assert p["dv"] > 0 and p["gap"] / p["dv"] < 3.0  # TTC by hand
+        assert item["ttc"] == pytest.approx(p["gap"] / p["dv"], rel=1e-12)
+        assert item["exposure_weight"] > 0
+        assert 0.0 <= item["risk"]["risk"] <= 1.0
+        assert "scenario" not in item
+
+
+def test_same_seed_same_answer_and_a_new_seed_differs(client: Any) -> None:
+    req = {"n": 5, "seed": 42, "score": False}
+    a = client.post("/scenarios", json=req).json()
+    b = client.post("/scenarios", json=req).json()
+    c = client.post("/scenarios", json={**req, "seed": 43}).json()
+    assert a == b
+    assert [s["params"] for s in a["scenarios"]] != [s["params"] for s in c["scenarios"]]
+    assert all(s["risk"] is None for s in a["scenarios"])
+
+
+def test_trajectories_on_request(client: Any) -> None:
+    body = client.post("/scenarios", json={"n": 2, "seed": 3, "score": False,
+                                           "include_trajectories": True,
+                                           "sampler": "rejection"}).json()
+    for item in body["scenarios"]:
+        scenario = ConcreteScenario.from_dict(item["scenario"])
+        assert scenario.params == pytest.approx(item["params"])
+        assert scenario.seed == item["seed"]
+        assert [o.id for o in scenario.objects] == ["cutter"]
+
+
+def test_mcmc_sampler_stays_in_the_region(client: Any) -> None:
+    body = client.post("/scenarios", json={"n": 20, "seed": 5, "score": False,
+                                           "sampler": "mcmc",
+                                           "constraints": ["ttc<3"]}).json()
+    assert len(body["scenarios"]) == 20
+    assert all(s["params"]["gap"] / s["params"]["dv"] < 3 for s in body["scenarios"])
+
+
+@pytest.mark.parametrize(("body", "field", "text"), [
+    ({"n": 51}, "body.n", "limit of 50"),
+    ({"n": 0}, "body.n", ""),
+    ({"n": "ten"}, "body.n", ""),
+    ({"n": 2, "seed": -1}, "body.seed", ""),
+    ({"n": 2, "sampler": "gibbs"}, "body.sampler", ""),
+    ({"n": 2, "constraints": ["ttc<<3"]}, "body.constraints.0", "ttc<<3"),
+    ({"n": 2, "constraints": ["ttc<3", "speed>3"]}, "body.constraints.1", "speed"),
+    ({"n": 2, "colour": "red"}, "body.colour", ""),
+])
+def test_bad_requests_are_422_naming_the_field(client: Any, body: dict[str, Any], field: str,
+                                               text: str) -> None:
+    r = client.post("/scenarios", json=body)
+    assert r.status_code == 422, r.text
+    err = r.json()["error"]
+    assert err["field"] == field and text in err["message"]
+
+
+def test_unknown_model_is_404(client: Any) -> None:
+    r = client.post("/scenarios", json={"n": 1, "model": "nope"})
+    assert r.status_code == 404 and r.json()["error"]["field"] == "body.model"
+
+
+def test_an_empty_region_is_a_clear_422(client: Any) -> None:
+    r = client.post("/scenarios", json={"n": 1, "constraints": ["ttc<3", "ttc>4"],
+                                        "sampler": "rejection"})
+    assert r.status_code == 422
+    assert r.json()["error"]["field"] == "body.constraints"

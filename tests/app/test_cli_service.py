@@ -1,0 +1,58 @@
+"""`scengen catalogue create|status|list|export` against a local store."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from app.cli import main
+from app.settings import get_settings
+from tests.app.factories import TEST_MODEL_OPTIONS, copy_model_cache
+
+
+@pytest.fixture
+def store(tmp_path: Path, model_cache_dir: Path,
+          monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
+    monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
+    monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
+    monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
+    monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
+    get_settings.cache_clear()
+    yield data_dir
+    get_settings.cache_clear()
+
+
+def test_create_status_list_export(store: Path, tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["catalogue", "create", "--n", "4", "--seed", "3", "--chunk-size", "2",
+                 "--constraint", "ttc<3", "--no-score"]) == 0
+    out, err = capsys.readouterr()
+    result = json.loads(out.strip().splitlines()[-1])
+    assert result["status"] == "done"
+    assert "2/2" in err  # the progress bar (chunks) on stderr
+    cid = result["id"]
+    assert main(["catalogue", "status", cid]) == 0
+    status = json.loads(capsys.readouterr().out)
+    assert status["scenarios_stored"] == 4 and status["constraints"] == ["ttc<3"]
+    assert main(["catalogue", "list"]) == 0
+    assert cid in capsys.readouterr().out
+    target = tmp_path / "out.csv"
+    assert main(["catalogue", "export", cid, "--format", "csv", "--out", str(target)]) == 0
+    assert len(target.read_text().strip().splitlines()) == 5
+
+
+def test_user_errors_are_one_line_and_exit_2(store: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["catalogue", "status", "nope"]) == 2
+    assert capsys.readouterr().err.strip() == "scengen: error: catalogue 'nope' not found"
+    assert main(["catalogue", "create", "--n", "3", "--constraint", "ttc<<3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("scengen: error: constraint") and "\n" not in err
+    assert main(["catalogue", "create", "--n", "0"]) == 2
+    assert "n must be between 1" in capsys.readouterr().err
