@@ -292,7 +292,9 @@ def _try_lane_change(
     if behind.any():
         fb = np.flatnonzero(behind)[np.argmax(s[behind])]
         gap_b = s[i] - s[fb] - 0.5 * (length[fb] + length[i])
-        if gap_b < 4.0 + 1.5 * max(0.0, v[fb] - v_i):
+        # predicted bumper gap when the cutter crosses (about t0 + p_t) must stay >= 3 m
+        v_low = v_i + min(p_a1, 0.0) * p_a3
+        if gap_b - max(0.0, v[fb] - v_low) * (t0 + p_t - t) < 3.0:
             return None
     p_v0 = v_i + p_a1 * float(np.clip(-p_a2, 0.0, p_a3))
     y_from = float(centres[d][j])
