@@ -133,11 +133,19 @@
   }
 
   function bars(hist, name, color, key, extra) {
-    return Object.assign({
+    const trace = Object.assign({
       type: "bar", name: name, x: centres(hist.edges), y: hist[key || "density"],
       width: widths(hist.edges), marker: { color: color, line: { width: 0 } },
       hovertemplate: "%{x:.3g}: %{y:.3g}<extra>" + name + "</extra>",
     }, extra || {});
+    if (trace.width === null) delete trace.width;  // grouped bars: Plotly sizes them
+    return trace;
+  }
+
+  function legend(box, items) {
+    box.innerHTML = items.map(([label, color]) =>
+      "<span class=\"swatch\" style=\"background:" + color + "\"></span>" + esc(label))
+      .join(" ");
   }
 
   function cell(container, id) {
@@ -196,6 +204,8 @@
       $("fit-note").textContent = "Histograms of the " + fit.n_data + " cut-ins of " +
         fit.dataset_name + " with the marginal density of model " + fit.model + " (" +
         fit.n_components + " Gaussian components, " + fit.density_method + ").";
+      legend($("fit-legend"), [["data (histogram)", COLORS.data], ["GMM marginal density",
+                                                                   COLORS.model]]);
       const grid = $("fit-grid");
       for (const p of fit.parameters) {
         const div = cell(grid, "fit-" + p.name);
@@ -203,7 +213,7 @@
                              { opacity: 0.6 })];
         const layout = { title: { text: p.name, font: { size: 12 } },
                          xaxis: { title: { text: p.label } },
-                         yaxis: { title: { text: "density" } }, showlegend: p.name === "p_y1",
+                         yaxis: { title: { text: "density" } }, showlegend: false,
                          bargap: 0 };
         if (p.density) {
           traces.push({ type: "scatter", mode: "lines", name: "GMM marginal", x: p.density.x,
@@ -322,6 +332,8 @@
           " (not scored; draw a catalogue to score them)") +
         " against " + view.n_reference + " model samples inside the physical bounds only" +
         pa + ". Bars are densities on common bins.";
+      legend($("shift-legend"), [["unconstrained (model, physical bounds only)",
+                                  COLORS.unconstrained], ["constrained", COLORS.constrained]]);
       const grid = $("shift-grid");
       const source = view.source === "catalogue" ? view.catalogue : "preview:" + what;
       for (const p of view.parameters) {
@@ -333,7 +345,7 @@
                { opacity: 0.55 }),
           bars(p.constrained, "constrained", COLORS.constrained, "density", { opacity: 0.55 }),
         ], {
-          barmode: "overlay", bargap: 0, showlegend: p.name === "p_y1",
+          barmode: "overlay", bargap: 0, showlegend: false,
           title: { text: p.name + shift, font: { size: 11 } },
           xaxis: { title: { text: p.label } }, yaxis: { title: { text: "density" } },
         }, source);
@@ -389,10 +401,11 @@
       const h = view.risk_hist;
       await draw(divs[0], [
         bars(h.r_dep, "r_dep (" + h.r_dep.n_finite + ")", COLORS.r_dep, "counts",
-             { opacity: 0.6 }),
+             { width: null }),
         bars(h.r_ind, "r_ind (" + h.r_ind.n_finite + ")", COLORS.r_ind, "counts",
-             { opacity: 0.5 }),
-      ], { barmode: "overlay", bargap: 0,
+             { width: null }),
+      ], { barmode: "group", bargap: 0.1,
+           legend: { x: 0.98, xanchor: "right", y: 0.98, bgcolor: "rgba(255,255,255,0.85)" },
            title: { text: "Scenario risk (max over time)", font: { size: 12 } },
            xaxis: { title: { text: "risk" }, range: [0, 1] },
            yaxis: { title: { text: "scenarios" } } }, id);
@@ -736,6 +749,9 @@
       clearError();
       selectCatalogue(e.target.value, true);
     });
+    for (const id of ["constraint-input", "n-input", "seed-input"]) {
+      $(id).addEventListener("input", () => $(id).classList.remove("invalid"));
+    }
     $("constraint-input").addEventListener("change", () => {
       if (!state.catalogue) loadShift();
     });

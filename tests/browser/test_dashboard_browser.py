@@ -1,0 +1,306 @@
+"""The dashboard in a real browser: Playwright (sync API) drives Debian's headless Chromium
+against the service started here with uvicorn (subprocess, free loopback port, private
+data dir and SQLite database, a quickly fitted default model).
+
+Each test waits for the page's own signals (``body[data-ready]``, ``data-busy``, a plot's
+``data-source``/``data-version``) instead of sleeping, counts what Plotly drew in the SVG
+(``.barlayer .point``, ``.scatterlayer .point``, ``.scatterlayer .trace``) and saves a
+screenshot of the view under ``test-artifacts/dashboard/``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
+
+from app.db.database import Database
+from tests.browser.factories import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    free_port,
+    prepare_data_dir,
+    store_synthetic_catalogue,
+)
+
+pytestmark = pytest.mark.browser
+
+ROOT = Path(__file__).resolve().parents[2]
+ARTIFACTS = ROOT / "test-artifacts" / "dashboard"
+TIMEOUT_MS = 120_000
+#: keeps the drawn samples clear of a lane-width mismatch between the sampler's region (the
+#: model's lane width) and the scenario builder (its default width); see docs/dashboard.md
+CONSTRAINT = "ttc<3; cross_margin>0.2"
+
+
+class Server:
+    def __init__(self, base: str, data_dir: Path) -> None:
+        self.base = base
+        self.data_dir = data_dir
+
+    def db(self) -> Database:
+        return Database(f"sqlite:///{(self.data_dir / 'scengen.db').resolve()}")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    data_dir = prepare_data_dir(tmp_path_factory.mktemp("browser-data"))
+    log = (data_dir / "uvicorn.log").open("wb")
+    port = free_port()
+    env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0",
+               SCENGEN_CHUNK_SIZE="6")
+    for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
+        env.pop(name, None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1", "--port",
+         str(port)], cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT,
+        start_new_session=True)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(2400):  # bounded polling, no wall-clock assertion
+            if proc.poll() is not None:
+                raise AssertionError("uvicorn exited: " +
+                                     (data_dir / "uvicorn.log").read_text()[-3000:])
+            try:
+                if httpx.get(f"{base}/health", timeout=2).status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            proc_wait(proc, 0.1)
+        else:
+            raise AssertionError("uvicorn did not answer /health")
+        yield Server(base, data_dir)
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+        log.close()
+
+
+def proc_wait(proc: subprocess.Popen[bytes], seconds: float) -> None:
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        proc.wait(timeout=seconds)
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+class Console:
+    """Console errors and uncaught exceptions of a page."""
+
+    def __init__(self, page: Page) -> None:
+        self.errors: list[str] = []
+        page.on("console", self._console)
+        page.on("pageerror", lambda exc: self.errors.append(f"pageerror: {exc}"))
+
+    def _console(self, msg: ConsoleMessage) -> None:
+        if msg.type == "error":
+            self.errors.append(msg.text)
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Page]:
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    context.set_default_timeout(TIMEOUT_MS)
+    pg = context.new_page()
+    # nothing may come from the network: every request goes to the app itself
+    outside: list[str] = []
+    pg.on("request", lambda req: outside.append(req.url)
+          if not req.url.startswith(("http://127.0.0.1", "data:")) else None)
+    yield pg
+    context.close()
+    assert outside == [], f"requests outside the app: {outside}"
+
+
+def settle(page: Page) -> None:
+    page.wait_for_selector("body[data-ready='1']")
+    page.wait_for_function("document.body.dataset.busy === '0'")
+
+
+def count(page: Page, selector: str) -> int:
+    return page.locator(selector).count()
+
+
+def shot(page: Page, selector: str, name: str) -> None:
+    """Screenshot of one element, whole: the viewport is made tall enough for it and the
+    sticky header is let go so it cannot cover the element."""
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.add_style_tag(content="header { position: static !important; }")
+    size = page.viewport_size or {"width": 1400, "height": 1000}
+    box = page.locator(selector).bounding_box()
+    tall = int(box["height"]) + 200 if box else size["height"]
+    page.set_viewport_size({"width": size["width"], "height": max(size["height"], tall)})
+    try:
+        page.locator(selector).screenshot(path=str(ARTIFACTS / name), animations="disabled")
+    finally:
+        page.set_viewport_size(size)
+
+
+PARAMS = ("p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap")
+
+
+# --------------------------------------------------------------------------- tests
+def test_page_loads_without_errors_and_every_plot_has_data(server: Server, page: Page) -> None:
+    console = Console(page)
+    response = page.goto(f"{server.base}/dashboard")
+    assert response is not None and response.status == 200
+    settle(page)
+    assert console.errors == []
+    assert page.locator("#error").is_hidden()
+    for name in PARAMS:
+        # data histogram bars and the GMM marginal density line
+        assert count(page, f"#fit-{name} .barlayer .point") >= 5, name
+        assert count(page, f"#fit-{name} .scatterlayer .trace path.js-line") == 1, name
+        # unconstrained and constrained bars (preview of the typed constraint)
+        assert count(page, f"#shift-{name} .barlayer .trace") == 2, name
+        assert count(page, f"#shift-{name} .barlayer .point") >= 5, name
+    # corner: 4 default parameters -> 6 panels, each with data and model points
+    assert count(page, "#corner-plot .scatterlayer .trace") == 12
+    assert count(page, "#corner-plot .scatterlayer .point") > 6 * 200
+    assert "no catalogue selected" in page.locator("#risk-note").inner_text().lower()
+    shot(page, "#view-fit", "1-data-against-model.png")
+    shot(page, "#view-shift", "2-constraint-shift-preview.png")
+
+
+def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
+        server: Server, page: Page) -> None:
+    console = Console(page)
+    page.goto(f"{server.base}/dashboard")
+    settle(page)
+    before = page.locator("#shift-gap").get_attribute("data-version")
+    page.fill("#constraint-input", CONSTRAINT)
+    page.fill("#n-input", "12")
+    page.fill("#seed-input", "5")
+    page.click("#draw-button")
+    page.wait_for_function(
+        "document.querySelector('#ttc-risk').dataset.source.startsWith('cat-')")
+    settle(page)
+    cid = page.locator("#ttc-risk").get_attribute("data-source")
+    assert cid is not None
+    status = page.locator("#draw-status").inner_text()
+    assert f"catalogue {cid} done" in status
+    assert page.url.endswith(f"/dashboard/catalogues/{cid}")
+    assert console.errors == []
+    # every view of the catalogue now shows it
+    for plot in ("risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"):
+        assert page.locator(f"#{plot}").get_attribute("data-source") == cid
+    assert page.locator("#shift-gap").get_attribute("data-source") == cid
+    assert page.locator("#shift-gap").get_attribute("data-version") != before
+    view = httpx.get(f"{server.base}/dashboard/api/catalogues/{cid}/risk").json()
+    assert view["n_rows"] == 12
+    assert count(page, "#ttc-risk .scatterlayer .point") == view["scatter"]["n_shown"] > 0
+    assert count(page, "#risk-hist .barlayer .point") == 2 * 50  # r_dep and r_ind bins
+    assert count(page, "#ttr-hist .barlayer .point") == len(view["ttr_hist"]["counts"])
+    assert count(page, "#evasion-shares .barlayer .point") == len(view["evasion"]["labels"])
+    info = page.locator("#catalogue-info").inner_text()
+    assert "P(A)" in info and "effective sample size" in info and "acceptance" in info
+    assert "12 · 5" in info  # n · seed
+    shot(page, "#view-shift", "2-constraint-shift-catalogue.png")
+    shot(page, "#view-risk", "3-catalogue-risk.png")
+
+    # click the highest-risk point of the scatter: its scenario opens
+    top = max(range(len(view["scatter"]["risk"])), key=lambda i: view["scatter"]["risk"][i])
+    index = view["scatter"]["index"][top]
+    point = page.locator("#ttc-risk .scatterlayer .point").nth(top)
+    point.scroll_into_view_if_needed()
+    box = point.bounding_box()
+    assert box is not None
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.wait_for_selector(f"#series-plot[data-source='{cid}#{index}']")
+    settle(page)
+    assert page.url.endswith(f"/dashboard/catalogues/{cid}?scenario={index}")
+    # risk r_dep, r_ind, TTC, WTTC and THW over time; lane lines, paths and two vehicles
+    assert count(page, "#series-plot .scatterlayer .trace") == 5
+    assert count(page, "#topdown-plot .scatterlayer .trace") == 4 + 2 + 2
+    assert f"Scenario {index} of catalogue {cid}" in page.locator("#scenario-note").inner_text()
+    shot(page, "#view-scenario", "4-scenario.png")
+
+    # the time slider moves the vehicles and the time marker
+    version = int(page.locator("#topdown-plot").get_attribute("data-version") or "0")
+    label = page.locator("#time-label").inner_text()
+    page.locator("#time-slider").fill("10")
+    page.wait_for_function(
+        f"+document.querySelector('#topdown-plot').dataset.version > {version}")
+    assert page.locator("#time-label").inner_text() != label
+    assert page.locator("#time-label").inner_text().startswith("t = 1 s")
+    # play animates: three more frames, then pause
+    page.click("#play-button")
+    version = int(page.locator("#topdown-plot").get_attribute("data-version") or "0")
+    page.wait_for_function(
+        f"+document.querySelector('#topdown-plot').dataset.version >= {version + 3}")
+    page.click("#play-button")
+    assert page.locator("#play-button").inner_text().endswith("Play")
+    assert console.errors == []
+
+
+def test_a_bad_constraint_shows_a_clear_message(server: Server, page: Page) -> None:
+    page.goto(f"{server.base}/dashboard")
+    settle(page)
+    page.fill("#constraint-input", "ttc<<3")
+    page.click("#draw-button")
+    error = page.locator("#error")
+    error.wait_for(state="visible")
+    text = error.inner_text()
+    assert "ttc<<3" in text and "HTTP 422" in text
+    assert "invalid" in (page.locator("#constraint-input").get_attribute("class") or "")
+    shot(page, "header", "5-bad-constraint.png")
+    # a bad n never reaches the service
+    page.fill("#constraint-input", "ttc<3")
+    page.fill("#n-input", "ten")
+    page.click("#draw-button")
+    page.wait_for_function("document.querySelector('#error').innerText.includes(\"'ten'\")")
+    assert "n must be a whole number" in error.inner_text()
+    # the rest of the page is still there
+    assert count(page, "#fit-gap .barlayer .point") >= 5
+    shot(page, "header", "5-bad-n.png")
+
+
+def test_an_unknown_catalogue_gives_a_404_page_with_a_message(server: Server,
+                                                              page: Page) -> None:
+    response = page.goto(f"{server.base}/dashboard/catalogues/cat-doesnotexist")
+    assert response is not None and response.status == 404
+    settle(page)
+    error = page.locator("#error")
+    assert error.is_visible()
+    assert "cat-doesnotexist" in error.inner_text() and "not found" in error.inner_text()
+    assert count(page, "#fit-p_v0 .barlayer .point") >= 5  # not a blank page
+    shot(page, "header", "6-unknown-catalogue.png")
+
+
+def test_a_10000_scenario_catalogue_is_drawn_from_bounded_data(server: Server,
+                                                               page: Page) -> None:
+    db = server.db()
+    try:
+        model_id = httpx.get(f"{server.base}/health").json()["default_model"]
+        cid = store_synthetic_catalogue(db, server.data_dir, model_id, 10_000, seed=9)
+    finally:
+        db.dispose()
+    console = Console(page)
+    page.goto(f"{server.base}/dashboard/catalogues/{cid}")
+    settle(page)
+    assert console.errors == []
+    assert page.locator("#ttc-risk").get_attribute("data-source") == cid
+    drawn = count(page, "#ttc-risk .scatterlayer .point")
+    assert 0 < drawn <= 2000
+    assert count(page, "#risk-hist .barlayer .point") == 2 * 50
+    assert "10000 scenarios stored" in page.locator("#risk-note").inner_text()
+    shot(page, "#view-risk", "7-catalogue-10000.png")
