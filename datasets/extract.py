@@ -6,8 +6,9 @@ For every cut-in (DESIGN.md, docs/datasets.md):
    to the cutter's lateral position (:func:`datasets.fit.fit_lateral`); t0 is the start of
    the lateral motion, i.e. t = 0 of the parameter vector;
 2. the rectangular acceleration pulse (p_a1, p_a2, p_a3, and p_v0 = model speed at t0) is
-   fitted by least squares to the cutter's speed in the window [t0 - 2 s, t0 + 2 p_t + 2 s]
-   (:func:`datasets.fit.fit_pulse`);
+   fitted by least squares to the cutter's speed (:func:`datasets.fit.fit_pulse`): over
+   the whole event for ego-centric data (an event is cut around one cut-in), over
+   [t0 - 2 s, t0 + 2 p_t + 2 s] of the track window for highD (``PULSE_MARGIN``);
 3. the crossing moment is the first time the cutter's centre is half a lane width away
    from its start-lane centre (highD: the time its centre crosses the lane marking, linear
    interpolation between frames); ``dv = v_ego - v_cutter`` and the bumper-to-bumper
@@ -51,7 +52,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: seconds of speed data before t0 and after t0 + 2 p_t used by the pulse fit
+#: highD: seconds of speed data before t0 and after t0 + 2 p_t used by the pulse fit
 PULSE_MARGIN = 2.0
 
 
@@ -90,7 +91,7 @@ def _crossing_time(t: FloatArray, y: FloatArray, y_marking: float, sign: float) 
 
 def _motion_row(
     t: FloatArray, y: FloatArray, v_cut: FloatArray, *, lane_width: float | None,
-    y_marking: float | None = None,
+    y_marking: float | None = None, pulse_margin: float | None = PULSE_MARGIN,
 ) -> dict[str, Any]:
     """Fit both models and find the crossing moment. Returns the cutter's part of a row.
 
@@ -117,8 +118,11 @@ def _motion_row(
             f"the cutter never crosses the lane marking (lateral displacement "
             f"{lat.displacement:.2f} m, lane width {width:.2f} m)"
         )
-    lo, hi = lat.t0 - PULSE_MARGIN, lat.t0 + 2.0 * lat.p_t + PULSE_MARGIN
-    w = (t >= lo) & (t <= hi)
+    if pulse_margin is None:
+        w = np.ones(t.shape, dtype=bool)
+    else:
+        lo, hi = lat.t0 - pulse_margin, lat.t0 + 2.0 * lat.p_t + pulse_margin
+        w = (t >= lo) & (t <= hi)
     pulse = fit_pulse(t[w], v_cut[w], lat.t0)
     return {
         "p_y1": lat.p_y1, "p_t": lat.p_t, "p_a1": pulse.p_a1, "p_a2": pulse.p_a2,
@@ -153,7 +157,7 @@ def _extract_event(ev: pd.DataFrame) -> dict[str, Any]:
     widths = ev[ec.LANE_WIDTH].to_numpy()
     finite = widths[np.isfinite(widths)]
     lane_width = float(finite[0]) if finite.size else None
-    row = _motion_row(t, y, v_cut, lane_width=lane_width)
+    row = _motion_row(t, y, v_cut, lane_width=lane_width, pulse_margin=None)
     tc = row["t_cross"]
     if abs(y[-1]) >= abs(y[0]):
         raise ExtractionError(
