@@ -21,8 +21,8 @@ from scipy.stats import norm
 def ref_ctra(x0: float, y0: float, psi0: float, v0: float, a: float, w: float,
              tau: float) -> tuple[float, float, float]:
     """Textbook CTRA closed form; no reversing (stop at v = 0, then frozen)."""
-    if a < 0:
-        tau = min(tau, v0 / -a)
+    if a < 0 and -a * tau > v0:  # stops before tau (v0 / -a could overflow otherwise)
+        tau = v0 / -a
     elif a == 0 and v0 <= 0:
         tau = 0.0
     psi = psi0 + w * tau
@@ -58,8 +58,9 @@ def ref_overlap(pa: np.ndarray, la: float, wa: float, pb: np.ndarray, lb: float,
     cb = corners(pb[:, 0], pb[:, 1], pb[:, 2], lb, wb)
     separated = np.zeros(pa.shape[0], dtype=bool)
     for psi in (pa[:, 2], pb[:, 2]):
-        for ang in (psi, psi + np.pi / 2):
-            u = np.stack([np.cos(ang), np.sin(ang)], axis=-1)[:, None, :]
+        c, s = np.cos(psi), np.sin(psi)
+        for ux, uy in ((c, s), (-s, c)):  # the edge normals (not cos(ψ + π/2): rounding)
+            u = np.stack([ux, uy], axis=-1)[:, None, :]
             qa = (ca * u).sum(-1)
             qb = (cb * u).sum(-1)
             separated |= (qa.max(1) <= qb.min(1)) | (qb.max(1) <= qa.min(1))
@@ -109,7 +110,12 @@ def ref_g(ttr: float, s: RefSettings) -> float:
 
 def ref_manoeuvres(v: float, s: RefSettings) -> list[tuple[float, float]]:
     """(a, ω) of steer left, steer right, brake, accelerate at speed v."""
-    w = 0.0 if v <= 0 else min(s.lat_accel_max / v, v / s.min_turn_radius)
+    if v <= 0:
+        w = 0.0
+    elif v * v >= s.lat_accel_max * s.min_turn_radius:  # then lat / v is the smaller one
+        w = s.lat_accel_max / v
+    else:  # (and lat / v might overflow for a tiny v)
+        w = v / s.min_turn_radius
     return [(0.0, w), (0.0, -w), (-s.brake_max, 0.0), (s.accel_max, 0.0)]
 
 
