@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from datasets import egocentric as ec
 from datasets.cutin_model import ttc_from_gap_dv
-from datasets.errors import ExtractionError, FormatError
+from datasets.errors import DatasetError, ExtractionError, FormatError
 from datasets.fit import fit_lateral, fit_pulse, max_lateral_speed
 from datasets.table import TABLE_COLUMNS, empty_table, validate_table
 
@@ -201,7 +201,7 @@ def extract_egocentric_report(
     for event_id, ev in groups:
         try:
             row = _extract_event(ev)
-        except ExtractionError as exc:
+        except DatasetError as exc:  # one bad event never stops the file
             skipped.append((str(event_id), str(exc)))
             continue
         row.update({"source": source, "event_id": str(event_id), "ego_id": "",

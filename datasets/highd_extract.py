@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from datasets.errors import ExtractionError
+from datasets.errors import DatasetError, ExtractionError
 from datasets.extract import ExtractionResult, _finish_row, _motion_row, _to_table
 from datasets.highd import HighDRecording, road_frame
 
@@ -116,7 +116,7 @@ def extract_recording(recording: HighDRecording, progress: bool = False) -> Extr
             v_e = float(np.interp(tc, ego["t"].to_numpy(), ego_v))
             half = 0.5 * (float(cut["length"].iloc[0]) + float(ego["length"].iloc[0]))
             row = _finish_row(row, x_c - x_e - half, v_e, float(np.interp(tc, t, v_cut)))
-        except ExtractionError as exc:
+        except DatasetError as exc:  # one bad event never stops the recording
             skipped.append((event_id, str(exc)))
             continue
         row.update({"source": source, "event_id": event_id, "ego_id": str(ev.ego),

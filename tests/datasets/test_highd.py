@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from datasets.cutin_model import crossing_time, motion, speed
 from datasets.errors import FormatError
@@ -215,3 +217,22 @@ def test_write_read_round_trip(tmp_path: Path) -> None:
         assert a.read_bytes() == b.read_bytes()
     pd.testing.assert_frame_equal(road_frame(back), road_frame(rec), check_exact=True)
     assert CENTRE[5] == -14.875  # the factory's lane centres match the markings
+
+
+@settings(max_examples=20, deadline=None)
+@given(direction=st.sampled_from([1, 2]), lane_left=st.booleans(),
+       s0=st.floats(0.0, 300.0), v=st.floats(5.0, 45.0), length=st.floats(3.0, 18.0))
+def test_road_frame_property_recovers_the_road_state(
+    direction: int, lane_left: bool, s0: float, v: float, length: float
+) -> None:
+    """Road state -> image (the factory's plain code) -> road_frame gives it back; x grows
+    along the driving direction whatever the direction."""
+    lane = {(1, False): 2, (1, True): 3, (2, False): 6, (2, True): 5}[(direction, lane_left)]
+    veh = straight(1, direction, lane, s0=s0, v=v, n=5, length=length)
+    road = road_frame(make_recording([veh]))
+    assert road["y"].to_numpy() == pytest.approx(np.full(5, CENTRE[lane]))
+    assert road["vx"].to_numpy() == pytest.approx(np.full(5, v))
+    assert np.diff(road["x"].to_numpy()) == pytest.approx(np.full(4, v / FPS))
+    assert (road["length"] == length).all()
+    # a vehicle in the left lane of its direction is at larger road y
+    assert (CENTRE[3] > CENTRE[2]) and (CENTRE[5] > CENTRE[6])
