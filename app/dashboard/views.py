@@ -281,15 +281,35 @@ def _catalogue(ctx: ServiceContext, catalogue_id: str) -> CatalogueRow:
     return row
 
 
-def _rows(ctx: ServiceContext, catalogue_id: str) -> list[ScenarioRow]:
-    with ctx.db.session() as s:
-        rows = list(repo.iter_scenarios(s, catalogue_id, batch=5000))
-        s.expunge_all()
-    return rows
-
-
 def _version(row: CatalogueRow) -> tuple[Any, ...]:
     return (row.id, row.status, row.updated_at.isoformat() if row.updated_at else None)
+
+
+def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
+    """A catalogue's stored rows as compact columns (read once per catalogue version and
+    shared by the views): ``idx``, ``params`` (DataFrame), ``risk``, ``r_ind``, ``ttc``,
+    ``min_ttr`` (float arrays; NaN = missing, inf kept) and ``evasion`` labels of the
+    scored rows."""
+    def compute() -> dict[str, Any]:
+        with ctx.db.session() as s:
+            rows = list(repo.iter_scenarios(s, crow.id, batch=5000))
+            s.expunge_all()
+        return {
+            "idx": np.array([r.idx for r in rows], dtype=np.int64),
+            "params": pd.DataFrame([r.params for r in rows], columns=list(domain.PARAM_NAMES)),
+            "risk": np.array([np.nan if r.risk is None else r.risk for r in rows],
+                             dtype=np.float64),
+            "r_ind": np.array([_summary_value(r, "risk_ind") for r in rows], dtype=np.float64),
+            "ttc": np.array([np.nan if r.ttc is None else r.ttc for r in rows],
+                            dtype=np.float64),
+            "min_ttr": np.array([_summary_value(r, "min_ttr") for r in rows],
+                                dtype=np.float64),
+            "evasion": [_evasion_label((r.summary or {}).get("min_ttr_evasion"))
+                        for r in rows if r.risk is not None],
+        }
+
+    cols: dict[str, Any] = _CACHE.get(_key(ctx, "columns", *_version(crow)), compute)
+    return cols
 
 
 def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
@@ -299,16 +319,14 @@ def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     mid, model, _ = _model_and_row(ctx, crow.model_id)
 
     def compute() -> dict[str, Any]:
-        rows = _rows(ctx, catalogue_id)
-        constrained = pd.DataFrame([r.params for r in rows],
-                                   columns=list(domain.PARAM_NAMES))
+        constrained = _columns(ctx, crow)["params"]
         reference = _reference_draws(ctx, mid, model)
         return {
             "source": "catalogue",
             "catalogue": crow.id,
             "model": mid,
             "constraints": list(crow.spec.get("constraints", [])),
-            "n": len(rows),
+            "n": len(constrained),
             "seed": crow.seed,
             "n_reference": len(reference),
             "p_region": domain.jsonable(domain.decode_floats(crow.p_region)),
@@ -377,24 +395,19 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
 
     def compute() -> dict[str, Any]:
         info = catalogue_service.describe(ctx, catalogue_id)
-        rows = _rows(ctx, catalogue_id)
+        cols = _columns(ctx, crow)
         with ctx.db.session() as s:
             chunks = repo.chunk_rows(s, catalogue_id)
             diag = _diagnostics(chunks)
-        idx = np.array([r.idx for r in rows], dtype=np.int64)
-        risk = np.array([np.nan if r.risk is None else r.risk for r in rows], dtype=np.float64)
-        r_ind = np.array([_summary_value(r, "risk_ind") for r in rows], dtype=np.float64)
-        ttc = np.array([np.nan if r.ttc is None else r.ttc for r in rows], dtype=np.float64)
-        min_ttr = np.array([_summary_value(r, "min_ttr") for r in rows], dtype=np.float64)
-        evasion = [_evasion_label((r.summary or {}).get("min_ttr_evasion"))
-                   for r in rows if r.risk is not None]
+        idx, risk, r_ind = cols["idx"], cols["risk"], cols["r_ind"]
+        ttc, min_ttr, evasion = cols["ttc"], cols["min_ttr"], cols["evasion"]
         scored = int(np.isfinite(risk).sum())
         risk_edges = shared_edges([], bins=RISK_BINS, span=(0.0, 1.0))
         ttr_edges = shared_edges([], bins=min(MAX_BINS, 31), span=(-0.05, 3.05))
         keep = thin_scatter(ttc, risk, MAX_SCATTER)
         return {
             "catalogue": info,
-            "n_rows": len(rows),
+            "n_rows": int(idx.size),
             "n_scored": scored,
             "diagnostics": diag,
             "risk_hist": {"r_dep": histogram(risk, risk_edges),
@@ -406,7 +419,7 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
                 "index": domain.jsonable(idx[keep]),
                 "ttc": domain.jsonable(ttc[keep]),
                 "risk": domain.jsonable(risk[keep]),
-                "n_total": len(rows),
+                "n_total": int(idx.size),
                 "n_plottable": int((np.isfinite(ttc) & np.isfinite(risk)).sum()),
                 "n_shown": int(keep.size),
                 "n_ttc_inf": int(np.sum(np.isinf(ttc))),

@@ -769,7 +769,11 @@
       setSelect($("dataset-select"), state.dataset);
       setSelect($("catalogue-select"), state.catalogue);
       if (!state.model) showError("no fitted model is available yet (see /health)");
-      await Promise.all([loadFit(), loadShift(), loadRisk()]);
+      // the catalogue's own view first (what a test engineer opened the page for), then
+      // the constraint shift, then the model views below it
+      await loadRisk();
+      await loadShift();
+      await loadFit();
       if (state.catalogue && initial.scenario !== null && initial.scenario !== undefined) {
         await openScenario(state.catalogue, initial.scenario);
       }

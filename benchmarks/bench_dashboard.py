@@ -1,0 +1,133 @@
+"""How fast is the dashboard for a 10,000-scenario catalogue? Prints the figures.
+
+Starts the service (uvicorn subprocess, temporary data dir and SQLite database, the quick
+default model of tests/browser/factories.py), stores a finished catalogue of 10,000
+synthetic scenario rows (the dashboard's cost depends only on the stored rows), then
+measures
+
+* each JSON view of the page: time of the first (cold, computed) and of a repeated
+  (cached) request, and the size of what is sent;
+* the page in headless Chromium: from navigation to every plot drawn
+  (``body[data-ready]`` and no request outstanding), first load and reload.
+
+Run:  .venv/bin/python benchmarks/bench_dashboard.py [n_scenarios]
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from app.db.database import Database  # noqa: E402
+from tests.browser.factories import (  # noqa: E402
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    free_port,
+    prepare_data_dir,
+    store_synthetic_catalogue,
+)
+
+
+def main() -> None:
+    n = int(sys.argv[1]) if len(sys.argv) > 1 else 10_000
+    with tempfile.TemporaryDirectory(prefix="bench-dashboard-") as tmp:
+        data_dir = prepare_data_dir(Path(tmp))
+        port = free_port()
+        env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0")
+        env.pop("SCENGEN_DATABASE_URL", None)
+        env.pop("SCENGEN_DASK_SCHEDULER", None)
+        log = (data_dir / "uvicorn.log").open("wb")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
+             "--port", str(port), "--log-level", "warning"], cwd=ROOT, env=env, stdout=log,
+            stderr=subprocess.STDOUT, start_new_session=True)
+        base = f"http://127.0.0.1:{port}"
+        try:
+            _wait_up(base, proc)
+            model_id = httpx.get(f"{base}/health").json()["default_model"]
+            db = Database(f"sqlite:///{(data_dir / 'scengen.db').resolve()}")
+            t0 = time.perf_counter()
+            cid = store_synthetic_catalogue(db, data_dir, model_id, n, seed=1)
+            db.dispose()
+            print(f"stored a catalogue of {n} synthetic scenarios in "
+                  f"{time.perf_counter() - t0:.1f} s ({cid})")
+            _api(base, cid)
+            _page(base, cid)
+        finally:
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(timeout=60)
+            log.close()
+
+
+def _wait_up(base: str, proc: subprocess.Popen[bytes]) -> None:
+    for _ in range(3000):
+        if proc.poll() is not None:
+            raise SystemExit("uvicorn exited")
+        try:
+            if httpx.get(f"{base}/health", timeout=2).status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        time.sleep(0.1)
+    raise SystemExit("uvicorn did not start")
+
+
+def _api(base: str, cid: str) -> None:
+    print("\nJSON views (cold = first request, computed; warm = repeated, cached):")
+    print(f"  {'view':44s} {'cold ms':>8s} {'warm ms':>8s} {'kB':>7s}")
+    with httpx.Client(base_url=base, timeout=300) as http:
+        for path in (f"/dashboard/api/catalogues/{cid}/risk",
+                     f"/dashboard/api/catalogues/{cid}/shift",
+                     "/dashboard/api/models/default/fit"):
+            times = []
+            size = 0
+            for _ in range(2):
+                t0 = time.perf_counter()
+                r = http.get(path)
+                times.append(1000 * (time.perf_counter() - t0))
+                r.raise_for_status()
+                size = len(r.content)
+            name = path.replace(cid, "{id}")
+            print(f"  {name:44s} {times[0]:8.0f} {times[1]:8.0f} {size / 1024:7.1f}")
+
+
+def _page(base: str, cid: str) -> None:
+    from playwright.sync_api import sync_playwright
+
+    print("\npage /dashboard/catalogues/{id} in headless Chromium, navigation to every "
+          "plot drawn:")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        for label in ("first load (plotly.js from the app)", "reload", "reload"):
+            t0 = time.perf_counter()
+            page.goto(f"{base}/dashboard/catalogues/{cid}", wait_until="commit")
+            page.wait_for_selector(f"#evasion-shares[data-source='{cid}']", timeout=120_000)
+            risk_view = time.perf_counter() - t0
+            page.wait_for_selector("body[data-ready='1']", timeout=120_000)
+            page.wait_for_function("document.body.dataset.busy === '0'", timeout=120_000)
+            elapsed = time.perf_counter() - t0
+            if os.environ.get("BENCH_VERBOSE"):
+                for e in page.evaluate("performance.getEntriesByType('resource').map(e => "
+                                       "[e.name, Math.round(e.startTime), "
+                                       "Math.round(e.duration)])"):
+                    print("     ", e)
+            points = page.locator("#ttc-risk .scatterlayer .point").count()
+            bars = page.locator(".barlayer .point").count()
+            print(f"  {label:38s} catalogue view {risk_view:5.2f} s, all views "
+                  f"{elapsed:5.2f} s ({points} scatter points, {bars} bars drawn)")
+        browser.close()
+
+
+if __name__ == "__main__":
+    main()
