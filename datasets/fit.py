@@ -19,10 +19,11 @@ two plateaus::
     v(t) = v1 + (v2 - v1) clip((t - tau1) / (tau2 - tau1), 0, 1)
 
 For fixed (tau1, tau2) this is linear in (v1, v2), so a grid over (tau1, tau2) with step
-``grid_step`` is solved exactly (2x2 normal equations, vectorised), and the best cell is
-refined with ``least_squares`` over all four. Then p_a1 = (v2 - v1) / (tau2 - tau1),
-p_a2 = tau1 - t0, p_a3 = tau2 - tau1, p_v0 = v(t0). A plateau step below ``min_step``
-(m/s) counts as no pulse (p_a1 = p_a2 = p_a3 = 0, p_v0 = mean speed).
+``grid_step`` (or span / 60 when coarser) is solved exactly (2x2 normal equations,
+vectorised), and the best cell is refined with ``least_squares`` over all four. Then
+p_a1 = (v2 - v1) / (tau2 - tau1), p_a2 = tau1 - t0, p_a3 = tau2 - tau1, p_v0 = v(t0).
+A plateau step below ``min_step`` (m/s) counts as no pulse (p_a1 = p_a2 = p_a3 = 0,
+p_v0 = mean speed).
 """
 
 from __future__ import annotations
@@ -222,7 +223,8 @@ def fit_pulse(
     t0 : float
         Start of the lateral motion (s, same clock): p_a2 is relative to it.
     grid_step : float
-        Spacing in s of the (tau1, tau2) grid before refinement.
+        Spacing in s of the (tau1, tau2) grid before refinement (coarsened to span / 60
+        for long windows).
     min_duration : float
         Shortest pulse in s.
     min_step : float
@@ -237,7 +239,9 @@ def fit_pulse(
     span = float(tt[-1])
     if span < 2.0 * min_duration:
         raise ExtractionError(f"speed fit: window of {span:.2f} s is too short")
-    tau1, tau2, v1, v2 = _ramp_grid(tt, v, grid_step, min_duration)
+    # at most ~60 grid candidates: long windows get a coarser grid, refined below
+    step = max(grid_step, span / 60.0)
+    tau1, tau2, v1, v2 = _ramp_grid(tt, v, step, min(min_duration, step))
 
     def model(x: FloatArray) -> FloatArray:
         a, d, w1, w2 = x
