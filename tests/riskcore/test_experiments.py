@@ -196,3 +196,18 @@ def test_same_inputs_give_the_same_output_bit_for_bit(surfaces: InputSurfaces) -
     a = evaluate_scenario(sc, surfaces=surfaces).to_dict()
     b = evaluate_scenario(sc, surfaces=surfaces).to_dict()
     assert a == b
+
+
+def test_touching_is_not_a_collision_in_the_engine() -> None:
+    """The touching convention end to end: side by side with exactly touching boxes."""
+    s = RiskSettings(n_a=1, n_omega=1)  # one trajectory: the mean inputs (0 here)
+    surf = paper_like_surfaces()
+    ego = EgoFuture.constant_velocity(0.0, 0.0, 0.0, 20.0, settings=s)
+    touching = ObjectState("to", 0.0, 1.8, 0.0, 20.0, 0.0, 0.0)  # widths 1.8: |dy| = 1.8
+    res = evaluate_scene(ego, [touching], s, surf).objects[0]
+    assert float(res.omega[0]) == 0.0 and float(res.a[0]) == 0.0
+    assert res.collision_time[0] == math.inf and res.ttr[0] == math.inf and res.risk == 0.0
+    overlapping = ObjectState("to", 0.0, 1.8 - 1e-9, 0.0, 20.0, 0.0, 0.0)
+    res = evaluate_scene(ego, [overlapping], s, surf).objects[0]
+    assert res.collision_time[0] == 0.0 and res.ttr[0] == 0.0 and res.evasion[0] == 0
+    assert res.evasion_labels() == ["none"] and res.risk == 1.0
