@@ -12,6 +12,8 @@ from riskcore.errors import SettingsError
 
 __all__ = ["RiskSettings"]
 
+_MAX_STEPS = 1000
+
 
 @dataclass(frozen=True)
 class RiskSettings:
@@ -92,8 +94,9 @@ class RiskSettings:
             raise SettingsError(
                 f"horizon: must be a whole number (>= 1) of dt steps, got {self.horizon} / "
                 f"{self.dt} = {steps}")
-        if round(steps) > 10_000:
-            raise SettingsError(f"horizon: at most 10000 steps of dt, got {round(steps)}")
+        if round(steps) > _MAX_STEPS:  # the evasion buffer grows with the square of it
+            raise SettingsError(f"horizon: at most {_MAX_STEPS} steps of dt, got "
+                                f"{round(steps)}")
 
     @property
     def n_steps(self) -> int:

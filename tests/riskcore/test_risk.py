@@ -166,6 +166,7 @@ def test_table_ii_defaults() -> None:
     ({"n_omega": 2.5}, "n_omega"), ({"brake_max": -1.0}, "brake_max"),
     ({"dt": math.nan}, "dt"), ({"m": -0.5}, "m"), ({"n_a": True}, "n_a"),
     ({"lat_accel_max": "6"}, "lat_accel_max"), ({"speed": 3.0}, "unknown setting"),
+    ({"dt": 0.001}, "at most 1000 steps"),
 ])
 def test_bad_settings_name_the_field(changes: dict[str, object], field: str) -> None:
     with pytest.raises(SettingsError, match=field):
