@@ -17,6 +17,7 @@ The row loop is a numba kernel (``cache=True``): one pass per row, no (n, grid) 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -122,6 +123,11 @@ def _crossing_kernel(arr: FloatArray, offset: float, one_minus_cos: FloatArray,
         out[r, 3] = max_lat
 
 
+@functools.lru_cache(maxsize=8)
+def _one_minus_cos(n_grid: int) -> FloatArray:
+    return 1.0 - np.cos(np.pi * np.linspace(0.0, 2.0, n_grid + 1))
+
+
 def crossing_kinematics(params: FloatArray, offset: float,
                         n_grid: int = DEFAULT_N_GRID) -> CrossingKinematics:
     """Crossing time, speed there, and final lateral displacement for many vectors.
@@ -148,7 +154,7 @@ def crossing_kinematics(params: FloatArray, offset: float,
     if n_grid < 2:
         raise ValueError(f"n_grid: must be >= 2, got {n_grid}")
     out = np.empty((arr.shape[0], 4))
-    one_minus_cos = 1.0 - np.cos(np.pi * np.linspace(0.0, 2.0, int(n_grid) + 1))
+    one_minus_cos = _one_minus_cos(int(n_grid))
     _crossing_kernel(np.ascontiguousarray(arr[:, :6]), float(offset), one_minus_cos, out)
     return CrossingKinematics(t_cross=out[:, 0].copy(), v_cross=out[:, 1].copy(),
                               y_end=out[:, 2].copy(), max_lat_speed=out[:, 3].copy())

@@ -1,0 +1,256 @@
+"""The region's probability mass P(A) under the model, with a confidence interval.
+
+Definition. The mixture puts a little mass on vectors no car can drive (outside the physical
+bounds B, see ``sampler.constraints.PHYSICAL_BOUNDS``). P(A) is the mass of the region
+*among physical cut-ins*: ``P(A) = P(A and B) / P(B)`` under the model (every region A
+with bounds on lies inside B). ``P(B)`` is estimated once per sample set from ``n_bounds``
+plain draws; the interval of P(A) combines both intervals conservatively:
+``[lo(A and B) / hi(B), hi(A and B) / lo(B)]``.
+
+Estimators of ``P(A and B)``:
+
+* ``mc`` — plain Monte Carlo: ``k`` of ``N`` model draws inside; exact Clopper-Pearson
+  interval. Used whenever at least ``mc_min_hits`` draws hit the region (so the relative
+  error stays below about 20 %).
+* ``is`` — importance sampling with a defensive mixture (Hesterberg 1995) for rare regions
+  (in practice P(A) < 1e-4, where the pilot's ~1e6 draws hit fewer than 100 times):
+  proposal ``q = alpha p + (1 - alpha) g`` in z-space, ``g`` a Gaussian fitted to samples
+  inside the region with its covariance inflated by ``inflate**2``; estimate
+  ``mean(w 1_A)`` with ``w = p / q <= 1 / alpha`` (bounded weights: finite variance even
+  where ``g`` is too narrow), normal interval from the sample standard deviation.
+
+Exposure weight of sample i (``exposure_weights``): ``P(A) / n`` for every sample of a set
+drawn from ``p(x | A)`` (rejection and MCMC both target it). It is the share of all
+physical real-world cut-ins (as the model sees them) that sample i stands for: the weights
+sum to P(A), and ``sum_i w_i 1[sample i fails]`` = failure share x P(A) estimates the
+probability that a real cut-in is in A *and* makes the system fail; multiplied by a cut-in
+rate per hour or km it is a real-world failure rate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+from scipy.special import logsumexp
+
+from sampler._exceptions import EmptyRegionError
+from sampler.model import clopper_pearson
+from sampler.samplers import Pilot, Problem, ProgressFn
+
+__all__ = ["PRegion", "PRegionEstimator"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PRegion:
+    """P(A) with its interval. Probabilities are in [0, 1]."""
+
+    estimate: float
+    ci_low: float
+    ci_high: float
+    confidence: float
+    method: str  # "mc" or "is"
+    n_draws: int  # draws behind the estimate (model draws for mc, proposal draws for is)
+    n_hits: int  # of those, inside the region
+    p_bounds: float  # P(B), the model's mass inside the physical bounds
+    p_bounds_ci: tuple[float, float]
+    p_joint: float  # P(A and B)
+
+    @property
+    def rel_halfwidth(self) -> float:
+        """Half the interval's width relative to the estimate (inf when the estimate is 0)."""
+        if self.estimate <= 0:
+            return math.inf
+        return 0.5 * (self.ci_high - self.ci_low) / self.estimate
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["p_bounds_ci"] = list(self.p_bounds_ci)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PRegion:
+        d = dict(d)
+        d["p_bounds_ci"] = tuple(d["p_bounds_ci"])
+        return cls(**d)
+
+    def __str__(self) -> str:
+        return (f"P(A)={self.estimate:.3g} [{self.ci_low:.3g}, {self.ci_high:.3g}] "
+                f"({self.method}, {self.confidence:.0%}, {self.n_hits}/{self.n_draws})")
+
+
+class PRegionEstimator:
+    """Pilot draws, the broadened search for rare regions, and the P(A) estimators.
+
+    Parameters
+    ----------
+    pilot_hits : int
+        Stop the plain-MC pilot once this many draws fell inside the region ...
+    pilot_max : int
+        ... or after this many draws.
+    mc_min_hits : int
+        Fewer plain-MC hits than this switch P(A) to importance sampling.
+    n_is : int
+        Proposal draws of the importance sampler.
+    defensive : float
+        alpha, the model's share of the defensive mixture.
+    inflate : float
+        Scale of the fitted Gaussian's standard deviations.
+    n_bounds : int
+        Plain draws for P(B).
+    search_scales : tuple of float
+        Widening factors tried (in order) when the pilot found fewer than ``search_need``
+        points inside the region.
+    search_draws : int
+        Draws per widening factor.
+    min_p : float
+        A region whose P(A) upper bound is below this is "practically empty" (error).
+    confidence : float
+    """
+
+    def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
+                 mc_min_hits: int = 100, n_is: int = 1 << 15, defensive: float = 0.1,
+                 inflate: float = 1.5, n_bounds: int = 8192,
+                 search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
+                 search_draws: int = 1 << 18, min_p: float = 1e-12,
+                 confidence: float = 0.95) -> None:
+        self.pilot_hits = int(pilot_hits)
+        self.pilot_max = int(pilot_max)
+        self.mc_min_hits = int(mc_min_hits)
+        self.n_is = int(n_is)
+        self.defensive = float(defensive)
+        self.inflate = float(inflate)
+        self.n_bounds = int(n_bounds)
+        self.search_scales = tuple(float(s) for s in search_scales)
+        self.search_draws = int(search_draws)
+        self.min_p = float(min_p)
+        self.confidence = float(confidence)
+
+    def settings(self) -> dict[str, Any]:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self).items()}
+
+    # ---------------------------------------------------------------- P(B)
+
+    def p_bounds(self, problem: Problem, rng: np.random.Generator) -> tuple[float, float, float]:
+        """P(B) and its interval from ``n_bounds`` plain draws."""
+        z = problem.model.sample_z(self.n_bounds, rng)
+        k = int(problem.in_bounds(z).sum())
+        if k == 0:
+            raise EmptyRegionError(
+                f"none of {self.n_bounds} model draws satisfies the physical bounds: the "
+                "model does not describe physical cut-ins (check the fit report)",
+                n_draws=self.n_bounds, n_hits=0)
+        lo, hi = clopper_pearson(k, self.n_bounds, self.confidence)
+        return k / self.n_bounds, lo, hi
+
+    # ---------------------------------------------------------------- pilot and search
+
+    def pilot(self, problem: Problem, rng: np.random.Generator, need: int,
+              progress: ProgressFn | None = None) -> Pilot:
+        """Plain MC in growing batches until ``pilot_hits`` hits or ``pilot_max`` draws;
+        then, if fewer than ``need`` hits, the broadened search."""
+        hits: list[FloatArray] = []
+        n_hits = n_draws = 0
+        batch = 1 << 14
+        while n_hits < self.pilot_hits and n_draws < self.pilot_max:
+            b = min(batch, self.pilot_max - n_draws)
+            z = problem.model.sample_z(b, rng)
+            inside = z[problem.inside(z)]
+            hits.append(inside)
+            n_hits += inside.shape[0]
+            n_draws += b
+            batch = min(batch * 2, 1 << 18)
+            if progress is not None:
+                progress("pilot", n_draws, self.pilot_max)
+        pilot = Pilot(n_draws=n_draws, hits=np.concatenate(hits, axis=0))
+        if pilot.n_hits < need:
+            self._search(problem, rng, pilot, need)
+        return pilot
+
+    def _search(self, problem: Problem, rng: np.random.Generator, pilot: Pilot,
+                need: int) -> None:
+        found: list[FloatArray] = []
+        total = 0
+        for s in self.search_scales:
+            z = problem.model.sample_z(self.search_draws, rng, scale=s)
+            inside = z[problem.inside(z)]
+            found.append(inside)
+            total += self.search_draws
+            if pilot.n_hits + sum(f.shape[0] for f in found) >= need:
+                break
+        pilot.search_hits = np.concatenate(found, axis=0)
+        pilot.search_draws = total
+        if pilot.n_hits == 0 and pilot.search_hits.shape[0] == 0:
+            p_up = float(stats.beta.ppf(self.confidence, 1, pilot.n_draws))
+            raise EmptyRegionError(
+                f"the region {problem.region.describe()} looks empty: none of "
+                f"{pilot.n_draws} model draws and none of {total} draws from the model "
+                f"widened by {', '.join(f'{s:g}x' for s in self.search_scales)} fell inside; "
+                f"P(A) < {p_up:.2g} ({self.confidence:.0%} upper bound)",
+                n_draws=pilot.n_draws + total, n_hits=0, p_upper=p_up)
+
+    # ---------------------------------------------------------------- estimators
+
+    def estimate(self, problem: Problem, rng: np.random.Generator, *, mc_draws: int,
+                 mc_hits: int, region_z: FloatArray,
+                 bounds: tuple[float, float, float]) -> PRegion:
+        """Choose ``mc`` or ``is`` (see the module docstring) and estimate P(A)."""
+        p_b, lo_b, hi_b = bounds
+        if mc_hits >= self.mc_min_hits:
+            lo, hi = clopper_pearson(mc_hits, mc_draws, self.confidence)
+            joint = mc_hits / mc_draws
+            out = PRegion(estimate=min(1.0, joint / p_b), ci_low=lo / hi_b,
+                          ci_high=min(1.0, hi / lo_b), confidence=self.confidence,
+                          method="mc", n_draws=mc_draws, n_hits=mc_hits, p_bounds=p_b,
+                          p_bounds_ci=(lo_b, hi_b), p_joint=joint)
+        else:
+            out = self._importance(problem, rng, region_z, bounds)
+        if out.ci_high < self.min_p:
+            raise EmptyRegionError(
+                f"the region {problem.region.describe()} is practically empty: {out}; "
+                f"below min_p={self.min_p:g}", n_draws=out.n_draws, n_hits=out.n_hits,
+                p_upper=out.ci_high)
+        return out
+
+    def _importance(self, problem: Problem, rng: np.random.Generator, region_z: FloatArray,
+                    bounds: tuple[float, float, float]) -> PRegion:
+        model = problem.model
+        d = model.n_features
+        p_b, lo_b, hi_b = bounds
+        if region_z.shape[0] >= d + 2:
+            mean = region_z.mean(axis=0)
+            cov = np.cov(region_z, rowvar=False)
+        else:
+            mean = region_z.mean(axis=0)
+            cov = np.eye(d) * 0.1
+        cov = cov * self.inflate**2 + 1e-6 * np.eye(d)
+        chol = np.linalg.cholesky(cov)
+        log_det = 2.0 * np.log(np.diag(chol)).sum()
+        n = self.n_is
+        from_model = rng.random(n) < self.defensive
+        z = np.empty((n, d))
+        k = int(from_model.sum())
+        z[from_model] = model.sample_z(k, rng)
+        z[~from_model] = mean + rng.standard_normal((n - k, d)) @ chol.T
+        log_p = model.log_density_z(z)
+        y = np.linalg.solve(chol, (z - mean).T)
+        log_g = -0.5 * (y * y).sum(axis=0) - 0.5 * log_det - 0.5 * d * math.log(2 * math.pi)
+        log_q = logsumexp(np.stack([math.log(self.defensive) + log_p,
+                                    math.log1p(-self.defensive) + log_g]), axis=0)
+        w = np.exp(log_p - log_q)
+        inside = problem.inside(z)
+        f = np.where(inside, w, 0.0)
+        joint = float(f.mean())
+        se = float(f.std(ddof=1) / math.sqrt(n))
+        zc = float(stats.norm.ppf(0.5 + self.confidence / 2))
+        lo_j, hi_j = max(0.0, joint - zc * se), joint + zc * se
+        return PRegion(estimate=min(1.0, joint / p_b), ci_low=lo_j / hi_b,
+                       ci_high=min(1.0, hi_j / lo_b), confidence=self.confidence, method="is",
+                       n_draws=n, n_hits=int(inside.sum()), p_bounds=p_b,
+                       p_bounds_ci=(lo_b, hi_b), p_joint=joint)
