@@ -55,13 +55,17 @@ def dashboard_page() -> HTMLResponse:
 @router.get("/catalogues/{catalogue_id}", response_class=HTMLResponse,
             summary="The dashboard page opened on one catalogue (404 page when unknown)")
 def catalogue_page(catalogue_id: str, ctx: ContextDep,
-                   scenario: Annotated[int | None, Query(ge=0)] = None) -> HTMLResponse:
+                   scenario: Annotated[str | None, Query(max_length=20)] = None) -> HTMLResponse:
     try:
         with ctx.db.session() as s:
             repo.get_catalogue(s, catalogue_id)
     except NotFound as exc:
         return _page({"catalogue": None, "error": exc.message}, status=404)
-    return _page({"catalogue": catalogue_id, "scenario": scenario})
+    if scenario is not None and not scenario.isdigit():
+        return _page({"catalogue": catalogue_id, "error": f"scenario must be a whole number "
+                      f">= 0 (a scenario index), got {scenario!r}"}, status=422)
+    return _page({"catalogue": catalogue_id,
+                  "scenario": None if scenario is None else int(scenario)})
 
 
 @router.get("/static/plotly.min.js", summary="plotly.js from the installed plotly package")

@@ -61,8 +61,14 @@
   }
 
   function showError(message) {
+    // one line per distinct message until the next clearError
     const el = $("error");
-    el.textContent = message;
+    const lines = Array.from(el.querySelectorAll("div")).map((d) => d.textContent);
+    if (!lines.includes(message)) {
+      const line = document.createElement("div");
+      line.textContent = message;
+      el.appendChild(line);
+    }
     el.hidden = false;
   }
 

@@ -224,3 +224,5 @@ def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     assert missing.status_code == 404 and missing.json()["error"]["field"] == "path.index"
     page = client.get(f"/dashboard/catalogues/{cid}", params={"scenario": 1})
     assert page.status_code == 200 and cid in page.text
+    bad = client.get(f"/dashboard/catalogues/{cid}", params={"scenario": "first"})
+    assert bad.status_code == 422 and "scenario must be a whole number" in bad.text

@@ -190,9 +190,12 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     page.fill("#n-input", "12")
     page.fill("#seed-input", "5")
     page.click("#draw-button")
+    # the catalogue's plots, or a message saying why not
     page.wait_for_function(
-        "document.querySelector('#ttc-risk').dataset.source.startsWith('cat-')")
+        "document.querySelector('#ttc-risk').dataset.source.startsWith('cat-') || "
+        "!document.querySelector('#error').hidden")
     settle(page)
+    assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
     cid = page.locator("#ttc-risk").get_attribute("data-source")
     assert cid is not None
     status = page.locator("#draw-status").inner_text()
@@ -233,6 +236,7 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     assert count(page, "#topdown-plot .scatterlayer .trace") == 4 + 2 + 2
     assert f"Scenario {index} of catalogue {cid}" in page.locator("#scenario-note").inner_text()
     shot(page, "#view-scenario", "4-scenario.png")
+    page.screenshot(path=str(ARTIFACTS / "0-whole-page.png"), full_page=True)
 
     # the time slider moves the vehicles and the time marker
     version = int(page.locator("#topdown-plot").get_attribute("data-version") or "0")
