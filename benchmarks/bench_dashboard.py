@@ -40,6 +40,7 @@ from tests.browser.factories import (  # noqa: E402
 
 def main() -> None:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 10_000
+    print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (shared machine)")
     with tempfile.TemporaryDirectory(prefix="bench-dashboard-") as tmp:
         data_dir = prepare_data_dir(Path(tmp))
         port = free_port()
@@ -117,6 +118,9 @@ def _page(base: str, cid: str) -> None:
             page.wait_for_selector("body[data-ready='1']", timeout=120_000)
             page.wait_for_function("document.body.dataset.busy === '0'", timeout=120_000)
             elapsed = time.perf_counter() - t0
+            marks = page.evaluate(
+                "Object.fromEntries(performance.getEntriesByType('mark')"
+                ".map(m => [m.name, m.startTime / 1000]))")
             if os.environ.get("BENCH_VERBOSE"):
                 for e in page.evaluate("performance.getEntriesByType('resource').map(e => "
                                        "[e.name, Math.round(e.startTime), "
@@ -126,6 +130,9 @@ def _page(base: str, cid: str) -> None:
             bars = page.locator(".barlayer .point").count()
             print(f"  {label:38s} catalogue view {risk_view:5.2f} s, all views "
                   f"{elapsed:5.2f} s ({points} scatter points, {bars} bars drawn)")
+            print(f"  {'':38s} in-page clock from navigation start: catalogue view "
+                  f"{marks.get('scengen:catalogue-view', float('nan')):5.2f} s, all views "
+                  f"{marks.get('scengen:all-views', float('nan')):5.2f} s")
         browser.close()
 
 

@@ -580,6 +580,22 @@
       shapes: [{ type: "line", x0: s.t[k], x1: s.t[k], yref: "paper", y0: 0, y1: 1,
                  line: { color: "#333", width: 1, dash: "dash" } }],
     }, source);
+    if (!$("series-plot").dataset.clickable) {
+      // a click in the time series moves the time slider there
+      $("series-plot").dataset.clickable = "1";
+      $("series-plot").on("plotly_click", (ev) => {
+        const pt = ev && ev.points && ev.points[0];
+        if (!pt || !state.scenario) return;
+        const t = state.scenario.t;
+        let best = 0;
+        for (let i = 1; i < t.length; i++) {
+          if (Math.abs(t[i] - pt.x) < Math.abs(t[best] - pt.x)) best = i;
+        }
+        stopPlay();
+        $("time-slider").value = String(best);
+        drawScenario(best);
+      });
+    }
     state.step = k;
     $("time-label").textContent = "t = " + fmt(sc.t[k]) + " s · risk " + fmt(s.r_dep[k]) +
       " · TTC " + fmt(s.ttc[k]) + " s";
@@ -778,8 +794,10 @@
       // the catalogue's own view first (what a test engineer opened the page for), then
       // the constraint shift, then the model views below it
       await loadRisk();
+      performance.mark("scengen:catalogue-view");
       await loadShift();
       await loadFit();
+      performance.mark("scengen:all-views");
       if (state.catalogue && initial.scenario !== null && initial.scenario !== undefined) {
         await openScenario(state.catalogue, initial.scenario);
       }
