@@ -352,7 +352,7 @@ def _diagnostics(chunks: Sequence[Any]) -> dict[str, Any]:
         return out
 
     acc = values("acceptance_rate") + values("acceptance_mean")
-    acc_min = values("acceptance_min") or values("acceptance_rate")
+    acc_min = values("acceptance_min") + values("acceptance_rate")
     tau = values("tau_max")
     ess = values("ess")
     draws = values("n_draws")

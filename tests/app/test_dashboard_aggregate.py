@@ -169,3 +169,41 @@ def test_marginal_density_integrates_to_one_and_matches_the_joint() -> None:
 def test_marginal_density_of_a_fixed_parameter_is_an_error() -> None:
     with pytest.raises(InvalidInput, match="not a feature"):
         domain.marginal_density(_two_component_model(), "p_v0", np.array([1.0]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=200),
+       st.floats(min_value=-1e3, max_value=1e3), st.floats(min_value=1e-3, max_value=1e3),
+       st.integers(min_value=1, max_value=60))
+def test_histogram_accounts_for_every_value(values: list[float], lo: float, width: float,
+                                            bins: int) -> None:
+    h = histogram(values, shared_edges([], bins=bins, span=(lo, lo + width)))
+    assert sum(h["counts"]) + h["below"] + h["above"] == h["n_finite"]
+    assert h["n_finite"] + h["n_nonfinite"] == len(values)
+    assert len(h["counts"]) == bins
+
+
+# --------------------------------------------------------------------------- diagnostics
+def test_sampler_diagnostics_over_chunks_by_hand() -> None:
+    from types import SimpleNamespace
+
+    from app.dashboard.views import _diagnostics
+
+    chunks = [
+        SimpleNamespace(diagnostics={"sampler": {
+            "method": "mcmc", "acceptance_mean": 0.3, "acceptance_min": 0.2, "tau_max": 12.0,
+            "ess": 40.0, "warnings": ["chain shorter than 50 tau"]}}),
+        SimpleNamespace(diagnostics={"sampler": {
+            "method": "mcmc", "acceptance_mean": 0.5, "acceptance_min": 0.1, "tau_max": 30.0,
+            "ess": 25.0, "warnings": []}}),
+        SimpleNamespace(diagnostics={"sampler": {
+            "method": "rejection", "acceptance_rate": 0.05, "ess": 50.0, "n_draws": 500}}),
+    ]
+    d = _diagnostics(chunks)
+    assert d["chunks"] == 3 and d["methods"] == ["mcmc", "rejection"]
+    assert d["acceptance_mean"] == pytest.approx((0.05 + 0.3 + 0.5) / 3)
+    assert d["acceptance_min"] == pytest.approx(0.05)  # the rejection chunk's rate
+    assert d["tau_max"] == 30.0 and d["ess_total"] == 115.0 and d["n_draws"] == 500.0
+    assert d["warnings"] == ["chain shorter than 50 tau"]
+    empty = _diagnostics([])
+    assert empty["chunks"] == 0 and empty["acceptance_mean"] is None
