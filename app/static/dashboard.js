@@ -381,6 +381,9 @@
       const c = view.catalogue;
       const d = view.diagnostics;
       const pr = c.p_region || {};
+      if (!pr.ci && pr.ci_low !== undefined && pr.ci_high !== undefined) {
+        pr.ci = [pr.ci_low, pr.ci_high];
+      }
       $("risk-note").textContent = "Catalogue " + c.id + " (" + c.status + "): " +
         view.n_rows + " scenarios stored, " + view.n_scored + " scored. Histograms are " +
         "binned and the scatter is thinned on the server (" + view.scatter.n_shown + " of " +
