@@ -310,3 +310,38 @@ def test_a_10000_scenario_catalogue_is_drawn_from_bounded_data(server: Server,
     assert count(page, "#risk-hist .barlayer .point") == 2 * 50
     assert "10000 scenarios stored" in page.locator("#risk-note").inner_text()
     shot(page, "#view-risk", "7-catalogue-10000.png")
+
+
+def test_picking_a_model_and_a_catalogue_redraws_their_views(server: Server,
+                                                             page: Page) -> None:
+    r = httpx.post(f"{server.base}/models", timeout=300, json={
+        "dataset": "tno-cutin",
+        "options": {"k_range": [1, 2], "n_init": 1, "cv_folds": 2, "n_report_samples": 1000}})
+    assert r.status_code == 201, r.text
+    other = r.json()["id"]
+    default = httpx.get(f"{server.base}/health").json()["default_model"]
+    db = server.db()
+    try:
+        cid = store_synthetic_catalogue(db, server.data_dir, default, 300, seed=2,
+                                        chunk_size=100)
+    finally:
+        db.dispose()
+    console = Console(page)
+    page.goto(f"{server.base}/dashboard")
+    settle(page)
+    assert page.locator("#fit-gap").get_attribute("data-source") == default
+    page.select_option("#model-select", other)
+    page.wait_for_selector(f"#fit-gap[data-source='{other}']")
+    settle(page)
+    assert f"model {other}" in page.locator("#fit-note").inner_text()
+    assert count(page, "#fit-gap .scatterlayer .trace path.js-line") == 1
+    page.select_option("#catalogue-select", cid)
+    page.wait_for_selector(f"#ttc-risk[data-source='{cid}']")
+    settle(page)
+    # the catalogue brings its own model back
+    assert page.locator("#model-select").input_value() == default
+    assert page.locator("#fit-gap").get_attribute("data-source") == default
+    assert page.locator("#shift-gap").get_attribute("data-source") == cid
+    assert count(page, "#ttc-risk .scatterlayer .point") == 300
+    assert page.url.endswith(f"/dashboard/catalogues/{cid}")
+    assert console.errors == []
