@@ -273,8 +273,11 @@
     const gap = 0.03;
     const size = (1 - gap * (k - 1)) / k;
     const traces = [];
+    // the legend sits in the empty upper triangle
     const layout = { showlegend: true, margin: { l: 60, r: 12, t: 30, b: 50 },
-                     hovermode: "closest" };
+                     hovermode: "closest",
+                     legend: { x: 0.98, xanchor: "right", y: 0.98, orientation: "v",
+                               font: { size: 12 }, itemsizing: "constant" } };
     let axis = 0;
     for (let row = 0; row < k; row++) {
       for (let col = 0; col <= row; col++) {
