@@ -4,14 +4,16 @@ views under ``/dashboard/api/`` (errors in the service's one error shape)."""
 
 from __future__ import annotations
 
+import gzip
+import hashlib
 import html
 import json
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query
-from fastapi.responses import FileResponse, HTMLResponse
+from fastapi import APIRouter, Query, Request
+from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from app.dashboard import views
 from app.db import repository as repo
@@ -68,10 +70,26 @@ def catalogue_page(catalogue_id: str, ctx: ContextDep,
                   "scenario": None if scenario is None else int(scenario)})
 
 
-@router.get("/static/plotly.min.js", summary="plotly.js from the installed plotly package")
-def plotly_js() -> FileResponse:
-    return FileResponse(plotly_js_path(), media_type="text/javascript; charset=utf-8",
-                        headers={"Cache-Control": "public, max-age=86400"})
+@lru_cache(maxsize=1)
+def _plotly_gzip() -> tuple[bytes, str]:
+    """plotly.min.js gzip-compressed once (4.8 MB → about 1.4 MB on the wire) and its ETag."""
+    raw = plotly_js_path().read_bytes()
+    return gzip.compress(raw, compresslevel=6, mtime=0), hashlib.sha256(raw).hexdigest()[:32]
+
+
+@router.get("/static/plotly.min.js", summary="plotly.js from the installed plotly package",
+            response_model=None)
+def plotly_js(request: Request) -> Response:
+    headers = {"Cache-Control": "public, max-age=86400", "Vary": "Accept-Encoding"}
+    if "gzip" not in request.headers.get("accept-encoding", ""):
+        return FileResponse(plotly_js_path(), media_type="text/javascript; charset=utf-8",
+                            headers=headers)
+    body, etag = _plotly_gzip()
+    headers["ETag"] = f'"{etag}"'
+    if request.headers.get("if-none-match") == headers["ETag"]:
+        return Response(status_code=304, headers=headers)
+    headers["Content-Encoding"] = "gzip"
+    return Response(body, media_type="text/javascript; charset=utf-8", headers=headers)
 
 
 @router.get("/static/{name}", summary="The dashboard's own script and style sheet")

@@ -70,6 +70,14 @@ def test_page_and_plotly_are_served_by_the_app(client: TestClient) -> None:
     assert js.status_code == 200 and "javascript" in js.headers["content-type"]
     assert js.text.lstrip().startswith("/**") and "plotly.js v" in js.text[:200]
     assert len(js.content) > 1_000_000
+    # sent gzip-compressed, cached by ETag; the same bytes without gzip
+    assert js.headers["content-encoding"] == "gzip"
+    assert int(js.headers["content-length"]) < len(js.content) / 2
+    again = client.get("/dashboard/static/plotly.min.js",
+                       headers={"If-None-Match": js.headers["etag"]})
+    assert again.status_code == 304
+    plain = client.get("/dashboard/static/plotly.min.js", headers={"Accept-Encoding": "identity"})
+    assert "content-encoding" not in plain.headers and plain.content == js.content
     for name in ("dashboard.js", "dashboard.css"):
         assert client.get(f"/dashboard/static/{name}").status_code == 200
 
