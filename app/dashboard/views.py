@@ -113,7 +113,10 @@ class ViewCache:
             self._data.clear()
 
 
-_CACHE = ViewCache()
+#: the views: small, bounded JSON-able results
+_CACHE = ViewCache(size=64)
+#: the catalogues' columns (n rows each): only the few most recent catalogues
+_COLUMNS = ViewCache(size=4)
 
 
 def _key(ctx: ServiceContext, *parts: Any) -> tuple[Any, ...]:
@@ -291,25 +294,46 @@ def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
     ``min_ttr`` (float arrays; NaN = missing, inf kept) and ``evasion`` labels of the
     scored rows."""
     def compute() -> dict[str, Any]:
+        names = list(domain.PARAM_NAMES)
+        idx: list[int] = []
+        params: list[list[float]] = []
+        risk: list[float] = []
+        r_ind: list[float] = []
+        ttc: list[float] = []
+        min_ttr: list[float] = []
+        evasion: list[str | None] = []
+        # streamed in batches: only the columns are kept, never the ORM rows
         with ctx.db.session() as s:
-            rows = list(repo.iter_scenarios(s, crow.id, batch=5000))
-            s.expunge_all()
+            for r in repo.iter_scenarios(s, crow.id, batch=5000):
+                idx.append(r.idx)
+                p = r.params or {}
+                params.append([_float(p.get(name)) for name in names])
+                risk.append(_float(r.risk))
+                r_ind.append(_summary_value(r, "risk_ind"))
+                ttc.append(_float(r.ttc))
+                min_ttr.append(_summary_value(r, "min_ttr"))
+                if r.risk is not None:
+                    evasion.append(_evasion_label((r.summary or {}).get("min_ttr_evasion")))
         return {
-            "idx": np.array([r.idx for r in rows], dtype=np.int64),
-            "params": pd.DataFrame([r.params for r in rows], columns=list(domain.PARAM_NAMES)),
-            "risk": np.array([np.nan if r.risk is None else r.risk for r in rows],
-                             dtype=np.float64),
-            "r_ind": np.array([_summary_value(r, "risk_ind") for r in rows], dtype=np.float64),
-            "ttc": np.array([np.nan if r.ttc is None else r.ttc for r in rows],
-                            dtype=np.float64),
-            "min_ttr": np.array([_summary_value(r, "min_ttr") for r in rows],
-                                dtype=np.float64),
-            "evasion": [_evasion_label((r.summary or {}).get("min_ttr_evasion"))
-                        for r in rows if r.risk is not None],
+            "idx": np.array(idx, dtype=np.int64),
+            "params": pd.DataFrame(np.array(params, dtype=np.float64).reshape(-1, len(names)),
+                                   columns=names),
+            "risk": np.array(risk, dtype=np.float64),
+            "r_ind": np.array(r_ind, dtype=np.float64),
+            "ttc": np.array(ttc, dtype=np.float64),
+            "min_ttr": np.array(min_ttr, dtype=np.float64),
+            "evasion": evasion,
         }
 
-    cols: dict[str, Any] = _CACHE.get(_key(ctx, "columns", *_version(crow)), compute)
+    cols: dict[str, Any] = _COLUMNS.get(_key(ctx, "columns", *_version(crow)), compute)
     return cols
+
+
+def _float(value: Any) -> float:
+    """A stored number as float; None (or anything not a number) as NaN."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    return math.nan
 
 
 def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
