@@ -94,18 +94,39 @@ class ViewCache:
         self.size = size
         self._data: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self._lock = threading.Lock()
+        self._pending: dict[tuple[Any, ...], threading.Lock] = {}
 
-    def get(self, key: tuple[Any, ...], compute: Callable[[], Any]) -> Any:
+    def _lookup(self, key: tuple[Any, ...]) -> tuple[bool, Any]:
         with self._lock:
             if key in self._data:
                 self._data.move_to_end(key)
-                return self._data[key]
-        value = compute()
+                return True, self._data[key]
+        return False, None
+
+    def get(self, key: tuple[Any, ...], compute: Callable[[], Any]) -> Any:
+        """The cached value of ``key``, computed once even when asked for concurrently
+        (the second caller waits for the first one's result)."""
+        found, value = self._lookup(key)
+        if found:
+            return value
         with self._lock:
-            self._data[key] = value
-            self._data.move_to_end(key)
-            while len(self._data) > self.size:
-                self._data.popitem(last=False)
+            pending = self._pending.setdefault(key, threading.Lock())
+        with pending:
+            found, value = self._lookup(key)
+            if found:
+                return value
+            try:
+                value = compute()
+            except BaseException:
+                with self._lock:
+                    self._pending.pop(key, None)
+                raise
+            with self._lock:
+                self._data[key] = value
+                self._data.move_to_end(key)
+                while len(self._data) > self.size:
+                    self._data.popitem(last=False)
+                self._pending.pop(key, None)
         return value
 
     def clear(self) -> None:

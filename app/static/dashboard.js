@@ -60,6 +60,21 @@
     return body;
   }
 
+  // requests started before they are needed (the catalogue's views while the lists load)
+  const early = new Map();
+
+  function prefetch(path) {
+    const promise = api(path);
+    promise.catch(() => null);  // a failure is reported when the view asks for it
+    early.set(path, promise);
+  }
+
+  function prefetched(path) {
+    const promise = early.get(path);
+    early.delete(path);
+    return promise || api(path);
+  }
+
   function showError(message) {
     // one line per distinct message until the next clearError
     const el = $("error");
@@ -322,8 +337,8 @@
     try {
       let view;
       if (state.catalogue) {
-        view = await api("/dashboard/api/catalogues/" + encodeURIComponent(state.catalogue) +
-                         "/shift");
+        view = await prefetched("/dashboard/api/catalogues/" +
+                                encodeURIComponent(state.catalogue) + "/shift");
       } else {
         if (!state.model) return;
         const constraint = $("constraint-input").value;
@@ -379,7 +394,8 @@
     busy(1);
     try {
       const id = state.catalogue;
-      const view = await api("/dashboard/api/catalogues/" + encodeURIComponent(id) + "/risk");
+      const view = await prefetched("/dashboard/api/catalogues/" + encodeURIComponent(id) +
+                                    "/risk");
       if (id !== state.catalogue) return;
       const c = view.catalogue;
       const d = view.diagnostics;
@@ -786,6 +802,11 @@
     if (initial.error) showError(initial.error);
     busy(1);
     try {
+      if (initial.catalogue) {
+        const base = "/dashboard/api/catalogues/" + encodeURIComponent(initial.catalogue);
+        prefetch(base + "/risk");
+        prefetch(base + "/shift");
+      }
       await loadLists();
       const cat = state.catalogues.find((c) => c.id === initial.catalogue);
       const def = state.models.find((m) => m["default"]) || state.models[0];

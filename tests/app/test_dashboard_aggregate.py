@@ -207,3 +207,41 @@ def test_sampler_diagnostics_over_chunks_by_hand() -> None:
     assert d["warnings"] == ["chain shorter than 50 tau"]
     empty = _diagnostics([])
     assert empty["chunks"] == 0 and empty["acceptance_mean"] is None
+
+
+# --------------------------------------------------------------------------- cache
+def test_view_cache_computes_a_key_once_even_concurrently_and_evicts_lru() -> None:
+    import threading
+
+    from app.dashboard.views import ViewCache
+
+    cache = ViewCache(size=2)
+    calls: list[str] = []
+    started, release = threading.Event(), threading.Event()
+
+    def slow() -> str:
+        calls.append("slow")
+        started.set()
+        assert release.wait(timeout=60)
+        return "value"
+
+    results: list[str] = []
+    first = threading.Thread(target=lambda: results.append(cache.get(("k",), slow)))
+    first.start()
+    assert started.wait(timeout=60)
+    second = threading.Thread(target=lambda: results.append(cache.get(("k",), slow)))
+    second.start()
+    release.set()
+    first.join(timeout=60)
+    second.join(timeout=60)
+    assert results == ["value", "value"] and calls == ["slow"]
+    # least recently used goes first
+    cache.get(("a",), lambda: "A")
+    cache.get(("k",), lambda: "recomputed")  # touch k
+    cache.get(("b",), lambda: "B")  # evicts a
+    assert cache.get(("k",), lambda: "recomputed") == "value"
+    assert cache.get(("a",), lambda: "A again") == "A again"
+    # a failing computation is not cached
+    with pytest.raises(RuntimeError):
+        cache.get(("bad",), lambda: (_ for _ in ()).throw(RuntimeError("boom")))
+    assert cache.get(("bad",), lambda: "ok") == "ok"
