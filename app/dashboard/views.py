@@ -325,16 +325,17 @@ def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
         evasion: list[str | None] = []
         # streamed in batches: only the columns are kept, never the ORM rows
         with ctx.db.session() as s:
-            for r in repo.iter_scenarios(s, crow.id, batch=5000):
-                idx.append(r.idx)
-                p = r.params or {}
+            for i, p, r, t, summary in repo.scenario_columns(s, crow.id):
+                idx.append(i)
+                p = p or {}
+                summary = summary or {}
                 params.append([_float(p.get(name)) for name in names])
-                risk.append(_float(r.risk))
-                r_ind.append(_summary_value(r, "risk_ind"))
-                ttc.append(_float(r.ttc))
-                min_ttr.append(_summary_value(r, "min_ttr"))
-                if r.risk is not None:
-                    evasion.append(_evasion_label((r.summary or {}).get("min_ttr_evasion")))
+                risk.append(_float(r))
+                r_ind.append(_summary_value(summary, "risk_ind"))
+                ttc.append(_float(t))
+                min_ttr.append(_summary_value(summary, "min_ttr"))
+                if r is not None:
+                    evasion.append(_evasion_label(summary.get("min_ttr_evasion")))
         return {
             "idx": np.array(idx, dtype=np.int64),
             "params": pd.DataFrame(np.array(params, dtype=np.float64).reshape(-1, len(names)),
@@ -416,9 +417,9 @@ def _diagnostics(chunks: Sequence[Any]) -> dict[str, Any]:
     }
 
 
-def _summary_value(row: ScenarioRow, key: str) -> float:
-    data = row.summary or {}
-    v = data.get(key)
+def _summary_value(summary: dict[str, Any], key: str) -> float:
+    """A number of a stored summary (``"Infinity"`` → inf; missing → NaN)."""
+    v = summary.get(key)
     if v == "Infinity":
         return math.inf
     if isinstance(v, int | float) and not isinstance(v, bool):

@@ -221,3 +221,21 @@ def delete_catalogue(session: Session, catalogue_id: str) -> None:
 def remove_catalogue_files(data_dir: Path, catalogue_id: str) -> None:
     """Remove a deleted catalogue's chunk files (call after the deletion committed)."""
     shutil.rmtree(data_dir / "catalogues" / catalogue_id, ignore_errors=True)
+
+
+def scenario_columns(session: Session, catalogue_id: str,
+                     batch: int = 5000) -> Iterator[tuple[int, Any, Any, Any, Any]]:
+    """``(idx, params, risk, ttc, summary)`` of every scenario of a catalogue in index order,
+    as plain tuples fetched in batches (no ORM objects: the dashboard's bulk read)."""
+    last = -1
+    while True:
+        stmt = (select(ScenarioRow.idx, ScenarioRow.params, ScenarioRow.risk, ScenarioRow.ttc,
+                       ScenarioRow.summary)
+                .where(ScenarioRow.catalogue_id == catalogue_id, ScenarioRow.idx > last)
+                .order_by(ScenarioRow.idx).limit(batch))
+        rows = session.execute(stmt).all()
+        if not rows:
+            return
+        for row in rows:
+            yield (int(row[0]), row[1], row[2], row[3], row[4])
+        last = int(rows[-1][0])
