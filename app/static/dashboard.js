@@ -698,18 +698,20 @@
       });
       $("constraint-input").classList.remove("invalid");
       const info = await waitFor(created.id, status);
+      status.textContent = "catalogue " + created.id + " " + info.status + " (" +
+        info.scenarios_stored + " of " + info.n + " scenarios)";
+      // a failed catalogue is shown too: its error and the chunks it stored
+      await loadLists();
+      await selectCatalogue(created.id, true);
       if (info.status !== "done") {
         throw new ApiError(0, "catalogue " + created.id + " " + info.status +
                               (info.error ? ": " + info.error : ""));
       }
-      status.textContent = "catalogue " + created.id + " done (" + info.n + " scenarios)";
-      await loadLists();
-      await selectCatalogue(created.id, true);
     } catch (e) {
       if (e.field && e.field.indexOf("constraints") >= 0) {
         $("constraint-input").classList.add("invalid");
       }
-      status.textContent = "";
+      if (status.textContent === "starting…") status.textContent = "";
       reportError("draw a new sample", e);
     } finally {
       button.disabled = false;

@@ -199,7 +199,7 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     cid = page.locator("#ttc-risk").get_attribute("data-source")
     assert cid is not None
     status = page.locator("#draw-status").inner_text()
-    assert f"catalogue {cid} done" in status
+    assert f"catalogue {cid} done (12 of 12 scenarios)" in status
     assert page.url.endswith(f"/dashboard/catalogues/{cid}")
     assert console.errors == []
     # every view of the catalogue now shows it
