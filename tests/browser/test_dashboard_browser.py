@@ -205,8 +205,11 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     # every view of the catalogue now shows it
     for plot in ("risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"):
         assert page.locator(f"#{plot}").get_attribute("data-source") == cid
-    assert page.locator("#shift-gap").get_attribute("data-source") == cid
     assert page.locator("#shift-gap").get_attribute("data-version") != before
+    for name in PARAMS:
+        assert page.locator(f"#shift-{name}").get_attribute("data-source") == cid, name
+        assert count(page, f"#shift-{name} .barlayer .trace") == 2, name
+        assert count(page, f"#shift-{name} .barlayer .point") >= 5, name
     view = httpx.get(f"{server.base}/dashboard/api/catalogues/{cid}/risk").json()
     assert view["n_rows"] == 12
     assert count(page, "#ttc-risk .scatterlayer .point") == view["scatter"]["n_shown"] > 0
