@@ -422,6 +422,11 @@
         ["effective sample size", esc(fmt(d.ess_total, 4))],
       ];
       if (c.status !== "done") rows.push(["progress", esc(Math.round(100 * c.progress) + "%")]);
+      if (c.status === "done") {
+        const href = "/catalogues/" + encodeURIComponent(c.id) + "/export?format=";
+        rows.push(["export", ["jsonl", "csv", "parquet", "xosc"].map((f) =>
+          "<a href=\"" + href + f + "\" download>" + f + "</a>").join(" · ")]);
+      }
       if (c.error) rows.push(["error", esc(c.error), "warn"]);
       for (const w of d.warnings) rows.push(["warning", esc(w), "warn"]);
       $("catalogue-info").innerHTML = table(rows);

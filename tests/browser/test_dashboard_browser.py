@@ -219,6 +219,11 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     info = page.locator("#catalogue-info").inner_text()
     assert "P(A)" in info and "effective sample size" in info and "acceptance" in info
     assert "12 · 5" in info  # n · seed
+    csv_link = page.locator("#catalogue-info a[href$='format=csv']")
+    href = csv_link.get_attribute("href")
+    assert href == f"/catalogues/{cid}/export?format=csv"
+    exported = httpx.get(server.base + href, timeout=120)
+    assert exported.status_code == 200 and len(exported.text.strip().splitlines()) == 1 + 12
     shot(page, "#view-shift", "2-constraint-shift-catalogue.png")
     shot(page, "#view-risk", "3-catalogue-risk.png")
 
