@@ -1,10 +1,197 @@
-"""``scengen`` sub-commands of this group (see app/cli.py for the conventions)."""
+"""``scengen fit`` and ``scengen sample``: the scenario model and constrained sampling.
+
+``scengen fit [DATASET] -o MODEL.json`` fits the cut-in GMM (sampler.model.CutInGMM) to a
+parameter table (CSV or Parquet as written by ``scengen data extract``; default: the
+embedded real TNO table) and prints the BIC curve, the chosen K and the fit report.
+
+``scengen sample MODEL.json --constraint 'ttc<3' -n 100 --seed 1 -o OUT.jsonl`` draws
+samples inside the region and writes one JSON line per sample::
+
+    {"index": 0, "params": {...}, "derived": {...}, "log_density": ..., "exposure_weight": ...,
+     "scenario": {...} (with --scenarios), "risk": {...} (with --score)}
+
+(+inf/NaN are written as null) and one summary line on stderr with P(A), its interval and
+the sampler's diagnostics; ``--summary-json FILE`` writes the whole sample set without the
+per-sample arrays. User errors end as one line ``scengen: error: ...``, exit code 2.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import sys
+from pathlib import Path
 from typing import Any
+
+_SUFFIXES = (".csv", ".parquet", ".pq")
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
-    """Add this group's sub-commands. Nothing here yet."""
+    """Add ``scengen fit`` and ``scengen sample``."""
+    f = subparsers.add_parser(
+        "fit", help="fit the cut-in GMM to a parameter table",
+        description="Fit the Gaussian-mixture scenario model (K by BIC) and write it as JSON.")
+    f.add_argument("dataset", nargs="?", default=None, metavar="DATASET",
+                   help="parameter table (.csv or .parquet); default: the embedded TNO data")
+    f.add_argument("-o", "--output", required=True, metavar="MODEL.json")
+    f.add_argument("--k-min", type=int, default=1, help="fewest components tried (1)")
+    f.add_argument("--k-max", type=int, default=8, help="most components tried (8)")
+    f.add_argument("--n-init", type=int, default=5, help="EM restarts per K (5)")
+    f.add_argument("--seed", type=int, default=0, help="random state (0)")
+    f.add_argument("--features", default=None,
+                   help="comma-separated table columns (default: the parameter vector)")
+    f.add_argument("--lane-width", type=float, default=None,
+                   help="lane width in m (default: the table's lane_width column, else 3.75)")
+    f.set_defaults(func=_fit)
+
+    s = subparsers.add_parser(
+        "sample", help="sample cut-ins inside a region (rejection / MCMC)",
+        description="Draw samples of the model restricted to the constraints and the "
+                    "physical bounds; one JSON line per sample.")
+    s.add_argument("model", metavar="MODEL.json")
+    s.add_argument("-c", "--constraint", action="append", default=[], metavar="EXPR",
+                   help="e.g. 'ttc<3', 'v_ego>=20' (repeatable; all must hold)")
+    s.add_argument("-n", type=int, default=100, help="number of samples (100)")
+    s.add_argument("--seed", type=int, default=None, help="seed (default: fresh, reported)")
+    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc"), default="auto")
+    s.add_argument("--no-envelope", action="store_true",
+                   help="draw from the whole model, not the region's half-space envelope")
+    s.add_argument("--lane-width", type=float, default=None, help="lane width in m")
+    s.add_argument("--score", action="store_true", help="build and score every scenario")
+    s.add_argument("--scenarios", action="store_true",
+                   help="include each concrete scenario (JSON form) in its line")
+    s.add_argument("--workers", type=int, default=1, help="processes for scoring (1)")
+    s.add_argument("-o", "--output", default="-", metavar="OUT.jsonl",
+                   help="output file ('-' = stdout)")
+    s.add_argument("--summary-json", default=None, metavar="FILE",
+                   help="write P(A), diagnostics and settings as JSON")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    s.set_defaults(func=_sample)
+
+
+def _read_table(path: str | None) -> tuple[Any, str]:
+    import pandas as pd
+
+    if path is None:
+        from datasets.embedded import default_parameter_table
+
+        return default_parameter_table(), "embedded TNO cut-ins (MIT)"
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in _SUFFIXES:
+        raise ValueError(f"{path}: expected a parameter table .csv or .parquet")
+    if not p.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        table = pd.read_csv(p) if suffix == ".csv" else pd.read_parquet(p)
+    except (ValueError, OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read the table ({str(exc).splitlines()[0]})") from None
+    return table, str(p)
+
+
+def _fit(args: argparse.Namespace) -> int:
+    from sampler.model import CutInGMM
+
+    table, source = _read_table(args.dataset)
+    features = None
+    if args.features:
+        features = [f.strip() for f in args.features.split(",") if f.strip()]
+    model = CutInGMM(features=features, k_range=(args.k_min, args.k_max), n_init=args.n_init,
+                     random_state=args.seed, lane_width=args.lane_width)
+    model.fit(table, source=source)
+    model.save(args.output)
+    print(f"fitted {source}: {len(table)} rows")
+    print(model.report_text())
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _clean(value: Any) -> Any:
+    """JSON without inf/NaN (they become null)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+class _Progress:
+    """tqdm bars on stderr, one per stage."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bars: dict[str, Any] = {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if self.quiet:
+            return
+        from tqdm import tqdm
+
+        bar = self.bars.get(stage)
+        if bar is None:
+            bar = self.bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr,
+                                          leave=False)
+        bar.total = total
+        bar.n = min(done, total)
+        bar.refresh()
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+        self.bars.clear()
+
+
+def _sample(args: argparse.Namespace) -> int:
+    from sampler.model import CutInGMM
+    from sampler.sampleset import sample
+
+    if args.workers < 1:
+        raise ValueError(f"--workers: must be >= 1, got {args.workers}")
+    model = CutInGMM.load(args.model)
+    progress = _Progress(args.quiet)
+    try:
+        ss = sample(model, args.constraint, args.n, args.seed, args.sampler,
+                    lane_width=args.lane_width, use_envelope=not args.no_envelope,
+                    progress=progress)
+    finally:
+        progress.close()
+    scored = None
+    if args.score:
+        from sampler.scoring import score_samples
+
+        scored = score_samples(ss, n_workers=args.workers, keep_scenarios=args.scenarios,
+                               progress=lambda d, t: progress("score", d, t))
+        progress.close()
+    d = ss.to_dict()
+    lines = []
+    for i in range(len(ss)):
+        row: dict[str, Any] = {
+            "index": i,
+            "params": ss.params_dict(i),
+            "derived": {k: d["derived"][k][i] for k in d["derived"]},
+            "log_density": d["log_density"][i],
+            "exposure_weight": d["exposure_weights"][i],
+        }
+        if scored is not None:
+            sc = scored[i]
+            row["risk"] = _clean(sc.summary())
+            if args.scenarios and sc.scenario is not None:
+                row["scenario"] = sc.scenario.to_dict()
+        elif args.scenarios:
+            row["scenario"] = ss.scenario(i).to_dict()
+        lines.append(json.dumps(_clean(row), allow_nan=False))
+    text = "\n".join(lines) + "\n"
+    if args.output == "-":
+        sys.stdout.write(text)
+    else:
+        Path(args.output).write_text(text, encoding="utf-8")
+    if args.summary_json:
+        summary = {k: v for k, v in d.items()
+                   if k not in ("params", "derived", "log_density", "exposure_weights")}
+        Path(args.summary_json).write_text(json.dumps(_clean(summary), indent=1) + "\n",
+                                           encoding="utf-8")
+    print(f"scengen sample: seed {ss.seed}: {ss.summary()}", file=sys.stderr)
+    return 0

@@ -18,8 +18,9 @@ Estimators of ``P(A and B)``:
   regions when S is tight (ttc < 1 on the TNO model: P(A) ~ 1e-6, P(A | S) ~ 0.05).
 * ``is`` — importance sampling with a defensive mixture (Hesterberg 1995) for rare regions
   (in practice P(A) < 1e-4, where the pilot's ~1e6 draws hit fewer than 100 times):
-  proposal ``q = alpha p + (1 - alpha) g`` in z-space, ``g`` a Gaussian fitted to samples
-  inside the region with its covariance inflated by ``inflate**2``; estimate
+  proposal ``q = alpha p + (1 - alpha) g`` in z-space, ``g`` a Gaussian mixture (K <= 3 by
+  BIC) fitted to samples inside the region with covariances inflated by ``inflate**2``;
+  estimate
   ``mean(w 1_A)`` with ``w = p / q <= 1 / alpha`` (bounded weights: finite variance even
   where ``g`` is too narrow), normal interval from the sample standard deviation.
 
@@ -40,7 +41,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
-from scipy.special import logsumexp
 
 from sampler._exceptions import EmptyRegionError
 from sampler.model import clopper_pearson
@@ -120,7 +120,7 @@ class PRegionEstimator:
 
     def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
                  mc_min_hits: int = 100, n_is: int = 1 << 15, defensive: float = 0.1,
-                 inflate: float = 1.5, n_bounds: int = 8192,
+                 inflate: float = 1.5, n_bounds: int = 1 << 15,
                  search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
                  search_draws: int = 1 << 18, min_p: float = 1e-12,
                  confidence: float = 0.95) -> None:
@@ -226,30 +226,20 @@ class PRegionEstimator:
 
     def _importance(self, problem: Problem, rng: np.random.Generator, region_z: FloatArray,
                     bounds: tuple[float, float, float]) -> PRegion:
+        from sampler.samplers import _MixtureProposal
+
         model = problem.model
-        d = model.n_features
         p_b, lo_b, hi_b = bounds
-        if region_z.shape[0] >= d + 2:
-            mean = region_z.mean(axis=0)
-            cov = np.cov(region_z, rowvar=False)
-        else:
-            mean = region_z.mean(axis=0)
-            cov = np.eye(d) * 0.1
-        cov = cov * self.inflate**2 + 1e-6 * np.eye(d)
-        chol = np.linalg.cholesky(cov)
-        log_det = 2.0 * np.log(np.diag(chol)).sum()
+        pts = np.unique(region_z, axis=0)
+        if pts.shape[0] < 2 * model.n_features + 2:
+            raise EmptyRegionError(
+                f"only {pts.shape[0]} distinct points inside {problem.region.describe()}: "
+                "too few to build an importance-sampling proposal", n_hits=pts.shape[0])
+        prop = _MixtureProposal(model, pts, int(rng.integers(0, 2**31 - 1)), max_k=3,
+                                inflate=self.inflate, alpha=self.defensive)
         n = self.n_is
-        from_model = rng.random(n) < self.defensive
-        z = np.empty((n, d))
-        k = int(from_model.sum())
-        z[from_model] = model.sample_z(k, rng)
-        z[~from_model] = mean + rng.standard_normal((n - k, d)) @ chol.T
-        log_p = model.log_density_z(z)
-        y = np.linalg.solve(chol, (z - mean).T)
-        log_g = -0.5 * (y * y).sum(axis=0) - 0.5 * log_det - 0.5 * d * math.log(2 * math.pi)
-        log_q = logsumexp(np.stack([math.log(self.defensive) + log_p,
-                                    math.log1p(-self.defensive) + log_g]), axis=0)
-        w = np.exp(log_p - log_q)
+        z = prop.draw(n, rng)
+        w = np.exp(model.log_density_z(z) - prop.log_q(z))
         inside = problem.inside(z)
         f = np.where(inside, w, 0.0)
         joint = float(f.mean())

@@ -32,6 +32,7 @@ from typing import Any
 import emcee
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import logsumexp
 
 from sampler._exceptions import EmptyRegionError, SamplerError
 from sampler.constraints import Region
@@ -238,17 +239,20 @@ def _upper95(k: int, n: int) -> float:
 
 
 class _MixtureProposal:
-    """A Gaussian mixture fitted to points inside the region: the independence proposal.
+    """Defensive independence proposal ``q = alpha p + (1 - alpha) g``.
 
-    Fitted with scikit-learn (K by BIC over 1 ... ``max_k``), covariances inflated by
-    ``inflate**2`` so the proposal's tails cover the region. Used as emcee's
-    ``MHMove(proposal_function)``: it draws new positions with emcee's RandomState and
-    returns ``log q(x) - log q(x')``, the Metropolis-Hastings correction of an independence
+    ``g`` is a Gaussian mixture fitted to points inside the region (scikit-learn, K by BIC
+    over 1 ... ``max_k``, covariances inflated by ``inflate**2``) and ``p`` the model itself
+    (weight ``alpha``). The model component bounds the importance ratio
+    ``p(x | A) / q(x) <= 1 / (alpha P(A))``, so the independence chain is uniformly
+    ergodic even where ``g`` has lighter tails than the target. Used as emcee's
+    ``MHMove(proposal_function)``: it draws with emcee's RandomState and returns
+    ``log q(x) - log q(x')``, the Metropolis-Hastings correction of an independence
     proposal.
     """
 
-    def __init__(self, points: FloatArray, seed: int, max_k: int = 3,
-                 inflate: float = 1.3) -> None:
+    def __init__(self, model: CutInGMM, points: FloatArray, seed: int, max_k: int = 3,
+                 inflate: float = 1.3, alpha: float = 0.1) -> None:
         from sklearn.mixture import GaussianMixture
 
         n, d = points.shape
@@ -264,6 +268,8 @@ class _MixtureProposal:
                 best = (bic, gm)
         assert best is not None
         gm = best[1]
+        self.model = model
+        self.alpha = float(alpha)
         self.k = int(gm.n_components)
         self.weights = np.asarray(gm.weights_, dtype=np.float64)
         self.cdf = np.cumsum(self.weights)
@@ -276,25 +282,41 @@ class _MixtureProposal:
                          - np.log(np.diagonal(self.chol, axis1=1, axis2=2)).sum(axis=1))
 
     def describe(self) -> dict[str, Any]:
-        return {"kind": "gaussian-mixture", "components": self.k}
+        return {"kind": "defensive-gaussian-mixture", "components": self.k,
+                "alpha": self.alpha}
 
     def log_q(self, x: FloatArray) -> FloatArray:
         comp = np.empty((self.k, x.shape[0]))
         for k in range(self.k):
             y = (x - self.means[k]) @ self.chol_inv[k].T
             comp[k] = self.log_norm[k] - 0.5 * np.einsum("ij,ij->i", y, y)
-        m = comp.max(axis=0)
-        return np.asarray(m + np.log(np.exp(comp - m).sum(axis=0)), dtype=np.float64)
+        log_g = logsumexp(comp, axis=0)
+        log_p = self.model.log_density_z(x)
+        return np.asarray(np.logaddexp(math.log(self.alpha) + log_p,
+                                       math.log1p(-self.alpha) + log_g), dtype=np.float64)
+
+    def draw(self, n: int, random: np.random.Generator | np.random.RandomState) -> FloatArray:
+        """``n`` draws of q (``random``: a Generator or emcee's RandomState)."""
+        d = self.means.shape[1]
+        from_model = random.random(n) < self.alpha
+        labels = np.minimum(np.searchsorted(self.cdf, random.random(n), side="right"),
+                            self.k - 1)
+        e = random.standard_normal((n, d))
+        new = np.empty((n, d))
+        for k in range(self.k):
+            idx = (labels == k) & ~from_model
+            new[idx] = self.means[k] + e[idx] @ self.chol[k].T
+        m = self.model
+        m_labels = np.minimum(np.searchsorted(m._cdf, random.random(n), side="right"),
+                              m.n_components_ - 1)
+        for k in range(m.n_components_):
+            idx = (m_labels == k) & from_model
+            new[idx] = m.means_[k] + e[idx] @ m._chol[k].T
+        return new
 
     def __call__(self, coords: FloatArray, random: np.random.RandomState
                  ) -> tuple[FloatArray, FloatArray]:
-        n, d = coords.shape
-        labels = np.minimum(np.searchsorted(self.cdf, random.rand(n), side="right"), self.k - 1)
-        e = random.randn(n, d)
-        new = np.empty_like(coords)
-        for k in range(self.k):
-            idx = labels == k
-            new[idx] = self.means[k] + e[idx] @ self.chol[k].T
+        new = self.draw(coords.shape[0], random)
         return new, self.log_q(coords) - self.log_q(new)
 
 
@@ -356,7 +378,7 @@ class MCMCSampler(Sampler):
 
     def __init__(self, n_walkers: int = 64, de_weight: float = 0.4,
                  snooker_weight: float = 0.1, independence_weight: float = 0.5,
-                 chunk: int = 100, adapt_steps: int = 100, min_tau_multiple: float = 30.0,
+                 chunk: int = 100, adapt_steps: int = 100, min_tau_multiple: float = 50.0,
                  max_steps: int = 20_000) -> None:
         self.n_walkers = int(n_walkers)
         self.de_weight = float(de_weight)
@@ -424,7 +446,7 @@ class MCMCSampler(Sampler):
         if use_ind and problem.envelope is not None:
             proposal = _EnvelopeProposal(problem)
         elif use_ind:
-            proposal = _MixtureProposal(pool, int(rng.integers(0, 2**31 - 1)))
+            proposal = _MixtureProposal(problem.model, pool, int(rng.integers(0, 2**31 - 1)))
         current = emcee.State(p0, random_state=state)
         adapt = 0
         if isinstance(proposal, _MixtureProposal) and self.adapt_steps > 0:
@@ -432,7 +454,7 @@ class MCMCSampler(Sampler):
             current = sampler.run_mcmc(current, self.adapt_steps)
             adapt = self.adapt_steps
             chain = sampler.get_chain(discard=self.adapt_steps // 2, flat=True)
-            proposal = _MixtureProposal(np.unique(chain, axis=0),
+            proposal = _MixtureProposal(problem.model, np.unique(chain, axis=0),
                                         int(rng.integers(0, 2**31 - 1)))
         sampler = self._sampler(problem, nw, d, proposal, current)
         steps = 0
@@ -467,7 +489,8 @@ class MCMCSampler(Sampler):
         elif not converged:
             warnings_.append(f"chain shorter than {self.min_tau_multiple:g} tau "
                              f"({steps} steps, tau={tau_max:.1f}): tau is uncertain")
-        z = flat[-n:]
+        # n samples spread evenly over the whole post-burn-in (thinned) chain
+        z = flat[np.linspace(0, flat.shape[0] - 1, n).round().astype(int)]
         acc = np.asarray(sampler.acceptance_fraction, dtype=np.float64)
         ess_per_dim = nw * (steps - burn) / np.where(tau > 0, tau, np.inf)
         ess_out = float(min(n, n * thin / tau_max)) if tau_max > 0 else float(n)

@@ -209,6 +209,7 @@ def sample(
     lane_width: float | None = None,
     physical_bounds: bool = True,
     estimator: PRegionEstimator | None = None,
+    use_envelope: bool = True,
     progress: ProgressFn | None = None,
 ) -> SampleSet:
     """Draw ``n`` samples of ``model`` restricted to a region.
@@ -228,6 +229,9 @@ def sample(
         Lane width in m; default the model's ``lane_width_``.
     estimator : PRegionEstimator, optional
         Pilot, search and P(A) settings.
+    use_envelope : bool
+        Draw from the model restricted to the region's half-space envelope when one exists
+        (``sampler.envelope``); False draws from the whole model.
     progress : callable (stage, done, total), optional
 
     Returns
@@ -251,7 +255,7 @@ def sample(
     strategy = make_sampler(method)
     est = estimator or PRegionEstimator()
     rng = np.random.default_rng(seed_i)
-    problem = Problem(model, region)
+    problem = Problem(model, region, use_envelope=use_envelope)
 
     bounds = est.p_bounds(problem, rng)
     need = getattr(getattr(strategy, "mcmc", strategy), "n_walkers", 0)
@@ -283,7 +287,8 @@ def sample(
         requested=strategy.name,
         diagnostics=diag,
         seed=seed_i,
-        sampler_settings={"sampler": strategy.settings(), "estimator": est.settings()},
+        sampler_settings={"sampler": strategy.settings(), "estimator": est.settings(),
+                          "use_envelope": use_envelope},
         region=region,
         model_info=_model_info(model),
     )

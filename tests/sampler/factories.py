@@ -8,11 +8,13 @@ import pandas as pd
 from datasets.cutin_model import PARAM_NAMES
 
 
-def synthetic_parameter_table(n: int = 300, seed: int = 0) -> pd.DataFrame:
+def synthetic_parameter_table(n: int = 300, seed: int = 0,
+                              no_pulse_share: float = 1.0 / 3.0) -> pd.DataFrame:
     """A plausible cut-in parameter table: columns PARAM_NAMES, SI units.
 
     Lateral displacement around 3.6 m (so every row crosses a 3.75 m lane's marking),
-    a third of the rows without an acceleration pulse (p_a3 = 0 exactly, as in real data),
+    ``no_pulse_share`` of the rows without an acceleration pulse (p_a3 = 0 exactly, as in
+    real data; such a spike becomes a needle-thin mixture component),
     mostly non-closing cut-ins (dv < 0) with a closing tail.
     """
     rng = np.random.default_rng(seed)
@@ -21,7 +23,7 @@ def synthetic_parameter_table(n: int = 300, seed: int = 0) -> pd.DataFrame:
     p_t = np.exp(rng.normal(np.log(2.5), 0.25, n))
     disp = rng.normal(3.7, 0.25, n)
     p_y1 = side * disp * np.pi / (2.0 * p_v0 * p_t**2)
-    has_pulse = rng.random(n) > 1.0 / 3.0
+    has_pulse = rng.random(n) >= no_pulse_share
     p_a1 = np.where(has_pulse, rng.normal(0.0, 0.6, n), 0.0)
     p_a2 = rng.normal(1.0, 1.0, n)
     p_a3 = np.where(has_pulse, np.exp(rng.normal(0.3, 0.5, n)), 0.0)
