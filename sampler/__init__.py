@@ -1,9 +1,14 @@
 """sampler: GMM scenario model, constraints, constrained sampling, scenario builder.
 
-Public surface (see docs/sampler.md)::
+Public surface (docs/sampler.md)::
 
-    Constraint, parse_constraint, Region      constraints as data
-    build_scenario                            parameter vector -> ConcreteScenario
+    CutInGMM                                   the scenario model (fit, log_density, JSON)
+    Constraint, parse_constraint, Region       constraints as data
+    sample, estimate_p_region -> SampleSet     constrained sampling with P(A)
+    RejectionSampler, MCMCSampler, AutoSampler the sampler strategies
+    PRegion, PRegionEstimator                  P(A) with its interval
+    build_scenario                             parameter vector -> ConcreteScenario
+    score_samples, ScoredSample                samples -> scenarios -> riskcore
 """
 
 from sampler._exceptions import (
@@ -24,20 +29,37 @@ from sampler.constraints import (
     derive,
     parse_constraint,
 )
+from sampler.model import CutInGMM
+from sampler.probability import PRegion, PRegionEstimator
+from sampler.samplers import AutoSampler, MCMCSampler, RejectionSampler, Sampler
+from sampler.sampleset import SampleSet, estimate_p_region, sample
+from sampler.scoring import ScoredSample, score_samples
 
 __all__ = [
     "DERIVED",
     "PHYSICAL_BOUNDS",
     "QUANTITY_NAMES",
+    "AutoSampler",
     "BuilderError",
     "Constraint",
     "ConstraintError",
+    "CutInGMM",
     "EmptyRegionError",
+    "MCMCSampler",
     "ModelError",
     "NotFittedError",
+    "PRegion",
+    "PRegionEstimator",
     "Region",
+    "RejectionSampler",
+    "SampleSet",
+    "Sampler",
     "SamplerError",
+    "ScoredSample",
     "build_scenario",
     "derive",
+    "estimate_p_region",
     "parse_constraint",
+    "sample",
+    "score_samples",
 ]
