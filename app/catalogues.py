@@ -14,6 +14,7 @@ from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.models import CatalogueRow, ScenarioRow
 from app.errors import Conflict, InvalidInput, ServiceError
+from app.jobs.chunk import CatalogueSpec, scenario_provenance
 from riskcore.scenario import ConcreteScenario
 
 SAMPLER_METHODS = ("auto", "rejection", "mcmc")
@@ -106,6 +107,12 @@ def iter_items(ctx: ServiceContext,
     """(scenario, summary) pairs of a finished catalogue in index order."""
     with ctx.db.session() as s:
         chunks = {c.chunk_index: c for c in repo.chunk_rows(s, catalogue_id)}
+        cat = repo.get_catalogue(s, catalogue_id)
+        spec = CatalogueSpec(n=cat.n, seed=cat.seed, chunk_size=cat.chunk_size,
+                             model_json="", constraints=tuple(cat.spec.get("constraints", ())),
+                             method=cat.spec.get("method", "auto"))
+        model_id = cat.model_id
+    lane_width: float | None = None
     current: int | None = None
     stream: Iterator[ConcreteScenario] | None = None
     last = -1
@@ -124,8 +131,11 @@ def iter_items(ctx: ServiceContext,
                           else _chunk_scenarios(ctx.data_dir / chunk.file_path))
             if stream is not None:
                 scenario = next(stream)
-            else:
-                scenario = domain.build_scenario(row.params, row.seed)
+            else:  # trajectories not stored: rebuild them (deterministic)
+                if lane_width is None:
+                    lane_width = domain.model_lane_width(ctx.model(model_id))
+                scenario = domain.build_scenario(row.params, row.seed, lane_width,
+                                                 scenario_provenance(spec, row.idx))
             yield scenario, export_summary(row)
 
 

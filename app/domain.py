@@ -306,6 +306,7 @@ class SampleResult:
     weights: np.ndarray  # exposure weight per sample
     p_region: dict[str, Any]  # {"estimate", "ci": [lo, hi], ...}
     diagnostics: dict[str, Any]
+    lane_width: float  # m, the region's lane width: build the scenarios with it
 
 
 def _region_dict(pr: Any) -> dict[str, Any]:
@@ -339,6 +340,7 @@ def sample(model: Any, constraints: Sequence[Any], n: int, seed: int,
         weights=np.asarray(ss.exposure_weights, dtype=np.float64),
         p_region=_region_dict(ss.p_region),
         diagnostics=diagnostics,
+        lane_width=float(ss.region.lane_width),
     )
 
 
@@ -353,12 +355,23 @@ def ttc_of(params: Mapping[str, float]) -> float:
 
 
 # --------------------------------------------------------------------------- scenarios
-def build_scenario(params: Mapping[str, float], seed: int,
+def model_lane_width(model: Any) -> float:
+    """The lane width (m) the model's region and scenarios use."""
+    return float(model.lane_width_)
+
+
+def build_scenario(params: Mapping[str, float], seed: int, lane_width: float | None = None,
                    provenance: Mapping[str, Any] | None = None) -> ConcreteScenario:
-    """The concrete scenario of one parameter vector (``sampler.build_scenario``)."""
+    """The concrete scenario of one parameter vector (``sampler.build_scenario``) on a road
+    with lanes ``lane_width`` m wide. Pass the sample set's lane width (its region's crossing
+    test used it; ``SampleResult.lane_width`` or ``model_lane_width``); None = the builder's
+    default, which may refuse vectors sampled for a narrower lane."""
     fn = _need("sampler.builder", "build_scenario")
+    kwargs: dict[str, Any] = {"seed": seed, "provenance": provenance}
+    if lane_width is not None:
+        kwargs["lane_width"] = lane_width
     try:
-        result: ConcreteScenario = fn(dict(params), seed=seed, provenance=provenance)
+        result: ConcreteScenario = fn(dict(params), **kwargs)
     except ValueError as exc:
         raise InvalidInput(f"building the scenario failed: {exc}", field="params") from None
     return result

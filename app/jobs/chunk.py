@@ -81,6 +81,13 @@ class CatalogueSpec:
         return cls(**values)
 
 
+def scenario_provenance(spec: CatalogueSpec, idx: int) -> dict[str, Any]:
+    """What a catalogue scenario records about its origin (no ids: the same seed gives the
+    same catalogue whatever store it is in)."""
+    return {"catalogue_index": idx, "catalogue_seed": spec.seed,
+            "constraints": list(spec.constraints), "sampler": spec.method}
+
+
 @dataclass
 class ChunkResult:
     """A computed chunk, ready to be stored in one transaction."""
@@ -110,10 +117,8 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
         idx = start + k
         params = {name: float(table[k, j]) for j, name in enumerate(names)}
         seed = scenario_seed(spec.seed, idx)
-        scenario = domain.build_scenario(
-            params, seed, provenance={"catalogue_index": idx, "chunk": index,
-                                      "sampler": str(drawn.diagnostics.get("method")),
-                                      "constraints": list(spec.constraints)})
+        scenario = domain.build_scenario(params, seed, drawn.lane_width,
+                                         provenance=scenario_provenance(spec, idx))
         summary = domain.score_scenario(scenario) if spec.score else {}
         risk = summary.get("risk")
         rows.append({

@@ -58,7 +58,7 @@ def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> dict[str, Any]:
             "risk": None,
         }
         if body.score or body.include_trajectories:
-            scenario = domain.build_scenario(params, seed)
+            scenario = domain.build_scenario(params, seed, drawn.lane_width)
             if body.score:
                 item["risk"] = domain.jsonable(domain.score_scenario(scenario))
             if body.include_trajectories:

@@ -27,7 +27,7 @@ def cluster() -> Iterator[Any]:
 def _build(data_dir: Path, tmp_path: Path, name: str, **settings: Any) -> tuple[Path, str]:
     ctx = ServiceContext.open(make_settings(data_dir, chunk_size=3, **settings))
     try:
-        row = catalogues.create(ctx, n=10, seed=2024, constraints=["ttc<3"], method="mcmc")
+        row = catalogues.create(ctx, n=10, seed=2024, constraints=["ttc<3"])
         executor = ctx.executor
         assert ctx.runner().run(row.id) == "done"
         out = catalogues.export(ctx, row.id, "jsonl", tmp_path / f"{name}.jsonl")

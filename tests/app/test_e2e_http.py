@@ -23,16 +23,17 @@ def server(tmp_path: Path, model_cache_dir: Path) -> Iterator[str]:
     copy_model_cache(model_cache_dir, data_dir)
     port = free_port()
     env = service_env(data_dir, local_workers="1", chunk_size="3")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
-         "--port", str(port)], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE, start_new_session=True)
+    log = tmp_path / "uvicorn.log"
+    with open(log, "wb") as log_file:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
+             "--port", str(port)], cwd=ROOT, env=env, stdout=log_file, stderr=log_file,
+            start_new_session=True)
     base = f"http://127.0.0.1:{port}"
 
     def up() -> bool:
         if proc.poll() is not None:
-            err = proc.stderr.read().decode() if proc.stderr else ""
-            raise AssertionError(f"uvicorn exited: {err[-2000:]}")
+            raise AssertionError(f"uvicorn exited: {log.read_text()[-2000:]}")
         try:
             return httpx.get(f"{base}/health", timeout=2).status_code == 200
         except httpx.TransportError:

@@ -41,16 +41,20 @@ def test_killed_job_resumes_to_the_uninterrupted_result(database_url: str, tmp_p
     data_dir = tmp_path / "data"
     copy_model_cache(model_cache_dir, data_dir)
     env = _env(data_dir, database_url)
-    proc = subprocess.Popen(
-        _cli("create", "--n", str(N), "--seed", str(SEED), "--no-progress"), cwd=ROOT,
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    db = Database(database_url)
+    db.migrate()  # so that the polling below can count chunks from the start
+    log = tmp_path / "create.log"
+    with open(log, "wb") as log_file:
+        proc = subprocess.Popen(
+            _cli("create", "--n", str(N), "--seed", str(SEED), "--no-progress"), cwd=ROOT,
+            env=env, stdout=log_file, stderr=log_file, start_new_session=True)
     db = Database(database_url)
     try:
         wait_for(lambda: _chunks(db) >= 2 or proc.poll() is not None, "two stored chunks")
         os.killpg(proc.pid, signal.SIGKILL)  # the process and its pool worker
     finally:
         proc.wait(timeout=60)
-    assert proc.returncode == -signal.SIGKILL, proc.stderr.read().decode() if proc.stderr else ""
+    assert proc.returncode == -signal.SIGKILL, log.read_text()[-2000:]
     with db.session() as s:
         (row,) = s.scalars(select(CatalogueRow)).all()
         cid, status = row.id, row.status
