@@ -145,8 +145,8 @@ PHYSICAL_BOUNDS: tuple[Constraint, ...] = (
     Constraint(name="v_cut_min", op=">", value=0.0),     # ... at every moment
     Constraint(name="gap", op=">", value=0.0),           # the cutter is ahead of the ego
     Constraint(name="psi_max", op="<", value=math.pi / 2),  # never turns sideways
-    Constraint(name="v_ego", op=">", value=0.0),         # the ego drives forwards
     Constraint(name="cross_margin", op=">", value=0.0),  # the marking is crossed
+    Constraint(name="v_ego", op=">", value=0.0),         # the ego drives forwards
 )
 
 _SHORT = re.compile(

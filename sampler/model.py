@@ -511,8 +511,15 @@ class CutInGMM:
         inside = region.in_bounds(params)
         k_out = int((~inside).sum())
         lo, hi = clopper_pearson(k_out, m)
-        per_bound = {name: float(v.mean()) for name, v in region.violations(params).items()
-                     if name in {str(b) for b in PHYSICAL_BOUNDS}}
+        # each outside draw is attributed to the first bound it violates (in the order of
+        # PHYSICAL_BOUNDS), so the shares add up to the total
+        viol = region.violations(params)
+        remaining = np.ones(m, dtype=bool)
+        per_bound = {}
+        for b in PHYSICAL_BOUNDS:
+            hit = viol[str(b)] & remaining
+            per_bound[str(b)] = float(hit.sum() / m)
+            remaining &= ~hit
         pf = np.asarray(per_fold)
         return {
             "n_rows": n,
@@ -559,7 +566,7 @@ class CutInGMM:
                          f"{ob['n_samples']} draws)")
             for name, frac in ob["per_bound"].items():
                 if frac > 0:
-                    lines.append(f"  violates {name}: {frac:.4f}")
+                    lines.append(f"  first violated bound {name}: {frac:.4f}")
         return "\n".join(lines)
 
     # ------------------------------------------------------------------ persistence
