@@ -11,6 +11,7 @@ screenshot of the view under ``test-artifacts/dashboard/``.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import signal
 import subprocess
@@ -227,17 +228,29 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     shot(page, "#view-shift", "2-constraint-shift-catalogue.png")
     shot(page, "#view-risk", "3-catalogue-risk.png")
 
-    # click the highest-risk point of the scatter: its scenario opens
-    top = max(range(len(view["scatter"]["risk"])), key=lambda i: view["scatter"]["risk"][i])
-    index = view["scatter"]["index"][top]
-    point = page.locator("#ttc-risk .scatterlayer .point").nth(top)
-    point.scroll_into_view_if_needed()
-    box = point.bounding_box()
-    assert box is not None
-    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-    page.wait_for_selector(f"#series-plot[data-source='{cid}#{index}']")
+    # click the drawn point farthest from any other (so no neighbour can take the click):
+    # the scenario of that point opens (points are drawn in the order of the data)
+    points = page.locator("#ttc-risk .scatterlayer .point")
+    points.first.scroll_into_view_if_needed()
+    centres = []
+    for i in range(points.count()):
+        b = points.nth(i).bounding_box()
+        assert b is not None
+        centres.append((b["x"] + b["width"] / 2, b["y"] + b["height"] / 2))
+
+    def isolation(i: int) -> float:
+        return min((math.dist(centres[i], c) for j, c in enumerate(centres) if j != i),
+                   default=math.inf)
+
+    pick = max(range(len(centres)), key=isolation)
+    index = view["scatter"]["index"][pick]
+    page.mouse.move(*centres[pick])
+    page.mouse.click(*centres[pick])
+    page.wait_for_function(
+        f"document.querySelector('#series-plot').dataset.source === '{cid}#{index}' || "
+        "!document.querySelector('#error').hidden")
     settle(page)
+    assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
     assert page.url.endswith(f"/dashboard/catalogues/{cid}?scenario={index}")
     # risk r_dep, r_ind, TTC, WTTC and THW over time; lane lines, paths and two vehicles
     assert count(page, "#series-plot .scatterlayer .trace") == 5
