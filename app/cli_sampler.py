@@ -163,6 +163,7 @@ def _sample(args: argparse.Namespace) -> int:
         from sampler.scoring import score_samples
 
         scored = score_samples(ss, n_workers=args.workers, keep_scenarios=args.scenarios,
+                               summary_only=True,
                                progress=lambda d, t: progress("score", d, t))
         progress.close()
     d = ss.to_dict()

@@ -3,8 +3,10 @@
 ``score_samples`` builds every sample's scenario (``sampler.builder.build_scenario``) and
 scores it (default ``riskcore.evaluate_scenario``), in chunks of ``chunk_size`` samples.
 With ``n_workers > 1`` the chunks run on a ``concurrent.futures.ProcessPoolExecutor``
-(``spawn`` start method: safe with numba and threaded BLAS); results come back in input
-order whatever the number of workers, so the output is deterministic.
+(``spawn`` start method: safe with numba and threaded BLAS, but a calling script needs the
+``if __name__ == "__main__":`` guard); results come back in input order whatever the number
+of workers, so the output is deterministic. Each chunk runs with BLAS limited to one thread
+(one process per core is the parallelism).
 
 A sample that cannot be built or scored does not stop the batch: its ``ScoredSample``
 carries ``error`` (one line) and no risk.
@@ -24,6 +26,7 @@ import pandas as pd
 from datasets.cutin_model import PARAM_NAMES
 from riskcore.scenario import ConcreteScenario
 from sampler._exceptions import SamplerError
+from sampler._threads import single_threaded
 from sampler.builder import build_scenario
 from sampler.sampleset import SampleSet
 
@@ -57,7 +60,9 @@ class ScoredSample:
     def summary(self) -> dict[str, Any]:
         """The risk's ``summary()`` (riskcore) or ``{}``, plus ``error`` when set."""
         out: dict[str, Any] = {}
-        if self.risk is not None and hasattr(self.risk, "summary"):
+        if isinstance(self.risk, Mapping):
+            out.update(self.risk)
+        elif self.risk is not None and hasattr(self.risk, "summary"):
             out.update(self.risk.summary())
         if self.error is not None:
             out["error"] = self.error
@@ -71,8 +76,9 @@ def _default_scorer(scenario: ConcreteScenario, settings: Any = None,
     return evaluate_scenario(scenario, settings=settings, surfaces=surfaces)
 
 
+@single_threaded
 def _score_chunk(chunk: Sequence[tuple[int, dict[str, float]]], builder_kwargs: dict[str, Any],
-                 scorer: Scorer, keep: bool) -> list[ScoredSample]:
+                 scorer: Scorer, keep: bool, summary_only: bool = False) -> list[ScoredSample]:
     out = []
     for index, params in chunk:
         kw = dict(builder_kwargs)
@@ -89,6 +95,8 @@ def _score_chunk(chunk: Sequence[tuple[int, dict[str, float]]], builder_kwargs: 
             out.append(ScoredSample(index, params, scen if keep else None, None,
                                     f"score: {exc}"))
             continue
+        if summary_only and hasattr(risk, "summary"):
+            risk = dict(risk.summary())
         out.append(ScoredSample(index, params, scen if keep else None, risk))
     return out
 
@@ -121,6 +129,7 @@ def score_samples(
     surfaces: Any = None,
     scorer: Scorer | None = None,
     keep_scenarios: bool = True,
+    summary_only: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[ScoredSample]:
     """Build and score every sample; results in input order.
@@ -141,6 +150,10 @@ def score_samples(
         Replaces riskcore (it must be picklable, i.e. a module-level function, for a pool).
     keep_scenarios : bool
         Keep each ConcreteScenario in the result (memory: ~20 kB each).
+    summary_only : bool
+        Keep only the risk's ``summary()`` dict instead of the full ``ScenarioRisk``
+        (~600 kB each when pickled back from a worker: with a pool, this is most of the
+        cost).
     progress : callable(done, total), optional
 
     Returns
@@ -163,14 +176,15 @@ def score_samples(
     out: list[ScoredSample] = []
     if n_workers == 1 or len(chunks) <= 1:
         for chunk in chunks:
-            out.extend(_score_chunk(chunk, kw, fn, keep_scenarios))
+            out.extend(_score_chunk(chunk, kw, fn, keep_scenarios, summary_only))
             if progress is not None:
                 progress(len(out), total)
         return out
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
-        for result in pool.map(_score_chunk, chunks, [kw] * len(chunks), [fn] * len(chunks),
-                               [keep_scenarios] * len(chunks)):
+        n_c = len(chunks)
+        for result in pool.map(_score_chunk, chunks, [kw] * n_c, [fn] * n_c,
+                               [keep_scenarios] * n_c, [summary_only] * n_c):
             out.extend(result)
             if progress is not None:
                 progress(len(out), total)

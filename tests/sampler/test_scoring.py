@@ -71,3 +71,11 @@ def test_bad_arguments(kwargs: dict[str, int], fragment: str) -> None:
         score_samples(_rows(1), scorer=fake_scorer, **kwargs)  # type: ignore[arg-type]
     with pytest.raises(SamplerError, match="missing column"):
         score_samples(_rows(1).drop(columns=list(PARAM_NAMES[:1])), scorer=fake_scorer)
+
+
+def test_summary_only_keeps_the_summary_dict() -> None:
+    rows = [base_params(dv=6.0, gap=4.0)]
+    full = score_samples(rows)[0]
+    small = score_samples(rows, summary_only=True, keep_scenarios=False)[0]
+    assert isinstance(small.risk, dict)
+    assert small.summary() == full.summary() == full.risk.summary()
