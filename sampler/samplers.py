@@ -1,25 +1,28 @@
 """Samplers of the truncated model: strategy objects with one method, ``draw``.
 
 The target is the model density restricted to a region A (constraints and physical bounds)
-and renormalised: ``p(x | A) = p(x) 1_A(x) / P(A)``.
+and renormalised: ``p(x | A) = p(x) 1_A(x) / P(A)``. ``Problem`` binds a model and a region
+and draws from the *proposal*: the model restricted to the region's half-space envelope
+(``sampler.envelope``) when there is one, else the whole model.
 
-* ``RejectionSampler`` — exact: draw i.i.d. from the mixture (a numpy Generator that is
+* ``RejectionSampler`` — exact: draw i.i.d. from the proposal (a numpy Generator that is
   advanced, labels then Gaussians), keep the draws inside A. Every kept draw is an
   independent sample (effective sample size = n).
 * ``MCMCSampler`` — emcee ``EnsembleSampler`` in the model's standardised z-space with a
-  vectorised log-probability (``log p_z(z)``, -inf outside A), a differential-evolution
-  move mixture (``DEMove`` 0.8, ``DESnookerMove`` 0.2), walkers started at distinct points
-  inside A (exact draws found by the pilot, or by the broadened search); it runs in chunks
-  until the chain is at least ``min_tau_multiple`` integrated autocorrelation times long and
-  holds ``n`` thinned post-burn-in samples (burn-in ``ceil(2 tau)``, thinning ``ceil(tau)``),
-  or until ``max_steps``. Diagnostics: acceptance fraction per walker, tau per feature,
-  effective sample size. emcee draws from its own ``RandomState``, seeded from our Generator
-  through its ``random_state`` property, so the same seed gives the same chain.
-* ``AutoSampler`` — rejection when its expected cost ``n / P(A)`` draws is below the MCMC
-  cost model ``cost_ratio * (n * tau_guess + n_walkers * burn_guess)`` (a fixed, documented
-  rule, so the choice is deterministic), MCMC otherwise.
+  vectorised log-probability (``log p_z(z)``, -inf outside A); moves ``DEMove`` 0.4,
+  ``DESnookerMove`` 0.1 and an independence ``MHMove`` 0.5 (proposal: the envelope, or a
+  defensive Gaussian-mixture fit); walkers started at distinct points inside A (exact draws
+  found by the pilot, or by the broadened search); it runs in chunks until the chain is at
+  least ``min_tau_multiple`` integrated autocorrelation times long and holds ``n`` thinned
+  post-burn-in samples (burn-in ``ceil(2 tau)``, thinning ``ceil(tau)``), or until
+  ``max_steps``. Diagnostics: acceptance fraction per walker, tau per feature, effective
+  sample size. emcee draws from its own ``RandomState``, seeded from our Generator through
+  its ``random_state`` property (emcee 3.1 has no seed argument), so the same seed gives the
+  same chain.
+* ``AutoSampler`` — rejection when its expected cost ``n / p_pilot`` draws is below the
+  MCMC cost model ``cost_ratio * (n * tau_guess + n_walkers * burn_guess)`` (a fixed,
+  documented rule, so the choice is deterministic), MCMC otherwise.
 """
-
 from __future__ import annotations
 
 import math
@@ -588,7 +591,7 @@ class AutoSampler(Sampler):
         if pilot.n_hits == 0:
             return self.mcmc
         rej_cost = n / pilot.p_hat
-        mcmc_cost = self.cost_ratio * (n * self.tau_guess / 1.0
+        mcmc_cost = self.cost_ratio * (n * self.tau_guess
                                        + self.mcmc.n_walkers * self.burn_guess)
         if rej_cost <= mcmc_cost and rej_cost <= self.rejection.max_draws:
             return self.rejection

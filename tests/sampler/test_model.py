@@ -8,6 +8,8 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 from scipy.special import logsumexp
 
@@ -276,3 +278,17 @@ def test_not_fitted_and_bad_settings() -> None:
         CutInGMM(covariance_type="banana").fit(synthetic_parameter_table(50))
     with pytest.raises(ModelError, match="transforms: not model features"):
         CutInGMM(transforms={"ttc": "log"}).fit(synthetic_parameter_table(50))
+
+
+@settings(max_examples=60, deadline=None)
+@given(kind=st.sampled_from(["identity", "log", "log_shift"]),
+       x=st.floats(1e-3, 1e3), loc=st.floats(-5, 5), scale=st.floats(0.05, 20),
+       shift=st.floats(0.01, 2.0))
+def test_property_transform_round_trip_and_monotone(kind: str, x: float, loc: float,
+                                                    scale: float, shift: float) -> None:
+    tr = FeatureTransform("f", kind, shift if kind == "log_shift" else 0.0, loc, scale)
+    xs = np.array([x, x * 1.01 + 1e-3])
+    z, logj = tr.forward(xs)
+    assert np.isfinite(z).all() and np.isfinite(logj).all()
+    assert z[1] > z[0]  # increasing: constraints on x are half-spaces in z
+    np.testing.assert_allclose(tr.inverse(z), xs, rtol=1e-9, atol=1e-9)
