@@ -13,6 +13,7 @@ from alembic.config import Config
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.pool import NullPool
 
 log = logging.getLogger("scengen.db")
 
@@ -55,9 +56,17 @@ def migrate(engine: Engine) -> None:
     """Bring the schema to the newest revision (idempotent)."""
     cfg = Config()
     cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
-    with engine.begin() as connection:
-        cfg.attributes["connection"] = connection
-        command.upgrade(cfg, "head")
+    # a throw-away engine without a pool: the migration's connection is closed at the end
+    # and never joins the service's pool
+    once = engine if engine.dialect.name == "sqlite" else create_engine(
+        engine.url, poolclass=NullPool)
+    try:
+        with once.begin() as connection:
+            cfg.attributes["connection"] = connection
+            command.upgrade(cfg, "head")
+    finally:
+        if once is not engine:
+            once.dispose()
     log.info("database schema at head (%s)", engine.url.render_as_string(hide_password=True))
 
 
