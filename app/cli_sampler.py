@@ -20,11 +20,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import multiprocessing
 import sys
 from pathlib import Path
 from typing import Any
 
 _SUFFIXES = (".csv", ".parquet", ".pq")
+#: a command-line process is single-threaded: fork starts workers at once (spawn re-imports)
+_POOL = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -163,7 +166,7 @@ def _sample(args: argparse.Namespace) -> int:
         from sampler.scoring import score_samples
 
         scored = score_samples(ss, n_workers=args.workers, keep_scenarios=args.scenarios,
-                               summary_only=True,
+                               summary_only=True, mp_context=_POOL,
                                progress=lambda d, t: progress("score", d, t))
         progress.close()
     d = ss.to_dict()

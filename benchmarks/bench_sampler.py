@@ -15,12 +15,16 @@ Usage: ``.venv/bin/python benchmarks/bench_sampler.py [--n 1000] [--no-score]``
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+#: this script is single-threaded: fork starts workers at once (spawn re-imports)
+_POOL = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
 
 
 def main() -> int:
@@ -65,7 +69,7 @@ def main() -> int:
         ss = sample(model, ["ttc<3"], args.n, seed=args.seed, method="auto")
         t_s = time.perf_counter() - t
         scored = score_samples(ss, n_workers=args.workers, keep_scenarios=False,
-                               summary_only=True, chunk_size=50)
+                               summary_only=True, mp_context=_POOL, chunk_size=50)
         dt = time.perf_counter() - t
         n_err = sum(s.error is not None for s in scored)
         risks = [s.summary().get("risk", 0.0) for s in scored if s.error is None]

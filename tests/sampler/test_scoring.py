@@ -65,8 +65,10 @@ def test_real_riskcore_scores_a_closing_cut_in_higher() -> None:
 
 
 @pytest.mark.parametrize(("kwargs", "fragment"), [({"n_workers": 0}, "n_workers"),
-                                                  ({"chunk_size": 0}, "chunk_size")])
-def test_bad_arguments(kwargs: dict[str, int], fragment: str) -> None:
+                                                  ({"chunk_size": 0}, "chunk_size"),
+                                                  ({"n_workers": 2, "mp_context": "nope"},
+                                                   "mp_context")])
+def test_bad_arguments(kwargs: dict[str, object], fragment: str) -> None:
     with pytest.raises(SamplerError, match=fragment):
         score_samples(_rows(1), scorer=fake_scorer, **kwargs)  # type: ignore[arg-type]
     with pytest.raises(SamplerError, match="missing column"):
