@@ -179,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
 
             print(f"catalogue on a {args.workers}-worker Dask LocalCluster", file=sys.stderr)
             with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                              dashboard_address=None, host="127.0.0.1") as cluster:
+                              dashboard_address=":0", host="127.0.0.1") as cluster:
                 server = Server(data_dir, {"SCENGEN_DASK_SCHEDULER": cluster.scheduler_address},
                                 log)
                 try:
