@@ -529,7 +529,8 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
             sc = ConcreteScenario.from_dict(data)
             source = "stored trajectories"
         else:
-            sc = domain.build_scenario(row.params, row.seed)
+            _, model, _ = _model_and_row(ctx, crow.model_id)
+            sc = domain.build_scenario(row.params, row.seed, domain.model_lane_width(model))
             data = sc.to_dict()
             source = "rebuilt from the stored parameters and seed"
         risk = domain.scenario_risk_series(sc)
