@@ -191,12 +191,17 @@ class PRegionEstimator:
         pilot.search_hits = np.concatenate(found, axis=0)
         pilot.search_draws = total
         if pilot.n_hits == 0 and pilot.search_hits.shape[0] == 0:
-            p_up = float(stats.beta.ppf(self.confidence, 1, pilot.n_draws))
+            # one-sided upper bound of P(A and B): P(S) times the bound on P(A | S)
+            p_up = problem.proposal_mass * float(stats.beta.ppf(self.confidence, 1,
+                                                                 pilot.n_draws))
+            what = "model draws" if problem.envelope is None else (
+                f"draws from the model restricted to the envelope {problem.envelope.source} "
+                f"(mass {problem.envelope.mass:.3g})")
             raise EmptyRegionError(
                 f"the region {problem.region.describe()} looks empty: none of "
-                f"{pilot.n_draws} model draws and none of {total} draws from the model "
+                f"{pilot.n_draws} {what} and none of {total} draws from the model "
                 f"widened by {', '.join(f'{s:g}x' for s in self.search_scales)} fell inside; "
-                f"P(A) < {p_up:.2g} ({self.confidence:.0%} upper bound)",
+                f"P(A and B) < {p_up:.2g} ({self.confidence:.0%} upper bound)",
                 n_draws=pilot.n_draws + total, n_hits=0, p_upper=p_up)
 
     # ---------------------------------------------------------------- estimators

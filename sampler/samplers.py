@@ -206,7 +206,8 @@ class RejectionSampler(Sampler):
                     f"{problem.proposal_mass * hits / max(draws, 1):.3g}); "
                     f"{n} samples would need about {n / max(hits / max(draws, 1), 1e-300):.3g} "
                     "draws: use --sampler mcmc or raise max_draws",
-                    n_draws=draws, n_hits=hits, p_upper=_upper95(hits, draws))
+                    n_draws=draws, n_hits=hits,
+                    p_upper=problem.proposal_mass * _upper95(hits, draws))
             rate = (hits + 1) / (draws + 2)
             batch = int(np.clip(1.2 * (n - got) / rate, self.min_batch, self.max_batch))
             batch = min(batch, self.max_draws - draws)

@@ -271,10 +271,14 @@ def test_sample_set_json(model: CutInGMM) -> None:
 
 def test_empty_region_ends_with_an_error(model: CutInGMM) -> None:
     est = PRegionEstimator(pilot_max=1 << 16, search_draws=1 << 14)
-    with pytest.raises(EmptyRegionError, match=r"looks empty.*P\(A\) <") as info:
+    with pytest.raises(EmptyRegionError, match=r"looks empty.*envelope gap<5.*P\(A and B\) <"
+                       ) as info:
         sample(model, ["gap<5", "gap>6"], 10, seed=1, estimator=est)
     assert info.value.n_hits == 0 and info.value.n_draws == (1 << 16) + 3 * (1 << 14)
     assert 0 < info.value.p_upper < 1e-3
+    # without the envelope the bound is on plain model draws
+    with pytest.raises(EmptyRegionError, match=r"none of 65536 model draws"):
+        sample(model, ["gap<5", "gap>6"], 10, seed=1, estimator=est, use_envelope=False)
 
 
 def test_practically_empty_region(model: CutInGMM) -> None:
