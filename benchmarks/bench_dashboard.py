@@ -59,11 +59,12 @@ def main() -> None:
             db = Database(f"sqlite:///{(data_dir / 'scengen.db').resolve()}")
             t0 = time.perf_counter()
             cid = store_synthetic_catalogue(db, data_dir, model_id, n, seed=1)
+            other = store_synthetic_catalogue(db, data_dir, model_id, n, seed=2)
             db.dispose()
-            print(f"stored a catalogue of {n} synthetic scenarios in "
-                  f"{time.perf_counter() - t0:.1f} s ({cid})")
+            print(f"stored two catalogues of {n} synthetic scenarios each in "
+                  f"{time.perf_counter() - t0:.1f} s ({cid}, {other})")
             _api(base, cid)
-            _page(base, cid)
+            _page(base, cid, other)
         finally:
             os.killpg(proc.pid, signal.SIGTERM)
             proc.wait(timeout=60)
@@ -102,7 +103,7 @@ def _api(base: str, cid: str) -> None:
             print(f"  {name:44s} {times[0]:8.0f} {times[1]:8.0f} {size / 1024:7.1f}")
 
 
-def _page(base: str, cid: str) -> None:
+def _page(base: str, cid: str, other: str) -> None:
     from playwright.sync_api import sync_playwright
 
     print("\npage /dashboard/catalogues/{id} in headless Chromium, navigation to every "
@@ -110,10 +111,13 @@ def _page(base: str, cid: str) -> None:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": 1400, "height": 1000})
-        for label in ("first load (plotly.js from the app)", "reload", "reload"):
+        for label, target in (("first load (plotly.js from the app)", cid),
+                              ("reload", cid), ("reload", cid),
+                              ("another catalogue, its views not cached", other)):
             t0 = time.perf_counter()
-            page.goto(f"{base}/dashboard/catalogues/{cid}", wait_until="commit")
-            page.wait_for_selector(f"#evasion-shares[data-source='{cid}']", timeout=120_000)
+            page.goto(f"{base}/dashboard/catalogues/{target}", wait_until="commit")
+            page.wait_for_selector(f"#evasion-shares[data-source='{target}']",
+                                   timeout=120_000)
             risk_view = time.perf_counter() - t0
             page.wait_for_selector("body[data-ready='1']", timeout=120_000)
             page.wait_for_function("document.body.dataset.busy === '0'", timeout=120_000)
@@ -128,9 +132,9 @@ def _page(base: str, cid: str) -> None:
                     print("     ", e)
             points = page.locator("#ttc-risk .scatterlayer .point").count()
             bars = page.locator(".barlayer .point").count()
-            print(f"  {label:38s} catalogue view {risk_view:5.2f} s, all views "
+            print(f"  {label:42s} catalogue view {risk_view:5.2f} s, all views "
                   f"{elapsed:5.2f} s ({points} scatter points, {bars} bars drawn)")
-            print(f"  {'':38s} in-page clock from navigation start: catalogue view "
+            print(f"  {'':42s} in-page clock from navigation start: catalogue view "
                   f"{marks.get('scengen:catalogue-view', float('nan')):5.2f} s, all views "
                   f"{marks.get('scengen:all-views', float('nan')):5.2f} s")
         browser.close()
