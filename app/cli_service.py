@@ -76,6 +76,7 @@ def _serve(args: argparse.Namespace) -> int:
 def _logging() -> None:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.getLogger("alembic").setLevel(logging.WARNING)
 
 
 def _context(load_defaults: bool = True) -> Any:

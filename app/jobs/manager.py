@@ -55,7 +55,7 @@ class JobManager:
         self._queue.put(None)
         if self._thread is not None:
             self._thread.join(timeout=60)
-        self.runner.executor.close()
+        # the executor belongs to the ServiceContext, which closes it
 
     def _loop(self) -> None:
         while True:
