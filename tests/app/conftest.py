@@ -49,6 +49,6 @@ def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> I
 
     data_dir = tmp_path_factory.mktemp("service")
     copy_model_cache(model_cache_dir, data_dir)
-    app = make_app(make_settings(data_dir, sync_n_limit=50, upload_limit_bytes=300_000))
+    app = make_app(make_settings(data_dir, sync_n_limit=50, upload_limit_bytes=1_000_000))
     with TestClient(app) as test_client:
         yield test_client

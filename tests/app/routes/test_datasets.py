@@ -85,6 +85,26 @@ def test_upload_an_egocentric_file(client: Any, tmp_path: Path) -> None:
     assert page["total"] == body["n_cutins"]
 
 
+def test_upload_a_highd_recording(client: Any, tmp_path: Path) -> None:
+    from datasets.highd import write_highd
+    from datasets.synth import generate_recording
+
+    rec = generate_recording(3, minutes=1.0, vehicles=60, frame_rate=5.0).recording
+    paths = write_highd(rec, tmp_path)
+    handles = [open(p, "rb") for p in paths]  # noqa: SIM115 - closed below
+    try:
+        r = client.post("/datasets", data={"kind": "highd"},
+                        files=[("files", (p.name, h, "text/csv"))
+                               for p, h in zip(paths, handles, strict=True)])
+    finally:
+        for h in handles:
+            h.close()
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert body["kind"] == "highd" and body["n_cutins"] > 0
+    assert sorted(body["report"]["files"]) == sorted(p.name for p in paths)
+
+
 def test_bad_uploads_store_nothing(client: Any, tmp_path: Path) -> None:
     before = _ids(client)
     garbage = client.post("/datasets", data={"kind": "egocentric"},
@@ -98,12 +118,12 @@ def test_bad_uploads_store_nothing(client: Any, tmp_path: Path) -> None:
     bad_name = client.post("/datasets", data={"kind": "egocentric"},
                            files=[("files", ("../../etc/x;.csv", b"a", "text/csv"))])
     assert bad_name.status_code == 422
-    big = b"x" * 400_000  # the test client's limit is 300,000 bytes
+    big = b"x" * 1_200_000  # the test client's limit is 1,000,000 bytes
     too_large = client.post("/datasets", data={"kind": "egocentric"},
                             files=[("files", ("big.csv", big, "text/csv"))])
     assert too_large.status_code == 413
     assert too_large.json()["error"]["status"] == 413
-    assert "300000" in too_large.json()["error"]["message"]
+    assert "1000000" in too_large.json()["error"]["message"]
     assert _ids(client) == before
     staging = Path(client.app.state.ctx.data_dir) / "tmp"
     assert not any(staging.glob("upload-*"))
