@@ -18,6 +18,8 @@ Derived quantities (road frame, SI units; ``t = 0`` is the start of the lateral 
     cross_margin  m    lat_disp - lane_width / 2 (> 0: the marking is crossed)
     lat_offset    m    final lateral offset of the cutter from the ego-lane centre, + left:
                        -sign(p_y1) lane_width + y(2 p_t) (it starts in the adjacent lane)
+    end_margin    m    lane_width / 2 - |lat_offset| (> 0: the cutter ends inside the ego
+                       lane instead of running on across its far marking)
     direction     -    +1 if the cutter moves left (p_y1 > 0, starts on the right), else -1
     psi_max       rad  peak heading 2 |p_y1| p_t / pi
     v_cut_min     m/s  the cutter's lowest speed at any time (before or after the pulse)
@@ -85,6 +87,8 @@ DERIVED: dict[str, _Quantity] = {
     "lat_disp": _Quantity("m", "lateral distance covered by the lane change", True),
     "cross_margin": _Quantity("m", "lat_disp - lane_width / 2 (> 0: marking crossed)", True),
     "lat_offset": _Quantity("m", "final offset of the cutter from the ego-lane centre", True),
+    "end_margin": _Quantity("m", "lane_width / 2 - |lat_offset| (> 0: ends in the ego lane)",
+                            True),
     "max_lat_speed": _Quantity("m/s", "largest lateral speed during the lane change", True),
 }
 
@@ -145,7 +149,8 @@ PHYSICAL_BOUNDS: tuple[Constraint, ...] = (
     Constraint(name="v_cut_min", op=">", value=0.0),     # ... at every moment
     Constraint(name="gap", op=">", value=0.0),           # the cutter is ahead of the ego
     Constraint(name="psi_max", op="<", value=math.pi / 2),  # never turns sideways
-    Constraint(name="cross_margin", op=">", value=0.0),  # the marking is crossed
+    Constraint(name="cross_margin", op=">", value=0.0),  # the marking is crossed ...
+    Constraint(name="end_margin", op=">", value=0.0),    # ... and only that one marking
     Constraint(name="v_ego", op=">", value=0.0),         # the ego drives forwards
 )
 
@@ -273,6 +278,7 @@ class _Quantities:
                 c["cross_margin"] = c["lat_disp"] - self.lane_width / 2.0
                 start = np.where(col["p_y1"] > 0, -self.lane_width, self.lane_width)
                 c["lat_offset"] = start + kin.y_end
+                c["end_margin"] = self.lane_width / 2.0 - np.abs(c["lat_offset"])
                 c["max_lat_speed"] = kin.max_lat_speed
             else:
                 raise ConstraintError(

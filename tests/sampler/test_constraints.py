@@ -98,6 +98,7 @@ def test_derived_by_hand() -> None:
     assert d["lat_disp"][0] == pytest.approx(disp, abs=1e-4)
     assert d["lat_offset"][0] == pytest.approx(-3.75 + disp, abs=1e-4)
     assert d["cross_margin"][0] == pytest.approx(disp - 3.75 / 2, abs=1e-4)
+    assert d["end_margin"][0] == pytest.approx(3.75 / 2 - abs(-3.75 + disp), abs=1e-4)
     # moving right: starts at +3.75 and ends at 3.75 - disp
     d2 = derive(_row(p_y1=-0.04))
     assert d2["lat_offset"][0] == pytest.approx(3.75 - disp, abs=1e-4)
@@ -180,6 +181,8 @@ def test_region_contains_matches_definition() -> None:
     [({"p_v0": -1.0}, "p_v0>0"), ({"gap": -0.5}, "gap>0"), ({"p_a3": -0.1}, "p_a3>=0"),
      ({"p_a1": -5.0, "p_a2": 1.0, "p_a3": 6.0}, "v_cut_min>0"),
      ({"p_y1": 0.005}, "cross_margin>0"), ({"dv": -40.0}, "v_ego>0"),
+     # ~14 m sideways at 25 m/s: runs across the ego lane into the next one
+     ({"p_y1": 0.1, "p_t": 3.0}, "end_margin>0"),
      ({"p_y1": 1.2, "p_t": 2.5}, "psi_max<1.5708")],
 )
 def test_each_physical_bound_rejects(override: dict[str, float], bound: str) -> None:
