@@ -147,6 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model-cache", type=Path, default=None,
                     help="data dir whose cached embedded table/model to reuse")
     ap.add_argument("--out", type=Path, default=None, help="write the figures as JSON")
+    ap.add_argument("--keep-exports", type=Path, default=None,
+                    help="directory to keep both catalogues' CSV exports in")
     args = ap.parse_args(argv)
 
     work = Path(tempfile.mkdtemp(prefix="scengen-bench-"))
@@ -192,6 +194,10 @@ def main(argv: list[str] | None = None) -> int:
             results["catalogue_dask_s"] = dask_s
             results["dask_over_local"] = dask_s / local_s
             results["same_catalogue"] = dask_csv == local_csv
+            if args.keep_exports:
+                args.keep_exports.mkdir(parents=True, exist_ok=True)
+                (args.keep_exports / "local.csv").write_bytes(local_csv)
+                (args.keep_exports / "dask.csv").write_bytes(dask_csv)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     text = json.dumps(results, indent=2)
