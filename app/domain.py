@@ -294,7 +294,11 @@ def parse_constraints(texts: Sequence[str], field: str = "body.constraints") -> 
         try:
             out.append(parse(text))
         except ValueError as exc:
-            raise InvalidInput(f"constraint {text!r}: {exc}", field=f"{field}.{i}") from None
+            # the sampler's message already quotes the constraint; do not repeat it
+            msg = str(exc)
+            if repr(text) not in msg:
+                msg = f"constraint {text!r}: {msg}"
+            raise InvalidInput(msg, field=f"{field}.{i}") from None
     return out
 
 

@@ -65,6 +65,24 @@ def test_bad_requests_are_422_naming_the_field(client: Any, body: dict[str, Any]
     assert r.status_code == 422, r.text
     err = r.json()["error"]
     assert err["field"] == field and text in err["message"]
+    assert err["message"].count("constraint '") <= 1  # the constraint is quoted once
+
+
+def test_mcmc_sampler_through_the_api(client: Any) -> None:
+    r = client.post("/scenarios", json={"n": 8, "seed": 2, "constraints": ["ttc<3"],
+                                        "sampler": "mcmc", "score": False})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert len(body["scenarios"]) == 8
+    for item in body["scenarios"]:
+        p = item["params"]
+        assert p["dv"] > 0 and p["gap"] / p["dv"] < 3.0
+
+
+def test_empty_region_is_a_422_that_says_so(client: Any) -> None:
+    r = client.post("/scenarios", json={"n": 3, "seed": 1, "constraints": ["ttc<3", "ttc>4"]})
+    assert r.status_code == 422, r.text
+    assert "empty" in r.json()["error"]["message"]
 
 
 def test_unknown_model_is_404(client: Any) -> None:
