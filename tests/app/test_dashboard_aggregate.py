@@ -4,6 +4,7 @@ app.domain.marginal_density, app.dashboard.views.split_constraints)."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -210,12 +211,26 @@ def test_sampler_diagnostics_over_chunks_by_hand() -> None:
 
 
 # --------------------------------------------------------------------------- cache
-def test_view_cache_computes_a_key_once_even_concurrently_and_evicts_lru() -> None:
+def test_view_cache_computes_a_key_once_even_concurrently_and_evicts_lru(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     import threading
 
     from app.dashboard.views import ViewCache
 
     cache = ViewCache(size=2)
+    # Release the first computation only after the second caller has missed the cache:
+    # from then on a cache without per-key waiting would compute a second time.
+    second_missed = threading.Event()
+    second: threading.Thread | None = None  # set below; the spy reads it when called
+    lookup = cache._lookup
+
+    def spying_lookup(key: tuple[Any, ...]) -> tuple[bool, Any]:
+        found, value = lookup(key)
+        if threading.current_thread() is second and not found:
+            second_missed.set()
+        return found, value
+
+    monkeypatch.setattr(cache, "_lookup", spying_lookup)
     calls: list[str] = []
     started, release = threading.Event(), threading.Event()
 
@@ -231,6 +246,7 @@ def test_view_cache_computes_a_key_once_even_concurrently_and_evicts_lru() -> No
     assert started.wait(timeout=60)
     second = threading.Thread(target=lambda: results.append(cache.get(("k",), slow)))
     second.start()
+    assert second_missed.wait(timeout=60)
     release.set()
     first.join(timeout=60)
     second.join(timeout=60)

@@ -55,8 +55,9 @@ def test_sample_catalogue_export_over_http(server: str) -> None:
     with httpx.Client(base_url=server, timeout=300) as http:
         r = http.post("/scenarios", json={"n": 3, "seed": 1, "constraints": ["ttc<3"]})
         assert r.status_code == 200, r.text
-        assert [s["params"]["gap"] / s["params"]["dv"] < 3 for s in r.json()["scenarios"]] \
-            == [True] * 3
+        params = [s["params"] for s in r.json()["scenarios"]]
+        assert len(params) == 3
+        assert all(p["dv"] > 0 and p["gap"] / p["dv"] < 3 for p in params)  # TTC by hand
         r = http.post("/catalogues", json={"n": 5, "seed": 4})
         assert r.status_code == 202
         cid = r.json()["id"]

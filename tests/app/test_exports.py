@@ -7,11 +7,13 @@ sampler. Every expected value below is written out, not computed by app.exports.
 from __future__ import annotations
 
 import csv
+import gc
 import importlib.metadata
 import io
 import json
 import math
 import re
+import weakref
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -608,15 +610,26 @@ def test_different_input_gives_different_files(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("fmt", EXPORT_FORMATS)
 def test_items_are_consumed_lazily_from_a_generator(tmp_path: Path, fmt: str) -> None:
+    # Every item is a fresh scenario object. When item i is asked for, item i - 2 must be
+    # gone already: an exporter that first collected the whole stream (list(items)) would
+    # still hold it, so this fails for a non-streaming exporter.
     consumed: list[int] = []
+    refs: list[weakref.ref[ConcreteScenario]] = []
+    still_alive: list[int] = []
 
     def gen() -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
-        for i, item in enumerate(items() * 2):
+        for i, (scenario, summary) in enumerate(items() * 3):
+            gc.collect()
+            if i >= 2 and refs[i - 2]() is not None:
+                still_alive.append(i - 2)
+            fresh = ConcreteScenario.from_dict(scenario.to_dict())
+            refs.append(weakref.ref(fresh))
             consumed.append(i)
-            yield item
+            yield fresh, dict(summary)
 
     export_catalogue(fmt, gen(), {}, tmp_path / "out")
-    assert consumed == [0, 1, 2, 3]
+    assert consumed == [0, 1, 2, 3, 4, 5]
+    assert still_alive == []
 
 
 @pytest.mark.parametrize("fmt", EXPORT_FORMATS)
