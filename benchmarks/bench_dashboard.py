@@ -16,8 +16,6 @@ Run:  .venv/bin/python benchmarks/bench_dashboard.py [n_scenarios]
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -28,11 +26,12 @@ import httpx
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench_service import Server  # noqa: E402  (benchmarks/ is on sys.path as the script dir)
+
 from app.db.database import Database  # noqa: E402
 from tests.browser.factories import (  # noqa: E402
     CHROMIUM,
     CHROMIUM_ARGS,
-    free_port,
     prepare_data_dir,
     store_synthetic_catalogue,
 )
@@ -43,18 +42,10 @@ def main() -> None:
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (shared machine)")
     with tempfile.TemporaryDirectory(prefix="bench-dashboard-") as tmp:
         data_dir = prepare_data_dir(Path(tmp))
-        port = free_port()
-        env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0")
-        env.pop("SCENGEN_DATABASE_URL", None)
-        env.pop("SCENGEN_DASK_SCHEDULER", None)
-        log = (data_dir / "uvicorn.log").open("wb")
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
-             "--port", str(port), "--log-level", "warning"], cwd=ROOT, env=env, stdout=log,
-            stderr=subprocess.STDOUT, start_new_session=True)
-        base = f"http://127.0.0.1:{port}"
+        server = Server(data_dir, {"SCENGEN_LOCAL_WORKERS": "0"}, data_dir / "uvicorn.log")
+        base = server.base
         try:
-            _wait_up(base, proc)
+            server.wait(timeout=300)
             model_id = httpx.get(f"{base}/health").json()["default_model"]
             db = Database(f"sqlite:///{(data_dir / 'scengen.db').resolve()}")
             t0 = time.perf_counter()
@@ -66,22 +57,7 @@ def main() -> None:
             _api(base, cid)
             _page(base, cid, other)
         finally:
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(timeout=60)
-            log.close()
-
-
-def _wait_up(base: str, proc: subprocess.Popen[bytes]) -> None:
-    for _ in range(3000):
-        if proc.poll() is not None:
-            raise SystemExit("uvicorn exited")
-        try:
-            if httpx.get(f"{base}/health", timeout=2).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.1)
-    raise SystemExit("uvicorn did not start")
+            server.stop()
 
 
 def _api(base: str, cid: str) -> None:
