@@ -15,11 +15,8 @@ Parameters the model does not include (when ``features`` is a subset of ``PARAM_
 are held at fixed values (``fixed_``: the table's median unless given), so sampling always
 yields full parameter vectors.
 
-Persistence is JSON only (``to_json``/``from_json``, ``save``/``load``), never pickle: the
-file holds the features, transforms, weights, means, full covariances, the BIC curve, the
-fit report, the training data's SHA-256 and size, and the scikit-learn version. Loading
-recomputes the Cholesky factors from the stored covariances exactly as ``fit`` does, so the
-loaded model's ``log_density`` equals the original's bit for bit.
+Persistence is JSON only (``to_json``/``from_json``, ``save``/``load``; the format is in
+``sampler.model_io``); the fit report and its text are in ``sampler.fit_report``.
 """
 
 from __future__ import annotations
@@ -36,34 +33,22 @@ import numpy as np
 import pandas as pd
 import sklearn
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
 from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 from sklearn.mixture import GaussianMixture
-from sklearn.model_selection import KFold
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES
 from sampler._exceptions import ModelError, NotFittedError
 from sampler._threads import single_threaded
-from sampler.constraints import PHYSICAL_BOUNDS, Region
+from sampler.intervals import clopper_pearson
+from sampler.model_io import FORMAT
 from sampler.transforms import FeatureTransform, transform_spec
 
-__all__ = ["FORMAT", "CutInGMM"]
+__all__ = ["FORMAT", "CutInGMM", "clopper_pearson"]
 
 FloatArray = NDArray[np.float64]
-FORMAT = "scengen.cutin-gmm/1"
 _LOG_2PI = math.log(2.0 * math.pi)
 _COV_TYPES = ("full", "tied", "diag", "spherical")
-
-
-def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Exact two-sided binomial interval for k successes in n trials."""
-    if n <= 0:
-        return 0.0, 1.0
-    alpha = 1.0 - confidence
-    lo = 0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1))
-    hi = 1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
-    return lo, hi
 
 
 def _full_covariances(gm: GaussianMixture, d: int) -> FloatArray:
@@ -489,112 +474,23 @@ class CutInGMM:
 
     def _report(self, x: FloatArray, z: FloatArray, logj: FloatArray,
                 bic: float) -> dict[str, Any]:
-        n = x.shape[0]
-        folds = min(int(self.cv_folds), n // 2)
-        per_fold = []
-        kf = KFold(n_splits=folds, shuffle=True, random_state=int(self.random_state))
-        for train, test in kf.split(z):
-            gm, _, _err = self._fit_gm(self.n_components_, z[train])
-            if gm is None:
-                per_fold.append(float("nan"))
-                continue
-            per_fold.append(float(np.mean(gm.score_samples(z[test]) + logj[test])))
-        rng = np.random.default_rng(int(self.random_state))
-        m = int(self.n_report_samples)
-        draws = self.sample(m, rng)
-        ks = {}
-        for j, f in enumerate(self.features_):
-            res = stats.ks_2samp(x[:, j], draws[:, j])
-            ks[f] = {"statistic": float(res.statistic), "pvalue": float(res.pvalue)}
-        region = Region(lane_width=self.lane_width_)
-        params = self.params_matrix(draws)
-        inside = region.in_bounds(params)
-        k_out = int((~inside).sum())
-        lo, hi = clopper_pearson(k_out, m)
-        # each outside draw is attributed to the first bound it violates (in the order of
-        # PHYSICAL_BOUNDS), so the shares add up to the total
-        viol = region.violations(params)
-        remaining = np.ones(m, dtype=bool)
-        per_bound = {}
-        for b in PHYSICAL_BOUNDS:
-            hit = viol[str(b)] & remaining
-            per_bound[str(b)] = float(hit.sum() / m)
-            remaining &= ~hit
-        pf = np.asarray(per_fold)
-        return {
-            "n_rows": n,
-            "k": self.n_components_,
-            "bic": bic,
-            "loglik_per_row": float(np.mean(self.log_density(x))),
-            "heldout_loglik_per_row": {
-                "mean": float(np.nanmean(pf)) if np.isfinite(pf).any() else None,
-                "std": float(np.nanstd(pf)) if np.isfinite(pf).any() else None,
-                "folds": folds,
-                "per_fold": [None if not math.isfinite(v) else v for v in per_fold],
-            },
-            "ks": ks,
-            "outside_bounds": {"fraction": k_out / m, "ci95": [lo, hi],
-                               "per_bound": per_bound, "lane_width": self.lane_width_,
-                               "n_samples": m},
-        }
+        from sampler.fit_report import fit_report
+
+        return fit_report(self, x, z, logj, bic)
 
     def report_text(self) -> str:
         """Human-readable BIC curve and fit report (what ``scengen fit`` prints)."""
-        self._check_fitted()
-        lines = ["BIC curve (original units, lower is better):"]
-        for c in self.bic_curve_:
-            mark = "  <- chosen" if c["k"] == self.n_components_ else ""
-            if c["bic"] is None:
-                lines.append(f"  K={c['k']:2d}  failed: {c['error']}")
-            else:
-                conv = "" if c["converged"] else "  (not converged)"
-                lines.append(f"  K={c['k']:2d}  BIC={c['bic']:12.2f}{conv}{mark}")
-        r = getattr(self, "fit_report_", None)
-        if r:
-            h = r["heldout_loglik_per_row"]
-            lines.append(f"chosen K = {r['k']}  ({r['n_rows']} rows, {len(self.features_)} "
-                         f"features)")
-            lines.append(f"log-likelihood per row: in-sample {r['loglik_per_row']:.3f}, "
-                         f"held-out {h['mean']:.3f} +- {h['std']:.3f} ({h['folds']}-fold CV)"
-                         if h["mean"] is not None else "held-out log-likelihood: failed")
-            lines.append("KS statistic data vs model samples:")
-            for f, v in r["ks"].items():
-                lines.append(f"  {f:6s} D={v['statistic']:.3f}  p={v['pvalue']:.3g}")
-            ob = r["outside_bounds"]
-            lines.append(f"model mass outside physical bounds: {ob['fraction']:.4f} "
-                         f"(95% CI {ob['ci95'][0]:.4f}-{ob['ci95'][1]:.4f}, "
-                         f"{ob['n_samples']} draws)")
-            for name, frac in ob["per_bound"].items():
-                if frac > 0:
-                    lines.append(f"  first violated bound {name}: {frac:.4f}")
-        return "\n".join(lines)
+        from sampler.fit_report import report_text
+
+        return report_text(self)
 
     # ------------------------------------------------------------------ persistence
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able form (plain lists and numbers)."""
-        self._check_fitted()
-        return {
-            "format": FORMAT,
-            "features": list(self.features_),
-            "transforms": [t.to_dict() for t in self.transforms_],
-            "fixed": dict(self.fixed_),
-            "lane_width": self.lane_width_,
-            "n_components": self.n_components_,
-            "covariance_type": self.covariance_type,
-            "weights": self.weights_.tolist(),
-            "means": self.means_.tolist(),
-            "covariances": self.covariances_.tolist(),
-            "bic_curve": list(getattr(self, "bic_curve_", [])),
-            "fit_report": getattr(self, "fit_report_", None),
-            "training": dict(getattr(self, "training_", {})),
-            "sklearn_version": getattr(self, "sklearn_version_", sklearn.__version__),
-            "settings": {"k_range": list(self.k_range), "n_init": self.n_init,
-                         "reg_covar": self.reg_covar, "max_iter": self.max_iter,
-                         "random_state": self.random_state, "cv_folds": self.cv_folds,
-                         "n_report_samples": self.n_report_samples,
-                         "lane_width": self.lane_width},
-        }
+        """JSON-able form (plain lists and numbers); see ``sampler.model_io``."""
+        from sampler.model_io import model_to_dict
+
+        return model_to_dict(self)
 
     def to_json(self, indent: int | None = None) -> str:
         return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
@@ -602,69 +498,9 @@ class CutInGMM:
     @classmethod
     def from_dict(cls, data: Any) -> CutInGMM:
         """Rebuild from ``to_dict``'s form. Raises ModelError naming the bad field."""
-        if not isinstance(data, Mapping):
-            raise ModelError(f"model: expected a JSON object, got {type(data).__name__}")
-        if data.get("format") != FORMAT:
-            raise ModelError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
-        for key in ("features", "transforms", "weights", "means", "covariances"):
-            if key not in data:
-                raise ModelError(f"{key}: missing")
-        features = data["features"]
-        if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
-            raise ModelError("features: expected a list of names")
-        settings = data.get("settings") or {}
-        if not isinstance(settings, Mapping):
-            raise ModelError("settings: expected an object")
-        kwargs: dict[str, Any] = {
-            k: (tuple(v) if k == "k_range" else v) for k, v in settings.items()
-            if k in {"k_range", "n_init", "reg_covar", "max_iter", "random_state", "cv_folds",
-                     "n_report_samples", "lane_width"}}
-        try:
-            model = cls(features=features,
-                        covariance_type=str(data.get("covariance_type", "full")), **kwargs)
-        except TypeError as exc:
-            raise ModelError(f"settings: {exc}") from None
-        trs = data["transforms"]
-        if not isinstance(trs, list) or len(trs) != len(features):
-            raise ModelError("transforms: expected one entry per feature")
-        transforms = []
-        for i, (f, t) in enumerate(zip(features, trs, strict=True)):
-            if not isinstance(t, Mapping) or t.get("feature") != f:
-                raise ModelError(f"transforms[{i}]: expected an object for feature {f!r}")
-            kind, shift = transform_spec(f, {"kind": t.get("kind"), "shift": t.get("shift", 0)})
-            loc, scale = t.get("loc"), t.get("scale")
-            if not (isinstance(loc, int | float) and isinstance(scale, int | float)
-                    and math.isfinite(loc) and math.isfinite(scale) and scale > 0):
-                raise ModelError(f"transforms[{i}]: loc and scale must be finite, scale > 0")
-            transforms.append(FeatureTransform(f, kind, shift, float(loc), float(scale)))
-        model.features_ = tuple(features)
-        model.transforms_ = tuple(transforms)
-        try:
-            weights = np.asarray(data["weights"], dtype=np.float64)
-            means = np.asarray(data["means"], dtype=np.float64)
-            covs = np.asarray(data["covariances"], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ModelError(f"mixture: expected numeric arrays ({exc})") from None
-        if means.ndim != 2 or means.shape[1] != len(features):
-            raise ModelError(f"means: expected shape (K, {len(features)}), got {means.shape}")
-        model._set_mixture(weights, means, covs)
-        fixed = data.get("fixed") or {}
-        if not isinstance(fixed, Mapping):
-            raise ModelError("fixed: expected an object")
-        model.fixed_ = {str(k): float(v) for k, v in fixed.items()}
-        missing = [p for p in PARAM_NAMES if p not in features and p not in model.fixed_]
-        if missing:
-            raise ModelError(f"fixed: missing value(s) for {', '.join(missing)}")
-        lw = data.get("lane_width", DEFAULT_LANE_WIDTH)
-        if isinstance(lw, bool) or not isinstance(lw, int | float) or not 0 < lw <= 10:
-            raise ModelError(f"lane_width: must be a number in (0, 10] m, got {lw!r}")
-        model.lane_width_ = float(lw)
-        model.bic_curve_ = list(data.get("bic_curve") or [])
-        if data.get("fit_report") is not None:
-            model.fit_report_ = dict(data["fit_report"])
-        model.training_ = dict(data.get("training") or {})
-        model.sklearn_version_ = str(data.get("sklearn_version", "unknown"))
-        return model
+        from sampler.model_io import model_from_dict
+
+        return model_from_dict(cls, data)
 
     @classmethod
     def from_json(cls, text: str) -> CutInGMM:

@@ -43,8 +43,8 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError
-from sampler.model import clopper_pearson
-from sampler.samplers import Pilot, Problem, ProgressFn
+from sampler.intervals import clopper_pearson
+from sampler.problem import Pilot, Problem, ProgressFn
 
 __all__ = ["PRegion", "PRegionEstimator"]
 
@@ -231,7 +231,7 @@ class PRegionEstimator:
 
     def _importance(self, problem: Problem, rng: np.random.Generator, region_z: FloatArray,
                     bounds: tuple[float, float, float]) -> PRegion:
-        from sampler.samplers import _MixtureProposal
+        from sampler.mcmc import _MixtureProposal
 
         model = problem.model
         p_b, lo_b, hi_b = bounds

@@ -33,7 +33,8 @@ from sampler.builder import build_scenario
 from sampler.constraints import DERIVED, Region, derive
 from sampler.model import CutInGMM
 from sampler.probability import PRegion, PRegionEstimator
-from sampler.samplers import Problem, ProgressFn, Sampler, make_sampler
+from sampler.problem import Problem, ProgressFn, Sampler
+from sampler.samplers import make_sampler
 
 __all__ = ["SampleSet", "estimate_p_region", "sample"]
 
@@ -310,7 +311,7 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     rng = np.random.default_rng(_seed(seed))
     problem = Problem(model, region)
     bounds = est.p_bounds(problem, rng)
-    from sampler.samplers import MCMCSampler
+    from sampler.mcmc import MCMCSampler
 
     mcmc = MCMCSampler()
     pilot = est.pilot(problem, rng, need=0)
