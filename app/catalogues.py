@@ -3,19 +3,20 @@ export and delete. Routes and CLI commands stay thin wrappers around these."""
 
 from __future__ import annotations
 
-import gzip
-import json
+import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from app import domain
+from app import domain, jsonconv
 from app.context import ServiceContext
+from app.db import chunkfile
 from app.db import repository as repo
 from app.db.models import CatalogueRow, ScenarioRow
 from app.errors import Conflict, InvalidInput, ServiceError
-from app.jobs.chunk import CatalogueSpec, scenario_provenance
+from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from riskcore.scenario import ConcreteScenario
+from sampler.record import SCORE_FIELDS, ScenarioRecord
 
 SAMPLER_METHODS = ("auto", "rejection", "mcmc")
 
@@ -75,46 +76,61 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     }
 
 
-def scenario_view(row: ScenarioRow) -> dict[str, Any]:
-    return {
-        "index": row.idx,
-        "seed": row.seed,
-        "params": row.params,
-        "ttc": domain.finite_or_none(row.ttc),
-        "risk": domain.finite_or_none(row.risk),
-        "exposure_weight": domain.finite_or_none(row.exposure_weight),
-        "summary": domain.jsonable(domain.decode_floats(row.summary)),
-    }
+def record_of(row: ScenarioRow) -> ScenarioRecord:
+    """The stored scenario as the service's one scored-record schema."""
+    scores = jsonconv.decode(row.summary or {})
+    return ScenarioRecord(index=row.idx, params=row.params,
+                          ttc=math.inf if row.ttc is None else row.ttc,
+                          exposure_weight=row.exposure_weight, error=row.error,
+                          **{k: scores.get(k) for k in SCORE_FIELDS})
 
 
 def export_summary(row: ScenarioRow) -> dict[str, Any]:
     """The flat summary an export gets for one scenario (scores + exposure weight)."""
-    summary = dict(domain.decode_floats(row.summary))
+    summary: dict[str, Any] = dict(jsonconv.decode(row.summary or {}))
     summary["scenario_id"] = row.idx
     summary["exposure_weight"] = row.exposure_weight
+    summary["error"] = row.error
     return summary
 
 
-def _chunk_scenarios(path: Path) -> Iterator[ConcreteScenario]:
-    with gzip.open(path, "rt", encoding="utf-8") as fh:
-        for line in fh:
-            if line.strip():
-                yield ConcreteScenario.from_dict(json.loads(line))
+def _spec_of(cat: CatalogueRow) -> CatalogueSpec:
+    """The catalogue's spec without the model (enough to rebuild its scenarios)."""
+    return CatalogueSpec(n=cat.n, seed=cat.seed, chunk_size=cat.chunk_size, model_json="",
+                         constraints=tuple(cat.spec.get("constraints", ())),
+                         method=cat.spec.get("method", "auto"))
+
+
+def stored_scenario(ctx: ServiceContext, cat: CatalogueRow,
+                    row: ScenarioRow) -> tuple[ConcreteScenario | None, str]:
+    """A catalogue scenario and where it came from: its chunk file when kept, else rebuilt
+    exactly as the chunk built it (deterministic). None when the builder refused it."""
+    with ctx.db.session() as s:
+        chunks = {c.chunk_index: c for c in repo.chunk_rows(s, cat.id)}
+    chunk = chunks.get(row.chunk_index)
+    if chunk is not None and chunk.file_path is not None:
+        path = ctx.data_dir / chunk.file_path
+        if path.exists():
+            data = chunkfile.read_at(path, row.idx - row.chunk_index * cat.chunk_size)
+            return (None if data is None else ConcreteScenario.from_dict(data),
+                    "stored trajectories")
+    lane_width = domain.model_lane_width(ctx.model(cat.model_id))
+    return (rebuild_scenario(_spec_of(cat), row.idx, row.params, lane_width),
+            "rebuilt from the stored parameters")
 
 
 def iter_items(ctx: ServiceContext,
                catalogue_id: str) -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
-    """(scenario, summary) pairs of a finished catalogue in index order."""
+    """(scenario, summary) pairs of a finished catalogue in index order; scenarios the
+    builder refused (rows with an error) have nothing to export and are left out."""
     with ctx.db.session() as s:
         chunks = {c.chunk_index: c for c in repo.chunk_rows(s, catalogue_id)}
         cat = repo.get_catalogue(s, catalogue_id)
-        spec = CatalogueSpec(n=cat.n, seed=cat.seed, chunk_size=cat.chunk_size,
-                             model_json="", constraints=tuple(cat.spec.get("constraints", ())),
-                             method=cat.spec.get("method", "auto"))
+        spec = _spec_of(cat)
         model_id = cat.model_id
     lane_width: float | None = None
     current: int | None = None
-    stream: Iterator[ConcreteScenario] | None = None
+    stream: Iterator[dict[str, Any] | None] | None = None
     last = -1
     while True:
         # one short transaction per batch: never hold the database during a long export
@@ -128,15 +144,17 @@ def iter_items(ctx: ServiceContext,
                 current = row.chunk_index
                 chunk = chunks.get(current)
                 stream = (None if chunk is None or chunk.file_path is None
-                          else _chunk_scenarios(ctx.data_dir / chunk.file_path))
+                          else chunkfile.read_scenarios(ctx.data_dir / chunk.file_path))
+            scenario: ConcreteScenario | None
             if stream is not None:
-                scenario = next(stream)
+                data = next(stream)
+                scenario = None if data is None else ConcreteScenario.from_dict(data)
             else:  # trajectories not stored: rebuild them (deterministic)
                 if lane_width is None:
                     lane_width = domain.model_lane_width(ctx.model(model_id))
-                scenario = domain.build_scenario(row.params, row.seed, lane_width,
-                                                 scenario_provenance(spec, row.idx))
-            yield scenario, export_summary(row)
+                scenario = rebuild_scenario(spec, row.idx, row.params, lane_width)
+            if scenario is not None:
+                yield scenario, export_summary(row)
 
 
 def manifest(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:

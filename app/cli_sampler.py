@@ -7,12 +7,16 @@ embedded real TNO table) and prints the BIC curve, the chosen K and the fit repo
 ``scengen sample MODEL.json --constraint 'ttc<3' -n 100 --seed 1 -o OUT.jsonl`` draws
 samples inside the region and writes one JSON line per sample::
 
-    {"index": 0, "params": {...}, "derived": {...}, "log_density": ..., "exposure_weight": ...,
-     "scenario": {...} (with --scenarios), "risk": {...} (with --score)}
+    {"index": 0, "params": {...}, "ttc": ..., "exposure_weight": ..., "derived": {...},
+     "log_density": ..., "scenario": {...} (with --scenarios),
+     "risk": ..., "min_ttr": ..., ..., "error": ... (the score fields, with --score)}
 
-(+inf/NaN are written as null) and one summary line on stderr with P(A), its interval and
-the sampler's diagnostics; ``--summary-json FILE`` writes the whole sample set without the
-per-sample arrays. User errors end as one line ``scengen: error: ...``, exit code 2.
+i.e. the service's scored record (``sampler.record.ScenarioRecord``, the same as an item of
+``POST /scenarios``) plus the sampler's derived quantities and log density; +inf/NaN are
+written as "Infinity"/"NaN" (the service's JSON convention), and one summary line on
+stderr with P(A), its interval and the sampler's diagnostics; ``--summary-json FILE``
+writes the whole sample set without the per-sample arrays. User errors end as one line
+``scengen: error: ...``, exit code 2.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import multiprocessing
 import sys
 from pathlib import Path
 from typing import Any
+
+from app import jsonconv
 
 _SUFFIXES = (".csv", ".parquet", ".pq")
 #: a command-line process is single-threaded: fork starts workers at once (spawn re-imports)
@@ -161,32 +167,20 @@ def _sample(args: argparse.Namespace) -> int:
                     progress=progress)
     finally:
         progress.close()
-    scored = None
-    if args.score:
-        from sampler.scoring import score_samples
+    from sampler.scoring import score_samples
 
-        scored = score_samples(ss, n_workers=args.workers, keep_scenarios=args.scenarios,
-                               summary_only=True, mp_context=_POOL,
-                               progress=lambda d, t: progress("score", d, t))
-        progress.close()
+    records = score_samples(ss, n_workers=args.workers, score=args.score,
+                            include_scenarios=args.scenarios, mp_context=_POOL,
+                            progress=(lambda d, t: progress("score", d, t)) if args.score
+                            else None)
+    progress.close()
     d = ss.to_dict()
     lines = []
-    for i in range(len(ss)):
-        row: dict[str, Any] = {
-            "index": i,
-            "params": ss.params_dict(i),
-            "derived": {k: d["derived"][k][i] for k in d["derived"]},
-            "log_density": d["log_density"][i],
-            "exposure_weight": d["exposure_weights"][i],
-        }
-        if scored is not None:
-            sc = scored[i]
-            row["risk"] = _clean(sc.summary())
-            if args.scenarios and sc.scenario is not None:
-                row["scenario"] = sc.scenario.to_dict()
-        elif args.scenarios:
-            row["scenario"] = ss.scenario(i).to_dict()
-        lines.append(json.dumps(_clean(row), allow_nan=False))
+    for i, record in enumerate(records):
+        row: dict[str, Any] = record.model_dump(exclude_none=not args.score)
+        row["derived"] = {str(k): float(v) for k, v in ss.derived.iloc[i].items()}
+        row["log_density"] = d["log_density"][i]
+        lines.append(jsonconv.dumps(row))
     text = "\n".join(lines) + "\n"
     if args.output == "-":
         sys.stdout.write(text)

@@ -68,11 +68,10 @@ def main() -> int:
         t = time.perf_counter()
         ss = sample(model, ["ttc<3"], args.n, seed=args.seed, method="auto")
         t_s = time.perf_counter() - t
-        scored = score_samples(ss, n_workers=args.workers, keep_scenarios=False,
-                               summary_only=True, mp_context=_POOL, chunk_size=50)
+        scored = score_samples(ss, n_workers=args.workers, mp_context=_POOL, chunk_size=50)
         dt = time.perf_counter() - t
         n_err = sum(s.error is not None for s in scored)
-        risks = [s.summary().get("risk", 0.0) for s in scored if s.error is None]
+        risks = [s.risk or 0.0 for s in scored if s.error is None]
         print(f"{args.n} sampled+built+scored scenarios (ttc<3, {args.workers} workers): "
               f"{dt:.1f} s (sampling {t_s:.2f} s), errors {n_err}, "
               f"mean risk {sum(risks) / max(len(risks), 1):.3f}")

@@ -8,7 +8,8 @@ Public surface (docs/sampler.md)::
     RejectionSampler, MCMCSampler, AutoSampler the sampler strategies
     PRegion, PRegionEstimator                  P(A) with its interval
     build_scenario                             parameter vector -> ConcreteScenario
-    score_samples, ScoredSample                samples -> scenarios -> riskcore
+    score_vector, ScenarioRecord               one vector -> scenario -> scored record
+    score_samples                              many vectors -> records (optional pool)
 """
 
 from sampler._exceptions import (
@@ -31,9 +32,10 @@ from sampler.constraints import (
 )
 from sampler.model import CutInGMM
 from sampler.probability import PRegion, PRegionEstimator
+from sampler.record import ScenarioRecord, score_vector
 from sampler.samplers import AutoSampler, MCMCSampler, RejectionSampler, Sampler
 from sampler.sampleset import SampleSet, estimate_p_region, sample
-from sampler.scoring import ScoredSample, score_samples
+from sampler.scoring import score_samples
 
 __all__ = [
     "DERIVED",
@@ -55,11 +57,12 @@ __all__ = [
     "SampleSet",
     "Sampler",
     "SamplerError",
-    "ScoredSample",
+    "ScenarioRecord",
     "build_scenario",
     "derive",
     "estimate_p_region",
     "parse_constraint",
     "sample",
     "score_samples",
+    "score_vector",
 ]

@@ -1,123 +1,67 @@
-"""Scoring glue: samples -> concrete scenarios -> riskcore scores, batched, optional pool.
+"""Score many samples: :func:`sampler.record.score_vector` over a table, batched, optional pool.
 
-``score_samples`` builds every sample's scenario (``sampler.builder.build_scenario``) and
-scores it (default ``riskcore.evaluate_scenario``), in chunks of ``chunk_size`` samples.
-With ``n_workers > 1`` the chunks run on a ``concurrent.futures.ProcessPoolExecutor``
-(default start method ``spawn``: safe with numba, threaded BLAS and threaded servers, but a
-calling script needs the ``if __name__ == "__main__":`` guard; ``mp_context="fork"`` starts
-faster from a single-threaded command-line process); results come back in input order
-whatever the number of workers, so the output is deterministic. Each chunk runs with BLAS
-limited to one thread (one process per core is the parallelism).
+``score_samples`` turns every sample into a :class:`~sampler.record.ScenarioRecord` (build
+the scenario, score it with riskcore), in chunks of ``chunk_size`` samples. With
+``n_workers > 1`` the chunks run on a ``concurrent.futures.ProcessPoolExecutor`` (default
+start method ``spawn``: safe with numba, threaded BLAS and threaded servers, but a calling
+script needs the ``if __name__ == "__main__":`` guard; ``mp_context="fork"`` starts faster
+from a single-threaded command-line process); results come back in input order whatever
+the number of workers, so the output is deterministic. Each chunk runs with BLAS limited
+to one thread (one process per core is the parallelism).
 
-A sample that cannot be built or scored does not stop the batch: its ``ScoredSample``
-carries ``error`` (one line) and no risk.
+A sample that cannot be built or scored does not stop the batch: its record carries
+``error`` (one line) and no scores (the policy of ``score_vector``).
 """
 
 from __future__ import annotations
 
-import functools
 import multiprocessing
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
 from typing import Any
 
 import pandas as pd
 
 from datasets.cutin_model import PARAM_NAMES
-from riskcore.scenario import ConcreteScenario
+from riskcore.settings import RiskSettings
+from riskcore.surfaces import InputSurfaces
 from sampler._exceptions import SamplerError
 from sampler._threads import single_threaded
-from sampler.builder import build_scenario
+from sampler.record import ScenarioRecord, score_rows
 from sampler.sampleset import SampleSet
 
-__all__ = ["ScoredSample", "score_samples"]
-
-Scorer = Callable[[ConcreteScenario], Any]
+__all__ = ["score_samples"]
 
 
-@dataclass(frozen=True)
-class ScoredSample:
-    """One sample's scenario and score.
-
-    Attributes
-    ----------
-    index : int
-        Position in the input.
-    params : dict of str -> float
-    scenario : ConcreteScenario or None
-        None when building failed or ``keep_scenarios=False``.
-    risk : object or None
-        What the scorer returned (``riskcore.ScenarioRisk`` by default); None on error.
-    error : str or None
-    """
-
-    index: int
-    params: dict[str, float]
-    scenario: ConcreteScenario | None
-    risk: Any
-    error: str | None = None
-
-    def summary(self) -> dict[str, Any]:
-        """The risk's ``summary()`` (riskcore) or ``{}``, plus ``error`` when set."""
-        out: dict[str, Any] = {}
-        if isinstance(self.risk, Mapping):
-            out.update(self.risk)
-        elif self.risk is not None and hasattr(self.risk, "summary"):
-            out.update(self.risk.summary())
-        if self.error is not None:
-            out["error"] = self.error
-        return out
-
-
-def _default_scorer(scenario: ConcreteScenario, settings: Any = None,
-                    surfaces: Any = None) -> Any:
-    from riskcore import evaluate_scenario
-
-    return evaluate_scenario(scenario, settings=settings, surfaces=surfaces)
+def _provenance(index: int) -> dict[str, Any]:
+    return {"sample_index": index}
 
 
 @single_threaded
-def _score_chunk(chunk: Sequence[tuple[int, dict[str, float]]], builder_kwargs: dict[str, Any],
-                 scorer: Scorer, keep: bool, summary_only: bool = False) -> list[ScoredSample]:
-    out = []
-    for index, params in chunk:
-        kw = dict(builder_kwargs)
-        prov = dict(kw.pop("provenance", None) or {})
-        prov["sample_index"] = index
-        try:
-            scen = build_scenario(params, provenance=prov, **kw)
-        except ValueError as exc:
-            out.append(ScoredSample(index, params, None, None, f"build: {exc}"))
-            continue
-        try:
-            risk = scorer(scen)
-        except ValueError as exc:
-            out.append(ScoredSample(index, params, scen if keep else None, None,
-                                    f"score: {exc}"))
-            continue
-        if summary_only and hasattr(risk, "summary"):
-            risk = dict(risk.summary())
-        out.append(ScoredSample(index, params, scen if keep else None, risk))
-    return out
+def _score_chunk(table: pd.DataFrame, start: int, weights: list[float] | None,
+                 kwargs: dict[str, Any]) -> list[ScenarioRecord]:
+    return [record for record, _ in score_rows(table, start=start, exposure_weights=weights,
+                                                provenance=_provenance, **kwargs)]
 
 
-def _rows(samples: SampleSet | pd.DataFrame | Iterable[Mapping[str, float]]
-          ) -> list[dict[str, float]]:
+def _table(samples: SampleSet | pd.DataFrame | Iterable[Mapping[str, float]]) -> pd.DataFrame:
     if isinstance(samples, SampleSet):
-        return [samples.params_dict(i) for i in range(len(samples))]
+        return samples.params
     if isinstance(samples, pd.DataFrame):
         missing = [k for k in PARAM_NAMES if k not in samples.columns]
         if missing:
             raise SamplerError(f"samples: missing column(s) {', '.join(missing)}")
-        return [{k: float(row[k]) for k in PARAM_NAMES}
-                for _, row in samples[list(PARAM_NAMES)].iterrows()]
+        return samples
     rows = []
     for i, r in enumerate(samples):
         if not isinstance(r, Mapping):
             raise SamplerError(f"samples[{i}]: expected a mapping of parameters")
         rows.append({str(k): float(v) for k, v in r.items()})
-    return rows
+    table = pd.DataFrame(rows)
+    missing = [k for k in PARAM_NAMES if k not in table.columns]
+    if missing and rows:
+        raise SamplerError(f"samples: missing parameter(s) {', '.join(missing)}")
+    return table
 
 
 def score_samples(
@@ -126,20 +70,19 @@ def score_samples(
     n_workers: int = 1,
     chunk_size: int = 20,
     builder_kwargs: Mapping[str, Any] | None = None,
-    settings: Any = None,
-    surfaces: Any = None,
-    scorer: Scorer | None = None,
-    keep_scenarios: bool = True,
-    summary_only: bool = False,
+    settings: RiskSettings | None = None,
+    surfaces: InputSurfaces | None = None,
+    score: bool = True,
+    include_scenarios: bool = False,
     mp_context: str = "spawn",
     progress: Callable[[int, int], None] | None = None,
-) -> list[ScoredSample]:
-    """Build and score every sample; results in input order.
+) -> list[ScenarioRecord]:
+    """Build and score every sample; records in input order.
 
     Parameters
     ----------
     samples : SampleSet, DataFrame with ``PARAM_NAMES`` columns, or mappings
-        A SampleSet passes its seed and lane width to the builder.
+        A SampleSet passes its seed, lane width and exposure weights.
     n_workers : int
         1 runs in this process; more use a process pool of that size.
     chunk_size : int
@@ -147,15 +90,11 @@ def score_samples(
     builder_kwargs : mapping, optional
         Passed to ``build_scenario`` (``dt``, ``duration``, ``lead_in``, ...).
     settings, surfaces : optional
-        riskcore ``RiskSettings`` and ``InputSurfaces`` for the default scorer.
-    scorer : callable(ConcreteScenario) -> object, optional
-        Replaces riskcore (it must be picklable, i.e. a module-level function, for a pool).
-    keep_scenarios : bool
-        Keep each ConcreteScenario in the result (memory: ~20 kB each).
-    summary_only : bool
-        Keep only the risk's ``summary()`` dict instead of the full ``ScenarioRisk``
-        (~600 kB each when pickled back from a worker: with a pool, this is most of the
-        cost).
+        riskcore ``RiskSettings`` and ``InputSurfaces``.
+    score : bool
+        False: only build (with ``include_scenarios``) or nothing; the records have no scores.
+    include_scenarios : bool
+        Put each scenario's JSON form in its record (~20 kB each).
     mp_context : {"spawn", "forkserver", "fork"}
         Start method of the pool. ``spawn`` (default) is safe anywhere, including inside a
         threaded server, but each worker re-imports the packages (seconds); ``fork`` starts
@@ -164,7 +103,7 @@ def score_samples(
 
     Returns
     -------
-    list of ScoredSample, one per sample, in input order.
+    list of ScenarioRecord, one per sample, in input order (``index`` = position).
     """
     if isinstance(n_workers, bool) or not isinstance(n_workers, int) or n_workers < 1:
         raise SamplerError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
@@ -173,28 +112,31 @@ def score_samples(
     if mp_context not in multiprocessing.get_all_start_methods():
         raise SamplerError(f"mp_context: {mp_context!r} is not available here; valid: "
                            f"{', '.join(multiprocessing.get_all_start_methods())}")
-    rows = _rows(samples)
-    kw: dict[str, Any] = dict(builder_kwargs or {})
+    table = _table(samples)
+    kw: dict[str, Any] = {"builder_kwargs": dict(builder_kwargs or {}), "settings": settings,
+                          "surfaces": surfaces, "score": score,
+                          "include_scenario": include_scenarios}
+    weights: list[float] | None = None
     if isinstance(samples, SampleSet):
-        kw.setdefault("lane_width", samples.region.lane_width)
-        kw.setdefault("seed", samples.seed)
-    fn: Scorer = scorer or functools.partial(_default_scorer, settings=settings,
-                                             surfaces=surfaces)
-    chunks = [list(enumerate(rows))[i:i + chunk_size] for i in range(0, len(rows), chunk_size)]
-    total = len(rows)
-    out: list[ScoredSample] = []
-    if n_workers == 1 or len(chunks) <= 1:
-        for chunk in chunks:
-            out.extend(_score_chunk(chunk, kw, fn, keep_scenarios, summary_only))
+        kw["lane_width"] = samples.region.lane_width
+        kw["seed"] = samples.seed
+        weights = [float(w) for w in samples.exposure_weights]
+    total = len(table)
+    starts = list(range(0, total, chunk_size))
+    parts = [(table.iloc[s:s + chunk_size].reset_index(drop=True), s,
+              None if weights is None else weights[s:s + chunk_size]) for s in starts]
+    out: list[ScenarioRecord] = []
+    if n_workers == 1 or len(parts) <= 1:
+        for part, start, w in parts:
+            out.extend(_score_chunk(part, start, w, kw))
             if progress is not None:
                 progress(len(out), total)
         return out
     ctx = multiprocessing.get_context(mp_context)
     with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
-        n_c = len(chunks)
-        for result in pool.map(_score_chunk, chunks, [kw] * n_c, [fn] * n_c,
-                               [keep_scenarios] * n_c, [summary_only] * n_c):
-            out.extend(result)
+        futures = [pool.submit(_score_chunk, part, start, w, kw) for part, start, w in parts]
+        for fut in futures:
+            out.extend(fut.result())
             if progress is not None:
                 progress(len(out), total)
     return out

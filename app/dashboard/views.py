@@ -18,8 +18,6 @@ Views of immutable things (models, finished catalogues, scenarios) are cached in
 
 from __future__ import annotations
 
-import gzip
-import json
 import math
 import threading
 from collections import OrderedDict
@@ -41,8 +39,8 @@ from app.dashboard.aggregate import (
     thin_scatter,
 )
 from app.db import repository as repo
-from app.db.models import CatalogueRow, ScenarioRow
-from app.errors import InvalidInput, NotFound
+from app.db.models import CatalogueRow
+from app.errors import Conflict, InvalidInput, NotFound
 
 __all__ = [
     "CORNER_DEFAULT",
@@ -480,29 +478,6 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- view 4
-def _stored_scenario(ctx: ServiceContext, crow: CatalogueRow,
-                     row: ScenarioRow) -> dict[str, Any] | None:
-    """The scenario's JSON form from its chunk file (None when no file is kept)."""
-    with ctx.db.session() as s:
-        chunks = {c.chunk_index: c for c in repo.chunk_rows(s, crow.id)}
-    chunk = chunks.get(row.chunk_index)
-    if chunk is None or chunk.file_path is None:
-        return None
-    path = ctx.data_dir / chunk.file_path
-    if not path.exists():
-        return None
-    position = row.idx - row.chunk_index * crow.chunk_size
-    with gzip.open(path, "rt", encoding="utf-8") as fh:
-        for k, line in enumerate(fh):
-            if k == position:
-                data: dict[str, Any] = json.loads(line)
-                prov = data.get("provenance") or {}
-                if prov.get("catalogue_index", row.idx) != row.idx:
-                    return None
-                return data
-    return None
-
-
 def _track(data: dict[str, Any]) -> dict[str, Any]:
     return {k: data.get(k) for k in ("id", "length", "width", "x", "y", "psi", "v")}
 
@@ -522,27 +497,20 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
     row = found[0]
 
     def compute() -> dict[str, Any]:
-        data = _stored_scenario(ctx, crow, row)
-        if data is not None:
-            from riskcore.scenario import ConcreteScenario
-
-            sc = ConcreteScenario.from_dict(data)
-            source = "stored trajectories"
-        else:
-            _, model, _ = _model_and_row(ctx, crow.model_id)
-            sc = domain.build_scenario(row.params, row.seed, domain.model_lane_width(model))
-            data = sc.to_dict()
-            source = "rebuilt from the stored parameters and seed"
+        sc, source = catalogue_service.stored_scenario(ctx, crow, row)
+        if sc is None:
+            raise Conflict(f"scenario {index} of catalogue {crow.id} has no trajectories: "
+                           f"{row.error}", field="path.index")
+        data = sc.to_dict()
         risk = domain.scenario_risk_series(sc)
         prov = data.get("provenance") or {}
         return {
             "catalogue": crow.id,
             "index": row.idx,
-            "seed": row.seed,
             "params": row.params,
+            "trajectory_source": source,
             "ttc": domain.finite_or_none(row.ttc),
             "risk": domain.finite_or_none(row.risk),
-            "trajectory_source": source,
             "lane_width": prov.get("lane_width"),
             "t": data["t"],
             "ego": _track(data["ego"]),
@@ -551,6 +519,6 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
             "series": risk["series"],
         }
 
-    result: dict[str, Any] = _CACHE.get(_key(ctx, "scenario", crow.id, index, row.seed),
+    result: dict[str, Any] = _CACHE.get(_key(ctx, "scenario", crow.id, index),
                                         compute)
     return result

@@ -3,7 +3,7 @@ migrations in ``app/migrations/``; change both together.
 
 Floats that may be infinite (TTC, TTR) are stored as IEEE doubles (SQLite REAL and
 PostgreSQL double precision both hold +inf); JSON columns never hold non-finite numbers
-(``app.domain.jsonable`` turns them into null first).
+(``app.jsonconv.encode`` writes them as "Infinity" strings first).
 """
 
 from __future__ import annotations
@@ -120,9 +120,11 @@ class ScenarioRow(Base):
     catalogue_id: Mapped[str] = mapped_column(ForeignKey("catalogues.id", ondelete="CASCADE"))
     idx: Mapped[int] = mapped_column(Integer)  # 0 .. n-1 within the catalogue
     chunk_index: Mapped[int] = mapped_column(Integer)
-    seed: Mapped[int] = mapped_column(BigInteger)  # the builder's seed for this scenario
     params: Mapped[dict[str, Any]] = mapped_column(JSON)
     ttc: Mapped[float | None] = mapped_column(Float, nullable=True)
     risk: Mapped[float | None] = mapped_column(Float, nullable=True)
     exposure_weight: Mapped[float | None] = mapped_column(Float, nullable=True)
+    #: the record's score fields (``sampler.record.SCORE_FIELDS``; inf as "Infinity")
     summary: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    #: why the vector has no scores ("build: ..." / "score: ..."), None when scored
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)

@@ -22,6 +22,7 @@ from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from app.db import chunkfile
 from app.db.models import CatalogueRow, ChunkRow, DatasetRow, ModelRow, ScenarioRow, utcnow
 from app.errors import NotFound
 
@@ -88,10 +89,6 @@ def stored_chunk_indices(session: Session, catalogue_id: str) -> set[int]:
     return set(session.scalars(stmt))
 
 
-def chunk_file(catalogue_id: str, index: int) -> str:
-    return f"catalogues/{catalogue_id}/chunk_{index:06d}.jsonl.gz"
-
-
 def store_chunk(session: Session, data_dir: Path, catalogue_id: str, index: int,
                 rows: Sequence[dict[str, Any]], blob: bytes | None, sha256: str | None,
                 diagnostics: dict[str, Any]) -> bool:
@@ -107,7 +104,7 @@ def store_chunk(session: Session, data_dir: Path, catalogue_id: str, index: int,
         return False
     rel = None
     if blob is not None:
-        rel = chunk_file(catalogue_id, index)
+        rel = chunkfile.relative_path(catalogue_id, index)
         write_file_atomic(data_dir / rel, blob)
     try:
         with session.begin_nested():

@@ -1,12 +1,12 @@
 """Catalogue jobs: chunked generation (sample → build → score), executors, resume.
 
 Public surface:
-- ``CatalogueSpec``, ``compute_chunk``, ``chunk_seed``, ``scenario_seed`` (``app.jobs.chunk``)
+- ``CatalogueSpec``, ``compute_chunk``, ``chunk_seed`` (``app.jobs.chunk``)
 - ``make_executor`` and the executors (``app.jobs.executors``)
 - ``CatalogueRunner`` (``app.jobs.runner``) and ``JobManager`` (``app.jobs.manager``)
 """
 
-from app.jobs.chunk import CatalogueSpec, ChunkResult, chunk_seed, compute_chunk, scenario_seed
+from app.jobs.chunk import CatalogueSpec, ChunkResult, chunk_seed, compute_chunk
 from app.jobs.executors import (
     ChunkExecutor,
     DaskExecutor,
@@ -27,5 +27,4 @@ __all__ = [
     "chunk_seed",
     "compute_chunk",
     "make_executor",
-    "scenario_seed",
 ]

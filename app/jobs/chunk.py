@@ -1,26 +1,30 @@
 """One chunk of a catalogue: a pure function of (spec, chunk index).
 
-Seeds: chunk i samples with ``chunk_seed(seed, i)`` and scenario j (global index) is built
-with ``scenario_seed(seed, j)``, both drawn from ``numpy.random.SeedSequence(seed,
-spawn_key=...)``. So chunk i's content depends only on the catalogue's spec and i: the
-order in which chunks run, the executor, and restarts cannot change it.
+Seeds: chunk i samples with ``chunk_seed(seed, i)``, drawn from
+``numpy.random.SeedSequence(seed, spawn_key=...)``; the builder is deterministic, so a
+scenario has no seed of its own (its ``seed`` is the catalogue's, its provenance names its
+index). So chunk i's content depends only on the catalogue's spec and i: the order in which
+chunks run, the executor, and restarts cannot change it. Every vector goes through
+``sampler.record.score_vector`` (the route and the CLI use it too); a vector the builder
+refuses is a row with ``error`` set, not a failed chunk.
 """
 
 from __future__ import annotations
 
-import gzip
 import hashlib
-import json
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from app import domain
+from app import domain, jsonconv
+from app.db import chunkfile
+from riskcore.scenario import ConcreteScenario
+from sampler.record import ScenarioRecord, score_rows, score_vector
 
 #: spawn-key prefixes that keep the seed streams apart
 _CHUNK_KEY = 1
-_SCENARIO_KEY = 2
 _REGION_KEY = 3
 
 
@@ -32,11 +36,6 @@ def _derive(seed: int, *key: int) -> int:
 def chunk_seed(seed: int, index: int) -> int:
     """Sampler seed of chunk ``index`` of a catalogue with seed ``seed`` (31-bit)."""
     return _derive(seed, _CHUNK_KEY, index)
-
-
-def scenario_seed(seed: int, idx: int) -> int:
-    """Builder seed of scenario ``idx`` (0 .. n-1) of a catalogue (31-bit)."""
-    return _derive(seed, _SCENARIO_KEY, idx)
 
 
 def region_seed(seed: int) -> int:
@@ -102,6 +101,20 @@ class ChunkResult:
         return None if self.blob is None else hashlib.sha256(self.blob).hexdigest()
 
 
+def scenario_row(record: ScenarioRecord, chunk_index: int) -> dict[str, Any]:
+    """The stored form of a catalogue scenario's record (``ScenarioRow`` columns)."""
+    return {
+        "idx": record.index,
+        "chunk_index": chunk_index,
+        "params": record.params,
+        "ttc": record.ttc,
+        "risk": record.risk,
+        "exposure_weight": record.exposure_weight,
+        "error": record.error,
+        "summary": jsonconv.encode(record.scores()),
+    }
+
+
 def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     """Sample, build and (optionally) score chunk ``index`` of the catalogue."""
     start, stop = spec.bounds(index)
@@ -109,33 +122,25 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     constraints = domain.parse_constraints(spec.constraints)
     drawn = domain.sample(model, constraints, stop - start, chunk_seed(spec.seed, index),
                           method=spec.method)
-    names = list(domain.PARAM_NAMES)
-    table = drawn.params[names].to_numpy(dtype=np.float64)
+    weights = spec.p_region / spec.n if spec.p_region is not None else drawn.weights
     rows: list[dict[str, Any]] = []
-    lines: list[str] = []
-    for k in range(stop - start):
-        idx = start + k
-        params = {name: float(table[k, j]) for j, name in enumerate(names)}
-        seed = scenario_seed(spec.seed, idx)
-        scenario = domain.build_scenario(params, seed, drawn.lane_width,
-                                         provenance=scenario_provenance(spec, idx))
-        summary = domain.score_scenario(scenario) if spec.score else {}
-        risk = summary.get("risk")
-        rows.append({
-            "idx": idx,
-            "chunk_index": index,
-            "seed": seed,
-            "params": params,
-            "ttc": domain.ttc_of(params),
-            "risk": None if risk is None else float(risk),
-            "exposure_weight": (spec.p_region / spec.n if spec.p_region is not None
-                                else float(drawn.weights[k])),
-            "summary": domain.encode_floats(summary),
-        })
-        if spec.store_trajectories:
-            lines.append(json.dumps(scenario.to_dict(), separators=(",", ":")))
-    blob = None
-    if spec.store_trajectories:
-        blob = gzip.compress(("\n".join(lines) + "\n").encode(), compresslevel=6, mtime=0)
-    diagnostics = domain.encode_floats({"sampler": drawn.diagnostics, "p_region": drawn.p_region})
+    scenarios: list[dict[str, Any] | None] = []
+    for record, _ in score_rows(
+            drawn.params, start=start, exposure_weights=weights, lane_width=drawn.lane_width,
+            seed=spec.seed, provenance=lambda idx: scenario_provenance(spec, idx),
+            score=spec.score, include_scenario=spec.store_trajectories):
+        rows.append(scenario_row(record, index))
+        scenarios.append(record.scenario)  # None: the builder refused the vector
+    blob = chunkfile.encode(scenarios) if spec.store_trajectories else None
+    diagnostics = jsonconv.encode({"sampler": drawn.diagnostics, "p_region": drawn.p_region})
     return ChunkResult(index=index, rows=rows, blob=blob, diagnostics=diagnostics)
+
+
+def rebuild_scenario(spec: CatalogueSpec, idx: int, params: Mapping[str, float],
+                     lane_width: float) -> ConcreteScenario | None:
+    """The concrete scenario of catalogue scenario ``idx`` exactly as its chunk built it
+    (the builder is deterministic); None when the builder refuses the vector."""
+    _, scenario = score_vector(params, index=idx, lane_width=lane_width, seed=spec.seed,
+                               provenance=scenario_provenance(spec, idx), score=False,
+                               include_scenario=True)
+    return scenario

@@ -13,7 +13,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from app import catalogues as service
 from app.db import repository as repo
 from app.deps import ContextDep, JobsDep, SessionDep
-from app.routes.scenarios import SEED_MAX
+from app.schemas import SEED_MAX, ApiModel
+from sampler.record import ScenarioRecord
 
 router = APIRouter(prefix="/catalogues", tags=["catalogues"])
 
@@ -63,7 +64,16 @@ def show_catalogue(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
     return service.describe(ctx, catalogue_id)
 
 
-@router.get("/{catalogue_id}/scenarios", summary="Page through the stored scenarios, "
+class ScenarioPage(ApiModel):
+    catalogue: str
+    total: int = Field(description="scenarios matching the filter")
+    offset: int
+    limit: int
+    scenarios: list[ScenarioRecord]
+
+
+@router.get("/{catalogue_id}/scenarios", response_model=ScenarioPage,
+            summary="Page through the stored scenarios, "
             "filtered by risk and TTC")
 def list_scenarios(
     catalogue_id: str,
@@ -74,13 +84,13 @@ def list_scenarios(
     risk_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     ttc_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     ttc_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
-) -> dict[str, Any]:
+) -> ScenarioPage:
     repo.get_catalogue(session, catalogue_id)
     flt = repo.ScenarioFilter(risk_min=risk_min, risk_max=risk_max, ttc_min=ttc_min,
                               ttc_max=ttc_max)
     total, rows = repo.page_scenarios(session, catalogue_id, flt, offset, limit)
-    return {"catalogue": catalogue_id, "total": total, "offset": offset, "limit": limit,
-            "scenarios": [service.scenario_view(r) for r in rows]}
+    return ScenarioPage(catalogue=catalogue_id, total=total, offset=offset, limit=limit,
+                        scenarios=[service.record_of(r) for r in rows])
 
 
 @router.get("/{catalogue_id}/export", summary="Export a finished catalogue",

@@ -19,7 +19,7 @@ from app.dashboard import views
 from app.db import repository as repo
 from app.deps import ContextDep
 from app.errors import NotFound, ServiceError
-from app.routes.scenarios import SEED_MAX
+from app.schemas import SEED_MAX
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
 

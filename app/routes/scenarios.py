@@ -2,39 +2,42 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any
 
 from fastapi import APIRouter
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from app import domain
 from app.deps import ContextDep
 from app.errors import InvalidInput
-from app.jobs.chunk import scenario_seed
+from app.schemas import ApiModel, PRegion, SamplingRequest
+from sampler.record import ScenarioRecord, score_rows
 
 router = APIRouter(prefix="/scenarios", tags=["scenarios"])
 
-SEED_MAX = 2**63 - 1
 
-
-class ScenarioRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-    model: str = Field(default="default", description="model id ('default': the embedded "
-                       "data's model)")
-    constraints: list[str] = Field(default_factory=lambda: ["ttc<3"],
-                                   description="risk-region constraints, e.g. 'ttc<3'")
+class ScenarioRequest(SamplingRequest):
     n: int = Field(default=10, ge=1, description="number of scenarios (≤ the synchronous "
                    "limit, see SCENGEN_SYNC_N_LIMIT)")
-    seed: int = Field(default=0, ge=0, le=SEED_MAX)
-    sampler: Literal["auto", "rejection", "mcmc"] = "auto"
     score: bool = Field(default=True, description="score each scenario with the TTR risk")
     include_trajectories: bool = Field(default=False,
                                        description="include the concrete scenarios' JSON")
 
 
-@router.post("", summary="Sample n cut-ins in the risk region, build and score them")
-def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> dict[str, Any]:
+class ScenariosResponse(ApiModel):
+    model: str = Field(description="id of the model sampled")
+    n: int
+    seed: int
+    sampler: str = Field(description="the sampler asked for (diagnostics.method: the one used)")
+    constraints: list[str]
+    p_region: PRegion
+    diagnostics: dict[str, Any] = Field(description="the sampler's diagnostics")
+    scenarios: list[ScenarioRecord]
+
+
+@router.post("", response_model=ScenariosResponse,
+             summary="Sample n cut-ins in the risk region, build and score them")
+def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosResponse:
     limit = ctx.settings.sync_n_limit
     if body.n > limit:
         raise InvalidInput(f"n = {body.n} is over the synchronous limit of {limit}; use "
@@ -43,34 +46,12 @@ def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> dict[str, Any]:
     model = ctx.model(model_id, field="body.model")
     constraints = domain.parse_constraints(body.constraints)
     drawn = domain.sample(model, constraints, body.n, body.seed, method=body.sampler)
-    names = list(domain.PARAM_NAMES)
-    table = drawn.params[names].to_numpy(dtype=float)
-    out = []
-    for k in range(len(table)):
-        params = {name: float(table[k, j]) for j, name in enumerate(names)}
-        seed = scenario_seed(body.seed, k)
-        item: dict[str, Any] = {
-            "index": k,
-            "seed": seed,
-            "params": params,
-            "ttc": domain.finite_or_none(domain.ttc_of(params)),
-            "exposure_weight": domain.finite_or_none(drawn.weights[k]),
-            "risk": None,
-        }
-        if body.score or body.include_trajectories:
-            scenario = domain.build_scenario(params, seed, drawn.lane_width)
-            if body.score:
-                item["risk"] = domain.jsonable(domain.score_scenario(scenario))
-            if body.include_trajectories:
-                item["scenario"] = scenario.to_dict()
-        out.append(item)
-    return {
-        "model": model_id,
-        "n": len(out),
-        "seed": body.seed,
-        "sampler": body.sampler,
-        "constraints": body.constraints,
-        "p_region": domain.jsonable(drawn.p_region),
-        "diagnostics": domain.jsonable(drawn.diagnostics),
-        "scenarios": out,
-    }
+    records = [record for record, _ in score_rows(
+        drawn.params, exposure_weights=drawn.weights, lane_width=drawn.lane_width,
+        seed=body.seed, score=body.score, include_scenario=body.include_trajectories,
+        provenance=lambda i: {"sample_index": i, "sampler": body.sampler,
+                              "constraints": list(body.constraints)})]
+    return ScenariosResponse(
+        model=model_id, n=len(records), seed=body.seed, sampler=body.sampler,
+        constraints=body.constraints, p_region=PRegion.model_validate(drawn.p_region),
+        diagnostics=drawn.diagnostics, scenarios=records)

@@ -111,7 +111,7 @@ def scenario_rows(chunk_index: int, start: int, count: int) -> list[dict[str, An
     for k in range(count):
         idx = start + k
         rows.append({
-            "idx": idx, "chunk_index": chunk_index, "seed": 1000 + idx,
+            "idx": idx, "chunk_index": chunk_index,
             "params": {"gap": 10.0 + idx, "dv": 5.0},
             "ttc": (10.0 + idx) / 5.0 if idx % 4 else float("inf"),
             "risk": idx / 100.0,

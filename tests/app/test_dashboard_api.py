@@ -52,7 +52,7 @@ def _hand_catalogue(client: TestClient) -> str:
         summary = {} if risks[i] is None else {
             "risk": risks[i], "risk_ind": min(1.0, (risks[i] or 0.0) + 0.01),
             "min_ttr": ttrs[i], "min_ttr_evasion": evasions[i]}
-        rows.append({"idx": i, "chunk_index": i // 3, "seed": 7 + i, "params": params,
+        rows.append({"idx": i, "chunk_index": i // 3, "params": params,
                      "ttc": ttcs[i], "risk": risks[i], "exposure_weight": 1.0,
                      "summary": summary})
     ctx = _ctx(client)
@@ -230,7 +230,7 @@ def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     for path in (_ctx(client).data_dir / "catalogues" / cid).glob("chunk_000001.*"):
         path.unlink()
     rebuilt = client.get(f"/dashboard/api/catalogues/{cid}/scenarios/2").json()
-    assert rebuilt["trajectory_source"] == "rebuilt from the stored parameters and seed"
+    assert rebuilt["trajectory_source"] == "rebuilt from the stored parameters"
     row2 = client.get(f"/catalogues/{cid}/scenarios", params={"offset": 2, "limit": 1})
     assert rebuilt["summary"]["risk"] == pytest.approx(row2.json()["scenarios"][0]["risk"],
                                                        rel=1e-12)

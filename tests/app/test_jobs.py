@@ -15,14 +15,14 @@ from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, DatasetRow, ModelRow
 from app.jobs import CatalogueRunner, CatalogueSpec, ChunkResult, InlineExecutor
-from app.jobs.chunk import chunk_seed, scenario_seed
+from app.jobs.chunk import chunk_seed
 
 
 def fake_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     """Deterministic stand-in for compute_chunk: rows from (seed, index) only."""
     start, stop = spec.bounds(index)
     rng = np.random.default_rng(chunk_seed(spec.seed, index))
-    rows = [{"idx": i, "chunk_index": index, "seed": scenario_seed(spec.seed, i),
+    rows = [{"idx": i, "chunk_index": index,
              "params": {"gap": float(rng.uniform(5, 50)), "dv": 3.0},
              "ttc": 1.0, "risk": float(rng.uniform()), "exposure_weight": 1.0,
              "summary": {}} for i in range(start, stop)]
@@ -66,7 +66,7 @@ def _catalogue(db: Database, cid: str, n: int = 23, seed: int = 11) -> None:
 
 def _rows(db: Database, cid: str) -> list[tuple[Any, ...]]:
     with db.session() as s:
-        return [(r.idx, r.chunk_index, r.seed, r.params, r.risk)
+        return [(r.idx, r.chunk_index, r.params, r.risk)
                 for r in repo.iter_scenarios(s, cid)]
 
 
@@ -149,8 +149,7 @@ def test_seeds_depend_only_on_catalogue_seed_and_index() -> None:
     assert chunk_seed(5, 3) == chunk_seed(5, 3)
     assert len({chunk_seed(5, i) for i in range(1000)}) == 1000
     assert chunk_seed(5, 3) != chunk_seed(6, 3)
-    assert scenario_seed(5, 3) != chunk_seed(5, 3)
-    assert all(0 <= scenario_seed(9, i) < 2**31 for i in range(100))
+    assert all(0 <= chunk_seed(9, i) < 2**31 for i in range(100))
 
 
 def test_spec_bounds_cover_n_exactly() -> None:

@@ -1,0 +1,56 @@
+"""Request and response schemas shared by several routes, and the service's JSON convention.
+
+JSON convention (one for the whole service): non-finite floats are written as the strings
+``"Infinity"``, ``"-Infinity"`` and ``"NaN"`` (pydantic's ``ser_json_inf_nan="strings"``);
+request models accept those strings back. Response models derive from :class:`ApiModel`;
+JSON built outside pydantic goes through :func:`app.jsonconv.dumps`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from sampler.record import ScenarioRecord
+
+__all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord"]
+
+#: the largest seed a request may give (numpy's SeedSequence takes any int >= 0; JSON
+#: clients handle int64)
+SEED_MAX = 2**63 - 1
+
+SamplerName = Literal["auto", "rejection", "mcmc"]
+
+
+class ApiModel(BaseModel):
+    """Base of every response model: the service's JSON convention for inf/NaN."""
+
+    model_config = ConfigDict(ser_json_inf_nan="strings")
+
+
+class SamplingRequest(BaseModel):
+    """The fields every sampling request shares (POST /scenarios, POST /catalogues)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    model: str = Field(default="default", description="model id ('default': the embedded "
+                       "data's model)")
+    constraints: list[str] = Field(default_factory=lambda: ["ttc<3"],
+                                   description="risk-region constraints, e.g. 'ttc<3'")
+    seed: int = Field(default=0, ge=0, le=SEED_MAX, description="random seed of the sampler")
+    sampler: SamplerName = Field(default="auto", description="rejection, mcmc, or auto "
+                                 "(rejection unless the region is rare)")
+
+
+class PRegion(ApiModel):
+    """P(A): the model's probability mass of the constraint region, with its interval."""
+
+    model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
+
+    estimate: float | None = Field(description="point estimate of P(A)")
+    ci: list[float | None] = Field(description="[low, high] confidence interval of P(A)")
+
+
+def p_region_of(data: dict[str, Any] | None) -> PRegion | None:
+    return None if data is None else PRegion.model_validate(data)
