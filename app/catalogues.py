@@ -174,13 +174,18 @@ def manifest(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     )
 
 
-def export(ctx: ServiceContext, catalogue_id: str, fmt: str, out: Path) -> Path:
-    """Write a finished catalogue to ``out`` in ``fmt`` (``app.exports``)."""
+def export(ctx: ServiceContext, catalogue_id: str, fmt: str, out: Path,
+           mode: str | None = None) -> Path:
+    """Write a finished catalogue to ``out`` in ``fmt`` (``app.exports``); ``mode``
+    (``test``/``replay``) only for ``xosc``."""
     from app.exports import EXPORT_FORMATS, ExportError, export_catalogue
 
     if fmt not in EXPORT_FORMATS:
         raise InvalidInput(f"unknown format {fmt!r}; choose one of {', '.join(EXPORT_FORMATS)}",
                            field="query.format")
+    if mode is not None and fmt != "xosc":
+        raise InvalidInput(f"mode {mode!r}: only the xosc export has modes, not {fmt!r}",
+                           field="query.mode")
     with ctx.db.session() as s:
         row = repo.get_catalogue(s, catalogue_id)
         if row.status != "done":
@@ -188,7 +193,7 @@ def export(ctx: ServiceContext, catalogue_id: str, fmt: str, out: Path) -> Path:
                            "finished catalogue", field="path.catalogue_id")
     try:
         return export_catalogue(fmt, iter_items(ctx, catalogue_id),
-                                manifest(ctx, catalogue_id), out)
+                                manifest(ctx, catalogue_id), out, mode=mode)
     except ExportError as exc:
         raise ServiceError(f"export of catalogue {catalogue_id} failed: {exc}") from None
 

@@ -62,6 +62,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     export.add_argument("--format", default="jsonl",
                         choices=["jsonl", "csv", "parquet", "xosc"])
     export.add_argument("--out", type=Path, required=True, help="output file")
+    export.add_argument("--mode", default=None, choices=["test", "replay"],
+                        help="xosc only: test (default; the ego is the system under test) "
+                             "or replay (both vehicles scripted)")
     export.set_defaults(func=_export)
 
 
@@ -168,7 +171,7 @@ def _export(args: argparse.Namespace) -> int:
 
     ctx = _context(load_defaults=False)
     try:
-        out = catalogues.export(ctx, args.id, args.format, args.out)
+        out = catalogues.export(ctx, args.id, args.format, args.out, mode=args.mode)
     finally:
         ctx.close()
     print(str(out))

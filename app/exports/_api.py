@@ -274,6 +274,8 @@ def export_catalogue(
     items: Iterable[tuple[ConcreteScenario, Mapping[str, Any]]],
     manifest: Mapping[str, Any],
     out: str | os.PathLike[str],
+    *,
+    mode: str | None = None,
 ) -> Path:
     """Write a catalogue to ``out`` in format ``fmt``; stream the items; return the path.
 
@@ -289,6 +291,9 @@ def export_catalogue(
         The file to write (for ``xosc`` a zip). Its directory must exist. The file is
         written under a temporary name next to it and renamed when complete, so a failed
         export leaves nothing behind.
+    mode : {"test", "replay"}, optional
+        OpenSCENARIO mode of the ``xosc`` export (default ``"test"``: the ego is the system
+        under test; ``"replay"``: both vehicles scripted). Only for ``xosc``.
 
     Raises
     ------
@@ -302,6 +307,8 @@ def export_catalogue(
                           f"{', '.join(EXPORT_FORMATS)}")
     if not isinstance(manifest, Mapping):
         raise ExportError(f"manifest: expected a mapping, got {type(manifest).__name__}")
+    if mode is not None and fmt != "xosc":
+        raise ExportError(f"mode: only the xosc export has modes, not {fmt!r}")
     manifest_clean = jsonable(manifest, "manifest")
     out_path = Path(out)
     if not out_path.parent.is_dir():
@@ -324,9 +331,9 @@ def export_catalogue(
 
             write_parquet(checked, manifest_clean, tmp)
         else:
-            from app.exports._xosc import write_xosc_zip
+            from app.exports._xosc import check_mode, write_xosc_zip
 
-            write_xosc_zip(checked, manifest_clean, tmp)
+            write_xosc_zip(checked, manifest_clean, tmp, check_mode(mode or "test"))
         os.replace(tmp, out_path)
     finally:
         if tmp.exists():

@@ -47,6 +47,7 @@ Validation: each ``.xosc`` against ``OpenSCENARIO_1_2.xsd`` and the ``.xodr`` ag
 
 from __future__ import annotations
 
+import csv
 import datetime as dt
 import functools
 import importlib.metadata
@@ -62,12 +63,13 @@ from typing import Any
 
 import numpy as np
 from lxml import etree
-from scenariogeneration import xodr, xosc
+from scenariogeneration import xodr
 
+from app.exports import _osc as osc
 from app.exports._common import ExportError, Row, dumps
 from app.exports._tabular import CsvRowWriter
-from datasets.cutin_model import DEFAULT_LANE_WIDTH
-from riskcore.scenario import ConcreteScenario, Track
+from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES
+from riskcore.scenario import ConcreteScenario
 
 Item = tuple[int, ConcreteScenario, Mapping[str, Any], Row]
 
@@ -80,14 +82,12 @@ INDEX_FILE = "catalogue.csv"
 INDEX_DIGITS = 7
 #: metres of road before the first and after the last vehicle position
 ROAD_MARGIN = 50.0
-#: vehicle properties scengen does not model (m, rad, m/s, m/s^2)
-VEHICLE_HEIGHT = 1.5
-WHEEL_DIAMETER = 0.7
-MAX_STEERING = 0.5
-AXLE_FRACTION = 0.3  # axles at +-0.3 length from the box centre
-MAX_SPEED = 70.0
-MAX_ACCELERATION = 10.0
-MAX_DECELERATION = 10.0
+#: the catalogue as one logical scenario (see docs/exports.md)
+LOGICAL_FILE = "cutin_logical.xosc"
+DISTRIBUTION_FILE = "cutin_distribution.xosc"
+WEIGHTS_FILE = "cutin_weights.csv"
+# esmini looks the catalogue up as <directory>/<catalogName>.xosc
+CATALOG_FILE = f"{osc.CATALOG_DIR}/{osc.TRAJECTORY_CATALOG}.xosc"
 #: header date when the manifest carries no ``created_at`` (keeps exports deterministic)
 DEFAULT_DATE = dt.datetime(1970, 1, 1)
 #: zip entry timestamp (the earliest a zip can hold) and permissions
@@ -97,7 +97,7 @@ ZIP_MODE = 0o644
 # scenariogeneration keeps the OpenSCENARIO version in a class attribute shared by every
 # object, and the lxml schema objects are shared too; building, serialising and validating
 # happen under this lock so that concurrent exports in threads cannot interfere.
-_LOCK = threading.Lock()
+_LOCK = threading.RLock()
 
 
 def schema_path(name: str) -> Path:
@@ -150,12 +150,18 @@ def _to_lxml(element: ET.Element) -> etree._Element:
 
 def _validated_bytes(element: ET.Element, schema_name: str, what: str) -> bytes:
     """Serialise, validate against the XSD, return pretty-printed UTF-8 with declaration."""
-    doc = _to_lxml(element)
+    return _validated_tree(_to_lxml(element), schema_name, what)
+
+
+def _validated_tree(doc: etree._Element, schema_name: str, what: str) -> bytes:
+    """Validate an lxml tree against the XSD; pretty-printed UTF-8 with declaration."""
     schema = _schema(schema_name)
-    if not schema.validate(doc):
+    with _LOCK:
+        valid = schema.validate(doc)
         errors = "; ".join(
             f"line {e.line}: {e.message}" for e in list(schema.error_log)[:3]
         )
+    if not valid:
         raise ExportError(f"{what} does not validate against {schema_name}: {errors}")
     out: bytes = etree.tostring(doc, pretty_print=True, xml_declaration=True,
                                 encoding="UTF-8")
@@ -180,58 +186,23 @@ def _num(value: float) -> str:
     return repr(float(value))
 
 
-def _vehicle(track: Track) -> xosc.Vehicle:
-    box = xosc.BoundingBox(track.width, track.length, VEHICLE_HEIGHT,
-                           0.0, 0.0, VEHICLE_HEIGHT / 2)
-    track_width = track.width * 0.85
-    front = xosc.Axle(MAX_STEERING, WHEEL_DIAMETER, track_width,
-                      AXLE_FRACTION * track.length, WHEEL_DIAMETER / 2)
-    rear = xosc.Axle(0.0, WHEEL_DIAMETER, track_width,
-                     -AXLE_FRACTION * track.length, WHEEL_DIAMETER / 2)
-    return xosc.Vehicle(track.id, xosc.VehicleCategory.car, box, front, rear,
-                        MAX_SPEED, MAX_ACCELERATION, MAX_DECELERATION)
-
-
-def _sim_time_trigger(name: str, value: float, point: str = "start") -> xosc.ValueTrigger:
-    edge = xosc.ConditionEdge.rising if point == "stop" else xosc.ConditionEdge.none
-    return xosc.ValueTrigger(
-        name, 0.0, edge, xosc.SimulationTimeCondition(value, xosc.Rule.greaterOrEqual), point
-    )
-
-
-def _follow(track: Track, times: list[float]) -> xosc.ManeuverGroup:
-    positions = [
-        xosc.WorldPosition(x, y, h=psi)
-        for x, y, psi in zip(track.x.tolist(), track.y.tolist(), track.psi.tolist(),
-                             strict=True)
-    ]
-    trajectory = xosc.Trajectory(f"{track.id} trajectory", False)
-    trajectory.add_shape(xosc.Polyline(times, positions))
-    action = xosc.FollowTrajectoryAction(
-        trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.absolute, 1.0, 0.0,
-    )
-    event = xosc.Event(f"{track.id} follows its trajectory", xosc.Priority.override)
-    event.add_action(f"{track.id} follow trajectory", action)
-    event.add_trigger(_sim_time_trigger(f"{track.id} starts", 0.0))
-    maneuver = xosc.Maneuver(f"{track.id} maneuver")
-    maneuver.add_event(event)
-    group = xosc.ManeuverGroup(f"{track.id} maneuver group")
-    group.add_actor(track.id)
-    group.add_maneuver(maneuver)
-    return group
-
-
-def _properties(index: int, scenario: ConcreteScenario, row: Row) -> xosc.Properties:
-    props = xosc.Properties()
-    props.add_property("scengen.index", str(index))
-    props.add_property("scengen.t0", _num(scenario.t[0]))
+def _properties(index: int, scenario: ConcreteScenario, row: Row, mode: str) -> dict[str, str]:
+    props = {"scengen.index": str(index), "scengen.mode": mode,
+             "scengen.t0": _num(scenario.t[0])}
     if row.get("scenario_id") is not None:
-        props.add_property("scengen.scenario_id", str(row["scenario_id"]))
+        props["scengen.scenario_id"] = str(row["scenario_id"])
     if scenario.seed is not None:
-        props.add_property("scengen.seed", str(scenario.seed))
+        props["scengen.seed"] = str(scenario.seed)
     for name, value in scenario.params.items():
-        props.add_property(f"scengen.param.{name}", _num(value))
+        props[f"scengen.param.{name}"] = _num(value)
     return props
+
+
+def check_mode(mode: str) -> str:
+    if mode not in osc.MODES:
+        raise ExportError(f"mode: unknown OpenSCENARIO mode {mode!r}; choose one of "
+                          f"{', '.join(osc.MODES)}")
+    return mode
 
 
 def scenario_xosc(
@@ -239,41 +210,21 @@ def scenario_xosc(
     *,
     index: int = 0,
     row: Row | None = None,
+    mode: str = osc.DEFAULT_MODE,
     road_file: str = ROAD_FILE,
     date: dt.datetime = DEFAULT_DATE,
 ) -> bytes:
-    """One scenario as a validated OpenSCENARIO 1.2 document (UTF-8 bytes)."""
+    """One scenario as a validated OpenSCENARIO 1.2 document (UTF-8 bytes) in ``mode``."""
+    check_mode(mode)
     if not scenario.objects:
         raise ExportError("the scenario has no objects besides the ego")
-    t0 = float(scenario.t[0])
-    times = (scenario.t - t0).tolist()  # simulation time; unchanged when t0 == 0
-    tracks = (scenario.ego, *scenario.objects)
-    with _LOCK:
-        entities = xosc.Entities()
-        init = xosc.Init()
-        act = xosc.Act("trajectories", _sim_time_trigger("act starts", 0.0))
-        step = xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time,
-                                       0.0)
-        for track in tracks:
-            entities.add_scenario_object(track.id, _vehicle(track))
-            init.add_init_action(track.id, xosc.TeleportAction(
-                xosc.WorldPosition(float(track.x[0]), float(track.y[0]),
-                                   h=float(track.psi[0]))))
-            init.add_init_action(track.id, xosc.AbsoluteSpeedAction(float(track.v[0]), step))
-            act.add_maneuver_group(_follow(track, times))
-        story = xosc.Story("scengen cut-in")
-        story.add_act(act)
-        storyboard = xosc.StoryBoard(init, _sim_time_trigger("end", times[-1], "stop"))
-        storyboard.add_story(story)
-        description = f"scengen scenario {index}"
-        doc = xosc.Scenario(
-            description, "scengen", xosc.ParameterDeclarations(), entities, storyboard,
-            xosc.RoadNetwork(road_file), xosc.Catalog(), osc_minor_version=2,
-            creation_date=date,
-            header_properties=_properties(index, scenario, row or {}),
-        )
-        element = doc.get_element()
-        return _validated_bytes(element, OSC_XSD, f"scenario {index} (.xosc)")
+    row = row or {}
+    root = osc.scenario_document(
+        scenario, mode=mode, description=f"scengen scenario {index} ({mode})", date=date,
+        properties=_properties(index, scenario, row, mode),
+        declarations=osc.scenario_declarations(scenario, row), road_file=road_file,
+    )
+    return _validated_tree(root, OSC_XSD, f"scenario {index} (.xosc)")
 
 
 @dataclass
@@ -361,13 +312,189 @@ def scenario_file_name(index: int) -> str:
     return f"scenario_{index:0{INDEX_DIGITS}d}.xosc"
 
 
-def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Path) -> None:
+class LogicalCatalogue:
+    """The catalogue as one logical scenario, written alongside the per-scenario files.
+
+    ``LOGICAL_FILE``: the test-mode scenario with every per-scenario value a parameter;
+    ``DISTRIBUTION_FILE``: a deterministic ``ParameterValueDistribution`` with one
+    ``ParameterValueSet`` per scenario, in catalogue order (permutation i = i-th scenario);
+    ``CATALOG_FILE``: the cutters' trajectories, one catalogue entry per scenario, picked by
+    the ``cutter_trajectory`` parameter; ``WEIGHTS_FILE``: permutation, catalogue index,
+    per-scenario file and exposure weight. Only catalogues of single-cutter scenarios with
+    every cut-in parameter have one; ``reason`` says why there is none.
+    """
+
+    def __init__(self, scratch: Path, date: dt.datetime) -> None:
+        self.date = date
+        self.reason: str | None = None
+        self.count = 0
+        self.names: list[osc.Declaration] = []
+        self.logical: bytes | None = None
+        self.paths = {name: scratch.with_name(f"{scratch.name}.{i}")
+                      for i, name in enumerate((CATALOG_FILE, DISTRIBUTION_FILE, WEIGHTS_FILE))}
+        self._fh = {name: path.open("w", encoding="utf-8", newline="\n")
+                    for name, path in self.paths.items()}
+        self._weights = csv.writer(self._fh[WEIGHTS_FILE], lineterminator="\n")
+        self._weights.writerow(("permutation", "index", "file", "exposure_weight"))
+        self._closed = False
+
+    def _declarations(self, scenario: ConcreteScenario, row: Row,
+                      control: Mapping[str, str]) -> list[osc.Declaration]:
+        out = [osc.Declaration(name, kind, control[name], unit, doc)
+               for name, kind, unit, doc in osc.CONTROL_PARAMETERS]
+        out += [d for d in osc.scenario_declarations(scenario, {"ttc": row.get("ttc")})]
+        for name, (unit, kind, doc) in osc.criticality_fields().items():
+            if name in row:
+                osc_kind = "double" if kind == "float" else "string"
+                out.append(osc.Declaration(name, osc_kind, self._text(row[name], osc_kind),
+                                           unit, doc))
+        return out
+
+    @staticmethod
+    def _text(value: Any, kind: str) -> str:
+        if value is None:
+            return "NaN" if kind == "double" else ""
+        if kind == "double":
+            return osc.num(value) if not isinstance(value, str) else "NaN"
+        if isinstance(value, bool):
+            return "true" if value else "false"
+        return str(value)
+
+    def add(self, index: int, scenario: ConcreteScenario, row: Row, file: str) -> None:
+        if self.reason is not None:
+            return
+        if len(scenario.objects) != 1:
+            self.reason = (f"item {index} has {len(scenario.objects)} objects besides the "
+                           "ego; the logical scenario has one cutter")
+            return
+        missing = [n for n in PARAM_NAMES if n not in scenario.params]
+        if missing:
+            self.reason = f"item {index} lacks the parameter(s) {', '.join(missing)}"
+            return
+        entry = scenario_file_name(index).removesuffix(".xosc")
+        control = osc.control_values(scenario, entry)
+        if self.count == 0:
+            self.names = self._declarations(scenario, row, control)
+            root = osc.logical_document(
+                description="scengen catalogue as one logical cut-in scenario (test mode)",
+                date=self.date, declarations=self.names, road_file=ROAD_FILE)
+            self.logical = _validated_tree(root, OSC_XSD, LOGICAL_FILE)
+            for name in (CATALOG_FILE, DISTRIBUTION_FILE):
+                self._fh[name].write(self._head(name))
+        # the catalogue entry, validated inside a one-entry catalogue
+        wrapper = osc.el(None, "OpenSCENARIO")
+        osc.file_header(wrapper, "entry check", self.date)
+        catalog = osc.el(wrapper, "Catalog", name=osc.TRAJECTORY_CATALOG)
+        traj = osc.cutter_trajectory(catalog, scenario, entry)
+        _validated_tree(wrapper, OSC_XSD, f"item {index}: trajectory catalogue entry")
+        self._fh[CATALOG_FILE].write(_fragment(traj, 4))
+        values = {d.name: d for d in self.names}
+        value_set = osc.el(None, "ParameterValueSet")
+        for name, decl in values.items():
+            if name in control:
+                text = control[name]
+            elif name in PARAM_NAMES:
+                text = osc.num(scenario.params[name])
+            elif name == "ttc":
+                text = self._text(row.get("ttc"), "double")
+            else:
+                text = self._text(row.get(name), decl.kind)
+            osc.el(value_set, "ParameterAssignment", parameterRef=name, value=text)
+        self._fh[DISTRIBUTION_FILE].write(_fragment(value_set, 10))
+        weight = row.get("exposure_weight")
+        self._weights.writerow((self.count, index, file,
+                                "" if weight is None else repr(float(weight))))
+        self.count += 1
+
+    def _head(self, name: str) -> str:
+        root = osc.root_element()
+        if name == CATALOG_FILE:
+            osc.file_header(root, "cutter trajectories of a scengen catalogue", self.date)
+            osc.el(root, "Catalog", name=osc.TRAJECTORY_CATALOG)
+            return _open_head(root, f'<Catalog name="{osc.TRAJECTORY_CATALOG}"/>')
+        osc.file_header(root, "the sampled tuples of a scengen catalogue", self.date)
+        dist = osc.el(root, "ParameterValueDistribution")
+        osc.el(dist, "ScenarioFile", filepath=LOGICAL_FILE)
+        osc.el(osc.el(osc.el(dist, "Deterministic"), "DeterministicMultiParameterDistribution"),
+               "ValueSetDistribution")
+        return _open_head(root, "<ValueSetDistribution/>")
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        tails = {CATALOG_FILE: "  </Catalog>\n</OpenSCENARIO>\n",
+                 DISTRIBUTION_FILE: ("        </ValueSetDistribution>\n"
+                                     "      </DeterministicMultiParameterDistribution>\n"
+                                     "    </Deterministic>\n  </ParameterValueDistribution>\n"
+                                     "</OpenSCENARIO>\n")}
+        for name, fh in self._fh.items():
+            if self.reason is None and self.count and name in tails:
+                fh.write(tails[name])
+            fh.close()
+
+    def remove(self) -> None:
+        for path in self.paths.values():
+            if path.exists():
+                path.unlink()
+
+    def entries(self) -> dict[str, bytes | Path]:
+        """Zip entry name -> content (bytes) or the scratch file holding it."""
+        if self.reason is not None or self.logical is None:
+            return {}
+        return {LOGICAL_FILE: self.logical, **self.paths}
+
+    def manifest(self) -> dict[str, Any]:
+        if self.reason is not None or self.logical is None:
+            return {"included": False, "reason": self.reason or "empty catalogue"}
+        return {
+            "included": True,
+            "scenario_file": LOGICAL_FILE,
+            "distribution_file": DISTRIBUTION_FILE,
+            "trajectory_catalog": CATALOG_FILE,
+            "weights_file": WEIGHTS_FILE,
+            "n_permutations": self.count,
+            "mode": "test",
+            "parameters": [d.name for d in self.names],
+            "cutter_motion": "catalogue trajectory per tuple (exact): the sine yaw-rate lane "
+                             "change with a speed pulse is no OpenSCENARIO action shape",
+        }
+
+
+_XML_DECL = "<?xml version='1.0' encoding='UTF-8'?>\n"
+
+
+def _open_head(root: etree._Element, empty: str) -> str:
+    """The document's text up to its innermost (empty) element, left open for entries."""
+    text: str = etree.tostring(root, encoding="unicode", pretty_print=True)
+    head = text[:text.index(empty)]
+    return _XML_DECL + head + empty[:-2] + ">\n"
+
+
+def _fragment(element: etree._Element, indent: int) -> str:
+    etree.indent(element, space="  ", level=indent // 2)
+    text: str = etree.tostring(element, encoding="unicode", with_tail=False)
+    return " " * indent + text + "\n"
+
+
+def _copy_into(zf: zipfile.ZipFile, name: str, path: Path) -> None:
+    info = _zinfo(name)
+    info.file_size = os.path.getsize(path)
+    with path.open("rb") as src, zf.open(info, "w") as dst:
+        while chunk := src.read(1 << 20):
+            dst.write(chunk)
+
+
+def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Path,
+                   mode: str = osc.DEFAULT_MODE) -> None:
     """Stream the scenarios into a scratch zip, then assemble the final sorted zip."""
+    check_mode(mode)
     if "export" in manifest:
         raise ExportError("manifest: the key 'export' is reserved for the xosc export")
     date = _creation_date(manifest)
     scratch_zip = path.with_name(path.name + ".scenarios")
     scratch_csv = path.with_name(path.name + ".csv")
+    logical = LogicalCatalogue(path.with_name(path.name + ".logical"), date)
     extent: RoadExtent | None = None
     count = 0
     try:
@@ -391,12 +518,14 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
                 extent.add(scenario)
                 name = scenario_file_name(index)
                 try:
-                    data = scenario_xosc(scenario, index=index, row=row, date=date)
+                    data = scenario_xosc(scenario, index=index, row=row, mode=mode, date=date)
                 except ExportError as exc:
                     raise ExportError(f"item {index}: {exc}") from None
                 zs.writestr(name, data)
                 index_writer.write(index, row, (name,))
+                logical.add(index, scenario, row, name)
                 count += 1
+        logical.close()
         assert extent is not None  # an empty catalogue raised in the item stream
         road = road_xodr(extent)
         n_left, n_right = extent.lanes()
@@ -404,35 +533,45 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
         full_manifest = dict(manifest)
         full_manifest["export"] = {
             "format": "xosc",
+            "mode": mode,
             "n_scenarios": count,
             "openscenario": "1.2",
             "opendrive": "1.7",
             "road_file": ROAD_FILE,
             "index_file": INDEX_FILE,
             "scenario_files": f"scenario_<index, {INDEX_DIGITS} digits>.xosc",
+            "logical_scenario": logical.manifest(),
             "lane_width": extent.lane_width,
             "lanes_left_of_ego": n_left,
             "lanes_right_of_ego": n_right,
             "road_x_range": [x_start, x_end],
             "frame": "scengen road frame = OpenSCENARIO world frame: x along the road, "
                      "y left, heading counter-clockwise from +x, z up; ego lane centre y = 0",
-            "reference_point": "vehicle bounding-box centre (BoundingBox Center x = y = 0)",
-            "time": "vertex time = scenario time - t[0] (simulation starts at the first "
-                    "step); Timing absolute, scale 1, offset 0; t[0] in the scengen.t0 "
-                    "header property",
+            "reference_point": "rear axle, 0.3 length behind the bounding-box centre "
+                               "(BoundingBox Center x = 0.3 length, RearAxle positionX = 0)",
+            "time": "simulation time 0 = the scenario's first step (t[0] in the scengen.t0 "
+                    "header property); replay: absolute timing; test: the cutter's timing "
+                    "relative to its trigger",
+        }
+        entries: dict[str, bytes | Path] = {
+            INDEX_FILE: scratch_csv,
+            MANIFEST_FILE: (dumps(full_manifest, indent=2) + "\n").encode("utf-8"),
+            ROAD_FILE: road,
+            **logical.entries(),
         }
         with zipfile.ZipFile(path, "w") as zf:
-            info = _zinfo(INDEX_FILE)
-            info.file_size = os.path.getsize(scratch_csv)
-            with scratch_csv.open("rb") as src, zf.open(info, "w") as dst:
-                while chunk := src.read(1 << 20):
-                    dst.write(chunk)
-            zf.writestr(_zinfo(MANIFEST_FILE), dumps(full_manifest, indent=2) + "\n")
-            zf.writestr(_zinfo(ROAD_FILE), road)
+            for name in sorted(entries):  # all sort before the scenario files
+                source = entries[name]
+                if isinstance(source, Path):
+                    _copy_into(zf, name, source)
+                else:
+                    zf.writestr(_zinfo(name), source)
             with zipfile.ZipFile(scratch_zip) as zs:
                 for entry in zs.infolist():  # written in index order = name order
                     zf.writestr(_zinfo(entry.filename), zs.read(entry))
     finally:
+        logical.close()
+        logical.remove()
         for scratch in (scratch_zip, scratch_csv):
             if scratch.exists():
                 scratch.unlink()

@@ -100,11 +100,14 @@ def export_catalogue(
     ctx: ContextDep,
     background: BackgroundTasks,
     format: Annotated[Literal["jsonl", "csv", "parquet", "xosc"], Query()] = "jsonl",
+    mode: Annotated[Literal["test", "replay"] | None, Query(
+        description="xosc only: test (default; the ego is the system under test) or "
+                    "replay (both vehicles scripted)")] = None,
 ) -> Response:
     tmp = Path(tempfile.mkdtemp(prefix="export-", dir=_tmp_dir(ctx.data_dir)))
     out = tmp / f"{catalogue_id}.{SUFFIXES[format]}"
     try:
-        service.export(ctx, catalogue_id, format, out)
+        service.export(ctx, catalogue_id, format, out, mode=mode)
     except BaseException:
         _rmtree(tmp)
         raise

@@ -398,24 +398,36 @@ def xosc_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _export(tmp_path_factory.mktemp("xosc"), "xosc")
 
 
+LOGICAL_FILES = ["catalogs/scengen_cutter_trajectories.xosc", "catalogue.csv",
+                 "cutin_distribution.xosc", "cutin_logical.xosc", "cutin_weights.csv"]
+
+
+@pytest.fixture(scope="module")
+def xosc_replay_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("xosc_replay") / "catalogue.zip"
+    return export_catalogue("xosc", items(), manifest(), out, mode="replay")
+
+
 def test_xosc_zip_layout(xosc_zip: Path) -> None:
     with zipfile.ZipFile(xosc_zip) as zf:
         names = zf.namelist()
         infos = zf.infolist()
-    assert names == ["catalogue.csv", "manifest.json", "road.xodr",
+    assert names == [*LOGICAL_FILES, "manifest.json", "road.xodr",
                      "scenario_0000000.xosc", "scenario_0000001.xosc"]
     assert all(i.date_time == (1980, 1, 1, 0, 0, 0) for i in infos)
 
 
-def test_every_xosc_validates_against_openscenario_1_2(xosc_zip: Path) -> None:
+def test_every_xosc_validates_against_openscenario_1_2(xosc_zip: Path,
+                                                       xosc_replay_zip: Path) -> None:
     schema = _xsd("OpenSCENARIO_1_2.xsd")
-    with zipfile.ZipFile(xosc_zip) as zf:
-        for name in ("scenario_0000000.xosc", "scenario_0000001.xosc"):
-            doc = etree.fromstring(zf.read(name))
-            assert schema.validate(doc), (name, schema.error_log)
-            header = doc.find("FileHeader")
-            assert header is not None
-            assert (header.get("revMajor"), header.get("revMinor")) == ("1", "2")
+    for path in (xosc_zip, xosc_replay_zip):
+        with zipfile.ZipFile(path) as zf:
+            for name in [n for n in zf.namelist() if n.endswith(".xosc")]:
+                doc = etree.fromstring(zf.read(name))
+                assert schema.validate(doc), (name, schema.error_log)
+                header = doc.find("FileHeader")
+                assert header is not None
+                assert (header.get("revMajor"), header.get("revMinor")) == ("1", "2")
 
 
 def test_road_validates_against_opendrive_1_7_and_centres_the_ego_lane(xosc_zip: Path) -> None:
@@ -446,37 +458,45 @@ def _vertices(doc: etree._Element, entity: str) -> list[etree._Element]:
     return list(group[0].iterfind(".//Trajectory/Shape/Polyline/Vertex"))
 
 
-def test_xosc_trajectories_are_the_exact_scenario_tracks(xosc_zip: Path) -> None:
-    with zipfile.ZipFile(xosc_zip) as zf:
+def _vertex(vertex: etree._Element) -> tuple[float, ...]:
+    pos = vertex.find("Position/WorldPosition")
+    assert pos is not None
+    return (float(vertex.get("time", "nan")), float(pos.get("x", "nan")),
+            float(pos.get("y", "nan")), float(pos.get("h", "nan")))
+
+
+def test_xosc_replay_trajectories_are_the_rear_axles_of_the_scenario_tracks(
+        xosc_replay_zip: Path) -> None:
+    # positions are rear axles, 0.3 length behind the box centre along the heading:
+    # cos 0.1 = 0.99500416527803, sin 0.1 = 0.09983341664683 (cut-in of a, 1.2 m back);
+    # cos 0.2 = 0.98006657784124, sin 0.2 = 0.19866933079506 (car 1, 1.275 m back);
+    # cos 0.125 = 0.99219766722933, sin 0.125 = 0.12467473338523
+    with zipfile.ZipFile(xosc_replay_zip) as zf:
         doc_a = etree.fromstring(zf.read("scenario_0000000.xosc"))
         doc_b = etree.fromstring(zf.read("scenario_0000001.xosc"))
     for doc, expected in (
-        (doc_a, {"ego": [(0.0, 0.0, 0.0, 0.0), (0.3, 9.0, 0.0, 0.0)],
-                 "cutin": [(0.0, 20.0, 3.75, -0.1), (0.3, 27.5, 3.0, -0.1)]}),
+        (doc_a, {"ego": [(0.0, -1.35, 0.0, 0.0), (0.3, 7.65, 0.0, 0.0)],
+                 "cutin": [(0.0, 18.80599500166636, 3.86980009997619, -0.1),
+                           (0.3, 26.30599500166636, 3.11980009997619, -0.1)]}),
         # b's grid starts at t = 2 s: simulation time 0 is its first step
-        (doc_b, {"ego": [(0.0, 100.0, 0.0, 0.0), (1.0, 130.0, 0.0, 0.0)],
-                 "car 1": [(0.0, 110.0, -3.5, 0.2), (1.0, 142.0, -1.5, 0.125)]}),
+        (doc_b, {"ego": [(0.0, 98.5, 0.0, 0.0), (1.0, 128.5, 0.0, 0.0)],
+                 "car 1": [(0.0, 108.75041511325242, -3.75330339676370, 0.2),
+                           (1.0, 140.73494797428260, -1.65896028506617, 0.125)]}),
     ):
         n_steps = 4 if doc is doc_a else 3
-        for entity, ((t0, x0, y0, h0), (t1, x1, y1, h1)) in expected.items():
+        for entity, (first, last) in expected.items():
             vertices = _vertices(doc, entity)
             assert len(vertices) == n_steps
-            first, last = vertices[0], vertices[-1]
-            p0, p1 = first.find("Position/WorldPosition"), last.find("Position/WorldPosition")
-            assert p0 is not None and p1 is not None
-            assert float(first.get("time", "nan")) == t0
-            assert float(last.get("time", "nan")) == t1
-            assert (float(p0.get("x")), float(p0.get("y")), float(p0.get("h"))) == (x0, y0, h0)
-            assert (float(p1.get("x")), float(p1.get("y")), float(p1.get("h"))) == (x1, y1, h1)
-    # a middle vertex too: the cut-in of scenario a at t = 0.2 s is at (25, 3.25)
+            assert _vertex(vertices[0]) == pytest.approx(first, abs=1e-12)
+            assert _vertex(vertices[-1]) == pytest.approx(last, abs=1e-12)
+    # a middle vertex too: the cut-in of scenario a at t = 0.2 s, centre (25, 3.25)
     middle = _vertices(doc_a, "cutin")[2]
-    assert float(middle.get("time", "nan")) == pytest.approx(0.2)
-    pos = middle.find("Position/WorldPosition")
-    assert pos is not None and (pos.get("x"), pos.get("y")) == ("25.0", "3.25")
+    assert _vertex(middle) == pytest.approx((0.2, 23.80599500166636, 3.36980009997619, -0.1),
+                                            abs=1e-12)
 
 
-def test_xosc_timing_entities_and_init(xosc_zip: Path) -> None:
-    with zipfile.ZipFile(xosc_zip) as zf:
+def test_xosc_replay_timing_entities_and_init(xosc_replay_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_replay_zip) as zf:
         doc = etree.fromstring(zf.read("scenario_0000001.xosc"))
     timings = doc.findall(".//FollowTrajectoryAction/TimeReference/Timing")
     assert len(timings) == 2
@@ -492,16 +512,136 @@ def test_xosc_timing_entities_and_init(xosc_zip: Path) -> None:
     modes = doc.xpath("//FollowTrajectoryAction/TrajectoryFollowingMode/@followingMode")
     assert modes == ["position", "position"]
     [car] = doc.xpath("//ScenarioObject[@name='car 1']/Vehicle")
-    assert car.find("BoundingBox/Center").get("x") == "0.0"
+    # reference point = rear axle: the box centre 0.3 * 4.25 m ahead, front axle 0.6 * 4.25
+    assert car.find("BoundingBox/Center").get("x") == "1.275"
+    assert car.find("Axles/RearAxle").get("positionX") == "0.0"
+    assert float(car.find("Axles/FrontAxle").get("positionX")) == pytest.approx(2.55)
+    assert car.xpath("Properties/Property[@name='plineInterpolation']/@value") == ["segment"]
+    assert doc.xpath("//Property[@name='type']") == []  # replay: nobody is the ego vehicle
     dims = car.find("BoundingBox/Dimensions")
     assert (dims.get("length"), dims.get("width")) == ("4.25", "1.75")
     [teleport] = doc.xpath("//Init//Private[@entityRef='car 1']//TeleportAction//WorldPosition")
-    assert (teleport.get("x"), teleport.get("y"), teleport.get("h")) == ("110.0", "-3.5", "0.2")
+    assert (float(teleport.get("x")), float(teleport.get("y")), float(teleport.get("h"))) == \
+        pytest.approx((108.75041511325242, -3.75330339676370, 0.2), abs=1e-12)
     [speed] = doc.xpath("//Init//Private[@entityRef='car 1']//AbsoluteTargetSpeed/@value")
     assert float(speed) == 32.0
     [stop] = doc.xpath("/OpenSCENARIO/Storyboard/StopTrigger//SimulationTimeCondition/@value")
     assert float(stop) == 1.0  # 3 s - 2 s
+    [collision] = doc.xpath("/OpenSCENARIO/Storyboard/StopTrigger//CollisionCondition")
+    assert collision.xpath("EntityRef/@entityRef") == ["car 1"]
+    assert collision.xpath("../../TriggeringEntities/EntityRef/@entityRef") == ["ego"]
     assert doc.xpath("//RoadNetwork/LogicFile/@filepath") == ["road.xodr"]
+
+
+def scenario_c() -> ConcreteScenario:
+    """Both cars straight at constant speed up to step 2, then the cutter turns right."""
+    return ConcreteScenario(
+        t=np.array([0.0, 0.1, 0.2, 0.3, 0.4]),
+        ego=_track("ego", 4.0, 1.8, [0.0, 3.0, 6.0, 9.0, 12.0], [0.0] * 5, [0.0] * 5,
+                   [30.0] * 5),
+        objects=(_track("cutter", 4.0, 1.8, [20.0, 22.5, 25.0, 27.6, 30.4],
+                        [3.5, 3.5, 3.5, 3.4, 3.2], [0.0, 0.0, 0.0, -0.1, -0.1],
+                        [25.0, 25.0, 25.0, 26.0, 27.0]),),
+        params=dict(PARAMS_A),
+    )
+
+
+def test_xosc_test_mode_ego_is_the_system_under_test_and_the_cutter_starts_on_a_trigger(
+        tmp_path: Path) -> None:
+    path = _export(tmp_path, "xosc", data=[(scenario_c(), {"exposure_weight": 0.5})])
+    with zipfile.ZipFile(path) as zf:
+        doc = etree.fromstring(zf.read("scenario_0000000.xosc"))
+    assert doc.xpath("//ScenarioObject[@name='ego']/Vehicle/Properties/Property"
+                     "[@name='type']/@value") == ["ego_vehicle"]
+    assert doc.xpath("//ManeuverGroup[Actors/EntityRef/@entityRef='ego']") == []
+    [teleport] = doc.xpath("//Init//Private[@entityRef='ego']//TeleportAction//WorldPosition")
+    assert (teleport.get("x"), teleport.get("y")) == ("-1.2", "0.0")
+    [timing] = doc.xpath("//FollowTrajectoryAction/TimeReference/Timing")
+    assert timing.get("domainAbsoluteRelative") == "relative"
+    # the cutter is straight at 25 m/s up to step 2 (t = 0.2 s): its trajectory starts
+    # there, relative to where it is then; the ego (30 m/s) closes in
+    vertices = _vertices(doc, "cutter")
+    assert [float(v.get("time")) for v in vertices] == pytest.approx([0.0, 0.1, 0.2])
+    rel = vertices[1].find("Position/RelativeWorldPosition")
+    assert rel is not None and rel.get("entityRef") == "cutter"
+    # step 3: rear axle (27.6 - 1.2 cos 0.1, 3.4 + 1.2 sin 0.1) minus step 2's (23.8, 3.5)
+    assert (float(rel.get("dx")), float(rel.get("dy"))) == pytest.approx(
+        (2.60599500166636, 0.01980009997619), abs=1e-12)
+    assert float(rel.find("Orientation").get("h")) == -0.1
+    # trigger: rear axles 23.8 - (-1.2 + 30 * 0.2) = 19 m apart at step 2, closing
+    [dist] = doc.xpath("//Event/StartTrigger//RelativeDistanceCondition")
+    assert dist.get("rule") == "lessOrEqual" and dist.get("entityRef") == "cutter"
+    assert dist.get("relativeDistanceType") == "longitudinal"
+    assert dist.get("freespace") == "false"
+    assert float(dist.get("value")) == pytest.approx(19.0 + 1e-6, abs=1e-9)
+    assert dist.xpath("../../TriggeringEntities/EntityRef/@entityRef") == ["ego"]
+    # stop: collision, the cutter's trajectory done, or 0.4 s + 30 s
+    [done] = doc.xpath("//StopTrigger//StoryboardElementStateCondition")
+    assert (done.get("storyboardElementRef"), done.get("state")) == (
+        "cutter manoeuvre", "completeState")
+    [stop] = doc.xpath("//StopTrigger//SimulationTimeCondition/@value")
+    assert float(stop) == pytest.approx(30.4)
+
+
+def test_xosc_declares_the_cut_in_parameters_and_ttc_with_units(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        doc = etree.fromstring(zf.read("scenario_0000001.xosc"))
+    decls = doc.find("ParameterDeclarations")
+    assert decls is not None
+    names = [d.get("name") for d in decls.iterfind("ParameterDeclaration")]
+    assert names[:9] == ["p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap", "ttc"]
+    values = {d.get("name"): d.get("value") for d in decls.iterfind("ParameterDeclaration")}
+    assert (values["p_y1"], values["gap"], values["ttc"]) == ("0.04", "20.0", "INF")
+    comments = [c.text for c in decls if isinstance(c, etree._Comment)]
+    assert comments[0].startswith(" p_y1 [rad/s]: yaw-rate amplitude")
+    assert comments[8].startswith(" ttc [s]:")
+
+
+def test_xosc_logical_scenario_has_one_value_set_per_scenario(xosc_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_zip) as zf:
+        logical = etree.fromstring(zf.read("cutin_logical.xosc"))
+        dist = etree.fromstring(zf.read("cutin_distribution.xosc"))
+        catalog = etree.fromstring(zf.read("catalogs/scengen_cutter_trajectories.xosc"))
+        weights = list(csv.DictReader(io.StringIO(zf.read("cutin_weights.csv").decode())))
+    declared = logical.xpath("/OpenSCENARIO/ParameterDeclarations/ParameterDeclaration/@name")
+    sets = dist.findall(".//ValueSetDistribution/ParameterValueSet")
+    assert len(sets) == 2
+    for value_set in sets:
+        assert value_set.xpath("ParameterAssignment/@parameterRef") == declared
+    assert dist.xpath("//ScenarioFile/@filepath") == ["cutin_logical.xosc"]
+    gaps = [s.xpath("ParameterAssignment[@parameterRef='gap']/@value")[0] for s in sets]
+    assert gaps == ["12.0", "20.0"]
+    entries = [s.xpath("ParameterAssignment[@parameterRef='cutter_trajectory']/@value")[0]
+               for s in sets]
+    assert entries == ["scenario_0000000", "scenario_0000001"]
+    assert catalog.xpath("/OpenSCENARIO/Catalog/Trajectory/@name") == entries
+    assert logical.xpath("//FollowTrajectoryAction/TrajectoryRef/CatalogReference/@entryName") \
+        == ["$cutter_trajectory"]
+    assert [(w["permutation"], w["index"], w["file"], w["exposure_weight"]) for w in weights] \
+        == [("0", "0", "scenario_0000000.xosc", "0.01"), ("1", "1", "scenario_0000001.xosc", "2.0")]
+
+
+def test_xosc_without_a_logical_scenario_says_why(tmp_path: Path) -> None:
+    sc = scenario_a()
+    bare = ConcreteScenario(t=sc.t, ego=sc.ego, objects=sc.objects)  # no parameters
+    path = _export(tmp_path, "xosc", data=[(bare, {})])
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+        m = json.loads(zf.read("manifest.json"))
+    assert "cutin_logical.xosc" not in names and "cutin_distribution.xosc" not in names
+    assert m["export"]["logical_scenario"] == {
+        "included": False, "reason": "item 0 lacks the parameter(s) p_y1, p_t, p_a1, p_a2, "
+        "p_a3, p_v0, dv, gap"}
+
+
+@pytest.mark.parametrize(("fmt", "mode", "message"), [
+    ("xosc", "bogus", "mode: unknown OpenSCENARIO mode 'bogus'; choose one of test, replay"),
+    ("csv", "test", "mode: only the xosc export has modes, not 'csv'"),
+])
+def test_bad_mode_is_named(tmp_path: Path, fmt: str, mode: str, message: str) -> None:
+    with pytest.raises(ExportError, match=re.escape(message)):
+        export_catalogue(fmt, items(), manifest(), tmp_path / "out", mode=mode)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_xosc_manifest_and_index(xosc_zip: Path) -> None:

@@ -91,8 +91,19 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     assert pq.read_table(io.BytesIO(r.content)).num_rows == N
     r = client.get(f"/catalogues/{cid}/export", params={"format": "xosc"})
     assert r.status_code == 200
-    names = zipfile.ZipFile(io.BytesIO(r.content)).namelist()
-    assert sum(name.endswith(".xosc") for name in names) == N
+    zf = zipfile.ZipFile(io.BytesIO(r.content))
+    names = zf.namelist()
+    assert sum(name.startswith("scenario_") for name in names) == N
+    assert "cutin_distribution.xosc" in names
+    assert b'value="ego_vehicle"' in zf.read("scenario_0000000.xosc")  # test mode: default
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "xosc", "mode": "replay"})
+    assert r.status_code == 200
+    replay = zipfile.ZipFile(io.BytesIO(r.content)).read("scenario_0000000.xosc")
+    assert b'value="ego_vehicle"' not in replay and b'"scengen.mode" value="replay"' in replay
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "csv", "mode": "replay"})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.mode"
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "xosc", "mode": "live"})
+    assert r.status_code == 422
 
 
 def test_list_and_delete(client: Any) -> None:
