@@ -17,8 +17,17 @@ from tests.sampler.factories import base_params
 
 def test_grid_and_ego_by_hand() -> None:
     s = build_scenario(base_params(), seed=7)
-    assert s.t.shape == (101,)
-    np.testing.assert_allclose(s.t[[0, 1, 100]], [0.0, 0.1, 10.0])
+    # constant speeds (25 and 27 m/s); after the lane change (t = 7.5 s) both drive
+    # straight, the cutter inside the ego's lane: contact when the bumper gap at t = 8 s
+    # has closed at 2 m/s; then the 3 s risk horizon
+    gap_8 = s.objects[0].x[80] - s.ego.x[80] - 4.5
+    t_contact = 8.0 + gap_8 / 2.0
+    assert 9.0 < t_contact < s.provenance["t_cross"] + 12.0 / 2.0  # heading shortened it
+    assert s.provenance["resolution"] == "contact"
+    assert s.provenance["t_resolved"] == pytest.approx(t_contact, abs=1e-9)
+    n = int(np.ceil((t_contact + 3.0) / 0.1))
+    assert s.t.shape == (n + 1,)
+    np.testing.assert_allclose(s.t[[0, 1, n]], [0.0, 0.1, n * 0.1])
     # no pulse: cutter at 25 m/s always, dv = 2 -> ego at 27 m/s from x = 0 on y = 0
     np.testing.assert_allclose(s.ego.v, 27.0)
     np.testing.assert_allclose(s.ego.x, 27.0 * s.t)
@@ -34,7 +43,7 @@ def test_grid_and_ego_by_hand() -> None:
 
 def test_gap_and_dv_hold_at_the_crossing_moment() -> None:
     params = base_params(p_a1=-1.5, p_a2=0.5, p_a3=2.0, dv=3.0, gap=9.0)
-    s = build_scenario(params, lead_in=2.0, dt=0.05, duration=8.0)
+    s = build_scenario(params, lead_in=2.0, dt=0.05)
     p = CutInParams.from_mapping(params)
     tau_c = crossing_time(p, 3.75 / 2)
     assert s.provenance["t_cross"] == pytest.approx(2.0 + tau_c)
@@ -69,13 +78,44 @@ def test_json_round_trip_is_lossless() -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "fragment"),
-    [({"dt": 0}, "dt"), ({"duration": -1}, "duration"), ({"lead_in": 10.0}, "lead_in"),
-     ({"duration": 10.05}, "whole number"), ({"ego_size": (4.5,)}, "ego_size"),
+    [({"dt": 0}, "dt"), ({"duration": -1}, "duration"), ({"lead_in": -1.0}, "lead_in"),
+     ({"lead_in": 20.0, "duration": 20.0}, "lead_in"),
+     ({"duration": 10.05}, "whole number"), ({"duration": 10.0}, "before the conflict"),
+     ({"ego_size": (4.5,)}, "ego_size"),
      ({"cutter_size": (4.5, -1)}, "cutter_size"), ({"lane_width": float("nan")}, "lane_width")],
 )
 def test_bad_settings(kwargs: dict[str, object], fragment: str) -> None:
     with pytest.raises(BuilderError, match=fragment):
         build_scenario(base_params(), **kwargs)  # type: ignore[arg-type]
+
+
+def test_duration_ends_when_the_conflict_does() -> None:
+    # not closing (dv < 0): settled once the lane change (2 p_t = 5 s after the 2.5 s
+    # lead-in) is over, on the first grid step after it (7.6 s), plus the 3 s horizon
+    s = build_scenario(base_params(dv=-1.0))
+    assert s.provenance["resolution"] == "settled"
+    assert s.provenance["t_resolved"] == pytest.approx(7.6, abs=1e-9)
+    assert s.t[-1] == pytest.approx(10.6, abs=1e-9)
+    # a requested longer duration is kept; a shorter one than the resolution is refused
+    assert build_scenario(base_params(dv=-1.0), duration=30.0).t[-1] == pytest.approx(30.0)
+    with pytest.raises(BuilderError, match="before the conflict is resolved"):
+        build_scenario(base_params(dv=-1.0), duration=7.0)
+
+
+def test_cutter_left_behind() -> None:
+    # a lane change that ends straddling the marking 1.85 m from the ego-lane centre does
+    # not overlap the ego's 1.8 m wide box (half widths 0.9 + 0.9): closing at 3 m/s the
+    # ego passes it; resolved when the cutter's front passes the ego's rear
+    p = base_params(dv=3.0, gap=5.0)
+    p["p_y1"] = 1.90 * np.pi / (2.0 * 25.0 * 2.5**2)  # displacement ~1.90 m
+    s = build_scenario(p)
+    end_offset = abs(s.objects[0].y[-1])
+    assert 1.8 < end_offset < 3.75 / 2
+    assert s.provenance["resolution"] == "left_behind"
+    t_r = s.provenance["t_resolved"]
+    x_front = np.interp(t_r, s.t, s.objects[0].x) + 2.25
+    x_rear = np.interp(t_r, s.t, s.ego.x) - 2.25
+    assert x_front == pytest.approx(x_rear, abs=1e-6)
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,310 @@
+"""Compiled (numba) kernels of :mod:`riskcore.criticality`. Private: use the public module.
+
+Everything here works in the *ego frame*: the ego moves along its own path, its box is
+axis-aligned at lateral offset 0, heading 0, and its centre is at arc length ``s`` along
+the path. The cutter is given on a uniform time grid ``t_k = t0 + k h`` by its centre's
+arc length ``cs`` and lateral offset ``cd`` relative to the ego's path, and its heading
+``cpsi`` relative to the ego's heading (rad), speed ``cv`` (m/s). For a generated cut-in
+(ego at y = 0, heading 0) the ego frame is the road frame.
+
+The ego's box spans ``[s - L_e/2, s + L_e/2] x [-W_e/2, W_e/2]``. The cutter's box meets
+the ego's lateral band ``|y| <= W_e/2`` in a convex set whose x-range ``[x_lo, x_hi]``
+:func:`band_range` returns exactly (the clip of the four edges against the band); the
+boxes overlap exactly when ``x_lo < s + L_e/2`` and ``x_hi > s - L_e/2``. The *clearance*
+``x_lo - (s + L_e/2)`` is the free longitudinal distance ahead of the ego's front inside
+its band (the gap of a car-following situation).
+
+The ego's longitudinal responses (no lateral reaction):
+
+* scripted: ``es[k]``, ``ev[k]`` (the recorded or generated motion, "none" driver);
+* braking from ``t_b`` (state ``s_b, v_b`` taken from the scripted motion there): jerk
+  ``j`` until the deceleration reaches ``A``, then ``A`` until standstill::
+
+      tau <= T1 = A / j:   v = v_b - j tau^2 / 2,   s = s_b + v_b tau - j tau^3 / 6
+      tau >  T1:           v = v1 - A (tau - T1),   s = s1 + v1 (tau - T1) - A (tau - T1)^2 / 2
+
+  (v1, s1 at tau = T1), stopping where v reaches 0 (in the ramp at tau = sqrt(2 v_b / j)).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+_BISECT = 48  # contact-time bisection steps: h / 2**48 < 1e-15 s for h = 0.01 s
+
+
+@njit(cache=True)
+def band_range(cs: float, cd: float, c: float, s: float, hl: float, hw: float,
+               band: float) -> tuple[bool, float, float]:  # pragma: no cover - jit
+    """x-range of the cutter's box inside the band ``|y| <= band``.
+
+    Box: centre (cs, cd), heading (cos c, sin s), half length hl, half width hw.
+    Returns (meets the band, x_lo, x_hi); x_lo = +inf, x_hi = -inf when it does not.
+    """
+    ux, uy = hl * c, hl * s
+    nx, ny = -hw * s, hw * c
+    px = (cs + ux + nx, cs - ux + nx, cs - ux - nx, cs + ux - nx)
+    py = (cd + uy + ny, cd - uy + ny, cd - uy - ny, cd + uy - ny)
+    lo = np.inf
+    hi = -np.inf
+    for e in range(4):
+        x0 = px[e]
+        y0 = py[e]
+        x1 = px[(e + 1) % 4]
+        y1 = py[(e + 1) % 4]
+        dy = y1 - y0
+        if dy == 0.0:
+            if abs(y0) > band:
+                continue
+            a, b = 0.0, 1.0
+        else:
+            t1 = (-band - y0) / dy
+            t2 = (band - y0) / dy
+            if t1 > t2:
+                t1, t2 = t2, t1
+            a = max(t1, 0.0)
+            b = min(t2, 1.0)
+            if a > b:
+                continue
+        xa = x0 + a * (x1 - x0)
+        xb = x0 + b * (x1 - x0)
+        lo = min(lo, xa, xb)
+        hi = max(hi, xa, xb)
+    return lo <= hi, lo, hi
+
+
+@njit(cache=True)
+def brake_state(v_b: float, jerk: float, a_max: float,
+                tau: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """Distance travelled and speed ``tau`` s after braking starts at speed ``v_b``.
+
+    Jerk-limited ramp to ``a_max`` then constant deceleration until standstill (see the
+    module docstring). ``jerk = inf`` is an instant step to ``a_max``.
+    """
+    if tau <= 0.0:
+        return 0.0, v_b
+    if v_b <= 0.0:
+        return 0.0, 0.0
+    t1 = a_max / jerk if jerk < np.inf else 0.0
+    t_ramp_stop = math.sqrt(2.0 * v_b / jerk) if jerk < np.inf else 0.0
+    if jerk < np.inf and t_ramp_stop <= t1:  # stops within the ramp
+        tt = min(tau, t_ramp_stop)
+        return v_b * tt - jerk * tt ** 3 / 6.0, max(v_b - 0.5 * jerk * tt * tt, 0.0)
+    if tau <= t1:
+        return v_b * tau - jerk * tau ** 3 / 6.0, v_b - 0.5 * jerk * tau * tau
+    v1 = v_b - 0.5 * jerk * t1 * t1 if t1 > 0.0 else v_b
+    s1 = v_b * t1 - jerk * t1 ** 3 / 6.0 if t1 > 0.0 else 0.0
+    tt = min(tau - t1, v1 / a_max)
+    return s1 + v1 * tt - 0.5 * a_max * tt * tt, max(v1 - a_max * tt, 0.0)
+
+
+@njit(cache=True)
+def _interp(arr: FloatArray, t0: float, h: float, t: float) -> float:  # pragma: no cover
+    """Linear interpolation of a grid array at time t (clamped to the grid)."""
+    n = arr.shape[0]
+    u = (t - t0) / h
+    if u <= 0.0:
+        return arr[0]
+    if u >= n - 1:
+        return arr[n - 1]
+    k = math.floor(u)
+    f = u - k
+    return arr[k] * (1.0 - f) + arr[k + 1] * f
+
+
+@njit(cache=True)
+def ego_at(t: float, t0: float, h: float, es: FloatArray, ev: FloatArray, t_b: float,
+           jerk: float, a_max: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """Ego arc length and speed at time t: scripted before ``t_b`` (NaN: never), braking
+    from the scripted state at ``t_b`` afterwards."""
+    if not (t > t_b):  # also when t_b is NaN
+        return _interp(es, t0, h, t), _interp(ev, t0, h, t)
+    s_b = _interp(es, t0, h, t_b)
+    v_b = _interp(ev, t0, h, t_b)
+    ds, v = brake_state(v_b, jerk, a_max, t - t_b)
+    return s_b + ds, v
+
+
+@njit(cache=True)
+def _cutter_at(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
+               cpsi: FloatArray, cv: FloatArray
+               ) -> tuple[float, float, float, float]:  # pragma: no cover - jit
+    return (_interp(cs, t0, h, t), _interp(cd, t0, h, t), _interp(cpsi, t0, h, t),
+            _interp(cv, t0, h, t))
+
+
+@njit(cache=True)
+def _overlap_at(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
+                cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray,
+                t_b: float, jerk: float, a_max: float, ehl: float, ehw: float, chl: float,
+                chw: float) -> bool:  # pragma: no cover - jit
+    x, y, p, _ = _cutter_at(t, t0, h, cs, cd, cpsi, cv)
+    s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
+    meets, lo, hi = band_range(x, y, math.cos(p), math.sin(p), chl, chw, ehw)
+    return meets and lo < s + ehl and hi > s - ehl
+
+
+@njit(cache=True)
+def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
+          cv: FloatArray, es: FloatArray, ev: FloatArray, ehl: float, ehw: float,
+          chl: float, chw: float, t_b: float, jerk: float, a_max: float,
+          t_from: float) -> tuple[float, float, float]:  # pragma: no cover - jit
+    """One ego response against the cutter's actual motion on the grid.
+
+    Returns (contact time or NaN, relative impact speed in m/s (0 without contact),
+    minimum clearance in m over grid times >= ``t_from`` until contact (+inf: the cutter
+    never is in the ego's band ahead; 0 with contact)). The contact time is refined by
+    bisection between the grid steps (ego states in closed form, cutter interpolated).
+    """
+    n = cs.shape[0]
+    min_gap = np.inf
+    for k in range(n):
+        t = t0 + k * h
+        s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
+        p = cpsi[k]
+        meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+        if not (meets and hi > s - ehl):
+            continue
+        gap = lo - (s + ehl)
+        if gap < 0.0:
+            if k == 0:
+                tc = t0
+            else:
+                a = t - h
+                b = t
+                for _ in range(_BISECT):
+                    m = 0.5 * (a + b)
+                    if _overlap_at(m, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max,
+                                   ehl, ehw, chl, chw):
+                        b = m
+                    else:
+                        a = m
+                tc = b
+            _, ve = ego_at(tc, t0, h, es, ev, t_b, jerk, a_max)
+            _, _, pc, vc = _cutter_at(tc, t0, h, cs, cd, cpsi, cv)
+            rel = math.hypot(ve - vc * math.cos(pc), vc * math.sin(pc))
+            return tc, rel, 0.0
+        if t >= t_from and gap < min_gap:
+            min_gap = gap
+    return np.nan, 0.0, min_gap
+
+
+@njit(cache=True)
+def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
+                        cv: FloatArray, es: FloatArray, ev: FloatArray, half_lengths: float,
+                        t_p: float, ttc_crit: float) -> float:  # pragma: no cover - jit
+    """First time >= t_p at which the cut-in is critical for the scripted ego, NaN: never.
+
+    Critical: the cutter's centre is ahead of the ego's and the longitudinal gap
+    g = cs - es - (L_c + L_e)/2 is <= 0 or closing with g < ttc_crit * closing speed
+    (TTC < ttc_crit). Between grid steps the root of f = g - ttc_crit * closing is
+    interpolated linearly (exact for constant speeds).
+    """
+    n = cs.shape[0]
+    k0 = math.ceil((t_p - t0) / h - 1e-9)
+    if k0 < 0:
+        k0 = 0
+    prev_t = t_p
+    x = _interp(cs, t0, h, t_p)
+    s = _interp(es, t0, h, t_p)
+    clos = _interp(ev, t0, h, t_p) - _interp(cv, t0, h, t_p) * math.cos(
+        _interp(cpsi, t0, h, t_p))
+    g = x - s - half_lengths
+    if x > s and (g <= 0.0 or (clos > 0.0 and g < ttc_crit * clos)):
+        return t_p
+    prev_f = g - ttc_crit * clos
+    for k in range(k0, n):
+        t = t0 + k * h
+        if t <= t_p:
+            continue
+        clos = ev[k] - cv[k] * math.cos(cpsi[k])
+        g = cs[k] - es[k] - half_lengths
+        f = g - ttc_crit * clos
+        if cs[k] > es[k] and (g <= 0.0 or (clos > 0.0 and g < ttc_crit * clos)):
+            if g > 0.0 and prev_f > 0.0 and f < prev_f:
+                return prev_t + (t - prev_t) * prev_f / (prev_f - f)
+            return t
+        prev_t = t
+        prev_f = f
+    return np.nan
+
+
+@njit(cache=True)
+def rss_trigger(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
+                cv: FloatArray, es: FloatArray, ev: FloatArray, ehl: float, ehw: float,
+                chl: float, chw: float, rho: float, a_acc: float, b_min: float,
+                b_max: float, mu: float, a_lat: float) -> float:  # pragma: no cover - jit
+    """First grid time at which the scripted ego is in an RSS-dangerous situation.
+
+    Longitudinal (Shalev-Shwartz et al. 2017, Def. 1): the cutter's centre is ahead and
+    the gap g = cs - es - (L_c + L_e)/2 is below
+    d_long = v_r rho + a_acc rho^2 / 2 + (v_r + rho a_acc)^2 / (2 b_min) - v_f^2 / (2 b_max)
+    (v_r ego speed, v_f the cutter's speed along the ego's heading). Lateral: the lateral
+    clearance between the boxes is below
+    d_lat = mu + (2 v + a_lat rho) rho / 2 + (v + a_lat rho)^2 / (2 a_lat),
+    v the cutter's lateral speed towards the ego (>= 0), the ego having none.
+    """
+    n = cs.shape[0]
+    for k in range(n):
+        c = math.cos(cpsi[k])
+        sn = math.sin(cpsi[k])
+        if cs[k] <= es[k]:
+            continue
+        vr = ev[k]
+        vf = max(cv[k] * c, 0.0)
+        d_long = (vr * rho + 0.5 * a_acc * rho * rho + (vr + rho * a_acc) ** 2 / (2.0 * b_min)
+                  - vf * vf / (2.0 * b_max))
+        g = cs[k] - es[k] - ehl - chl
+        if g >= d_long:
+            continue
+        half_lat = chl * abs(sn) + chw * abs(c)
+        lat_gap = abs(cd[k]) - ehw - half_lat
+        toward = -cv[k] * sn if cd[k] > 0.0 else cv[k] * sn
+        v = max(toward, 0.0)
+        d_lat = mu + (2.0 * v + a_lat * rho) * rho / 2.0 + (v + a_lat * rho) ** 2 / (2.0 * a_lat)
+        if lat_gap < d_lat:
+            return t0 + k * h
+    return np.nan
+
+
+@njit(cache=True)
+def required_decel(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
+                   es: FloatArray, ev: FloatArray, ehl: float, ehw: float, chl: float,
+                   chw: float, t_b: float) -> float:  # pragma: no cover - jit
+    """Smallest constant deceleration from ``t_b`` on (after the scripted motion until
+    ``t_b``) that keeps the ego's front behind the cutter inside its band at every grid
+    time after ``t_b``; +inf when the clearance is already gone.
+
+    For a clearance D available at tau = t - t_b from the ego's front at t_b, speed v_b:
+    0 if v_b tau <= D; 2 (v_b tau - D) / tau^2 if the ego is still moving at tau
+    (v_b tau <= 2 D); else v_b^2 / (2 D) (it stops before tau).
+    """
+    n = cs.shape[0]
+    s_b = _interp(es, t0, h, t_b)
+    v_b = _interp(ev, t0, h, t_b)
+    need = 0.0
+    for k in range(n):
+        t = t0 + k * h
+        if t <= t_b:
+            continue
+        p = cpsi[k]
+        meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+        if not (meets and hi > s_b - ehl):
+            continue
+        d = lo - (s_b + ehl)
+        if d <= 0.0:
+            return np.inf
+        tau = t - t_b
+        run = v_b * tau
+        if run <= d:
+            continue
+        a = 2.0 * (run - d) / (tau * tau) if run <= 2.0 * d else v_b * v_b / (2.0 * d)
+        if a > need:
+            need = a
+    return need

@@ -1,0 +1,299 @@
+"""The criticality record: hand-computed R157 cases, a slow reference, the real TNO cut-ins."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from riskcore import boxes_overlap
+from riskcore.criticality import (
+    CLASSES,
+    CRITICALITY_FIELDS,
+    Criticality,
+    CriticalityError,
+    CriticalitySettings,
+    criticality_profiles,
+    evaluate_criticality,
+)
+from riskcore.errors import SettingsError
+from riskcore.scenario import ConcreteScenario, Track
+from sampler import build_scenario
+
+J = 12.65
+A = 0.774 * 9.81
+L = 4.5  # both vehicles 4.5 m x 1.8 m: centre distance at contact = 4.5 m
+
+
+def lead_appears(gap_tp: float, v_ego: float = 30.0, v_lead: float = 20.0,
+                 duration: float = 12.0) -> tuple[ConcreteScenario, float]:
+    """A lead at constant speed that jumps from y = 2.0 m (laterally clear of the ego's
+    box by 0.2 m) into the ego's lane between t = 1.0 and 1.1 s; bumper gap ``gap_tp`` at
+    the perception moment t_p = 1.0 + 0.1 * 0.375 / 2.0 (linear interpolation of y)."""
+    t = np.round(np.arange(0.0, duration + 1e-9, 0.1), 10)
+    t_p = 1.0 + 0.1 * 0.375 / 2.0
+    x0 = gap_tp + L + (v_ego - v_lead) * t_p
+    y = np.where(t <= 1.0 + 1e-9, 2.0, 0.0)
+    z = np.zeros_like(t)
+    ego = Track("ego", L, 1.8, v_ego * t, z, z, np.full_like(t, v_ego))
+    lead = Track("cutter", L, 1.8, x0 + v_lead * t, y, z, np.full_like(t, v_lead))
+    return ConcreteScenario(t=t, ego=ego, objects=(lead,)), t_p
+
+
+def r157_by_hand(gap_b: float, dv: float) -> tuple[bool, float, float]:
+    """Closed form: gap gap_b and closing speed dv when braking starts, lead at constant
+    speed, ego decelerates with jerk J to A (it never stops here: the lead moves).
+    Returns (collision, impact speed, minimum gap)."""
+    t1 = A / J
+    closed_ramp = dv * t1 - J * t1**3 / 6.0
+    dv1 = dv - 0.5 * J * t1**2
+    if closed_ramp >= gap_b:  # contact during the ramp: solve dv tau - J tau^3/6 = gap_b
+        lo, hi = 0.0, t1
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if dv * mid - J * mid**3 / 6.0 < gap_b:
+                lo = mid
+            else:
+                hi = mid
+        return True, dv - 0.5 * J * hi**2, 0.0
+    left = gap_b - closed_ramp
+    stop = dv1**2 / (2.0 * A)
+    if stop > left:
+        return True, math.sqrt(dv1**2 - 2.0 * A * left), 0.0
+    return False, 0.0, left - stop
+
+
+@pytest.mark.parametrize("gap_tp", [15.0, 19.0, 12.0, 17.5])
+def test_r157_driver_by_hand(gap_tp: float) -> None:
+    scen, t_p = lead_appears(gap_tp)
+    c = evaluate_criticality(scen)
+    assert c["t_p"] == pytest.approx(t_p, abs=1e-12)
+    # TTC at t_p = gap / 10 < 2 s: the reaction starts at t_p, braking 0.75 s later
+    assert c["r157_cc_t_brake"] == pytest.approx(t_p + 0.75, abs=1e-9)
+    collides, speed, gap = r157_by_hand(gap_tp - 10.0 * 0.75, 10.0)
+    assert c["r157_cc_collision"] is collides
+    assert c["r157_cc_impact_speed"] == pytest.approx(speed, abs=1e-6)
+    if not collides:
+        assert c["r157_cc_min_gap"] == pytest.approx(gap, abs=1e-3)  # 0.01 s grid
+    # no reaction: contact when the gap has closed at 10 m/s
+    assert c["none_collision"] is True
+    assert c["none_impact_speed"] == pytest.approx(10.0, abs=1e-9)
+    # a_req: constant deceleration from t_p + 0.75 s against a lead at constant speed is
+    # dv^2 / (2 gap_b)
+    gap_b = gap_tp - 7.5
+    assert c["a_req"] == pytest.approx(100.0 / (2.0 * gap_b), rel=1e-4)
+    assert c["btn"] == pytest.approx(c["a_req"] / A, rel=1e-12)  # type: ignore[operator]
+    assert c["class"] == ("preventable" if not collides else c["class"])
+
+
+def test_r157_waits_for_a_developing_conflict() -> None:
+    # TTC at t_p = 25 / 10 = 2.5 s: the careful driver reacts when TTC reaches 2 s,
+    # 0.5 s later, and brakes 0.75 s after that
+    scen, t_p = lead_appears(25.0)
+    c = evaluate_criticality(scen)
+    assert c["r157_cc_t_brake"] == pytest.approx(t_p + 0.5 + 0.75, abs=1e-9)
+    collides, _, gap = r157_by_hand(20.0 - 7.5, 10.0)
+    assert c["r157_cc_collision"] is collides is False
+    assert c["r157_cc_min_gap"] == pytest.approx(gap, abs=1e-3)
+    assert c["class"] == "preventable"
+
+
+def test_unavoidable_cut_in() -> None:
+    # 1 m ahead, 20 m/s slower: contact within 0.05 s of t_p, nothing avoids it
+    scen, _ = lead_appears(1.0, v_ego=30.0, v_lead=10.0)
+    c = evaluate_criticality(scen)
+    assert c["class"] == "unavoidable"
+    assert c["ttr_true"] == 0.0 and c["ttr_manoeuvre"] == "none"
+    assert c["a_req"] == math.inf and c["btn"] == math.inf
+    assert c["r157_cc_t_brake"] is None  # contact before braking could start
+
+
+def test_no_conflict_record() -> None:
+    scen, _ = lead_appears(15.0, v_ego=20.0, v_lead=25.0)  # the lead is faster
+    c = evaluate_criticality(scen)
+    assert c["class"] == "no_conflict"
+    assert c["none_collision"] is False and c["ttr_true"] == math.inf
+    assert c["ttr_manoeuvre"] is None and c["a_req"] == 0.0 and c["btn"] == 0.0
+    assert c["r157_cc_t_brake"] is None  # never critical: no reaction
+    # the gap grows at 5 m/s from the moment the lead enters the ego's band (y <= 1.8 m
+    # at t = 1.01 s, 0.00875 s before t_p): 15 m give or take one 0.01 s step
+    assert c["none_min_gap"] == pytest.approx(15.0, abs=0.06)
+
+
+def test_record_shape_and_kinds() -> None:
+    c = evaluate_criticality(build_scenario({"p_y1": 0.05, "p_t": 2.0, "p_a1": 0.0,
+                                             "p_a2": 0.0, "p_a3": 0.0, "p_v0": 25.0,
+                                             "dv": 4.0, "gap": 8.0}))
+    rec = c.to_record()
+    assert list(rec) == list(CRITICALITY_FIELDS)
+    for name, spec in CRITICALITY_FIELDS.items():
+        value = rec[name]
+        if value is None:
+            continue
+        kind = {"float": float, "bool": bool, "str": str}[spec.kind]
+        assert isinstance(value, kind), name
+    assert rec["class"] in CLASSES
+    assert 0.0 <= rec["r_dep_tp"] <= rec["r_ind_tp"] <= 1.0  # type: ignore[operator]
+    assert rec["risk_peak"] == 1.0  # a collision course reaches TTR = 0 before contact
+    with pytest.raises(CriticalityError, match="missing"):
+        Criticality(values={"t_p": 1.0})
+
+
+def test_no_figure_from_a_cut_off() -> None:
+    s = build_scenario({"p_y1": 0.05, "p_t": 2.0, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
+                        "p_v0": 25.0, "dv": 4.0, "gap": 8.0})
+    d = s.to_dict()
+    n = 40
+    d["t"] = d["t"][:n]
+    for track in [d["ego"], *d["objects"]]:
+        for key in ("x", "y", "psi", "v", "a", "yaw_rate"):
+            track[key] = track[key][:n]
+    with pytest.raises(CriticalityError, match="cut-off"):
+        evaluate_criticality(ConcreteScenario.from_dict(d))
+
+
+def test_settings_are_validated() -> None:
+    with pytest.raises(SettingsError, match="jerk"):
+        CriticalitySettings(jerk=0.0)
+    with pytest.raises(SettingsError, match="unknown"):
+        CriticalitySettings().replace(nope=1.0)
+    assert CriticalitySettings().decel_max == pytest.approx(7.59294)
+
+
+def test_profiles_mark_the_reaction() -> None:
+    scen, t_p = lead_appears(19.0)
+    prof = criticality_profiles(scen)
+    assert prof["t_p"] == pytest.approx(t_p)
+    assert prof["r157_t_brake"] == pytest.approx(t_p + 0.75, abs=1e-9)
+    v = np.asarray(prof["r157_ego"]["v"])
+    t = np.asarray(prof["t"])
+    assert (v[t <= t_p + 0.75] == 30.0).all() and v[-1] < 30.0
+    assert len(prof["r_dep"]) == len(prof["r_dep_r157"]) == t.shape[0]
+    # the reacted ego's risk never exceeds ... at least it is a valid probability
+    assert all(0.0 <= r <= 1.0 for r in prof["r_dep_r157"])
+
+
+# --------------------------------------------------------------------------- reference
+def _reference(scen: ConcreteScenario, driver: str, s: CriticalitySettings,
+               h: float = 1e-3) -> tuple[bool, float]:
+    """Plain loop at 1 ms: (collision, impact speed). Generated cut-ins only (ego on
+    y = 0 at constant speed); the cutter linearly interpolated between its samples."""
+    t = scen.t
+    cut = scen.objects[0]
+    ego = scen.ego
+    tq = np.arange(t[0], t[-1] + 10.0, h)
+    xc = np.interp(tq, t, cut.x)
+    yc = np.interp(tq, t, cut.y)
+    pc = np.interp(tq, t, cut.psi)
+    vc = np.interp(tq, t, cut.v)
+    after = tq > t[-1]
+    xc[after] = cut.x[-1] + cut.v[-1] * math.cos(cut.psi[-1]) * (tq[after] - t[-1])
+    yc[after] = cut.y[-1] + cut.v[-1] * math.sin(cut.psi[-1]) * (tq[after] - t[-1])
+    # perception: the centre has moved 0.375 m towards the ego lane
+    moved = np.abs(cut.y - cut.y[0])
+    k = int(np.flatnonzero(moved >= s.wandering_zone)[0])
+    t_p = t[k - 1] + (s.wandering_zone - moved[k - 1]) / (moved[k] - moved[k - 1]) * 0.1
+    x = float(ego.x[0])
+    v = float(ego.v[0])
+    a = 0.0
+    braking_from = math.inf
+    xs = np.empty(tq.shape[0])
+    vs = np.empty(tq.shape[0])
+    for i, ti in enumerate(tq):
+        xs[i], vs[i] = x, v
+        if braking_from == math.inf:
+            gap = xc[i] - x - L
+            closing = v - vc[i] * math.cos(pc[i])
+            if driver == "r157" and ti >= t_p and xc[i] > x and (
+                    gap <= 0 or (closing > 0 and gap < s.critical_ttc * closing)):
+                braking_from = ti + s.reaction_time
+            if driver == "rss" and xc[i] > x:
+                rho = s.rss_response_time
+                d_long = (v * rho + 0.5 * s.rss_accel_max * rho**2
+                          + (v + rho * s.rss_accel_max) ** 2 / (2 * s.rss_brake_min)
+                          - max(vc[i] * math.cos(pc[i]), 0.0) ** 2 / (2 * s.rss_brake_max))
+                lat_gap = abs(yc[i]) - 0.9 - (2.25 * abs(math.sin(pc[i]))
+                                              + 0.9 * abs(math.cos(pc[i])))
+                toward = max(-math.copysign(1.0, yc[i]) * vc[i] * math.sin(pc[i]), 0.0)
+                al = s.rss_lat_accel_max
+                d_lat = (s.rss_lat_margin + (2 * toward + al * rho) * rho / 2
+                         + (toward + al * rho) ** 2 / (2 * al))
+                if gap < d_long and lat_gap < d_lat:
+                    braking_from = ti + rho
+        if ti >= braking_from:
+            a = min(a + s.jerk * h, s.decel_max)
+        x += v * h - 0.5 * a * h * h if v > 0 else 0.0
+        v = max(v - a * h, 0.0)
+    ego_boxes = np.column_stack([xs, np.zeros_like(xs), np.zeros_like(xs),
+                                 np.full_like(xs, L), np.full_like(xs, 1.8)])
+    cut_boxes = np.column_stack([xc, yc, pc, np.full_like(xs, L), np.full_like(xs, 1.8)])
+    hit = boxes_overlap(ego_boxes, cut_boxes)
+    if not hit.any():
+        return False, 0.0
+    i = int(np.argmax(hit))
+    rel = math.hypot(vs[i] - vc[i] * math.cos(pc[i]), vc[i] * math.sin(pc[i]))
+    return True, rel
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(gap=st.floats(2.0, 40.0), dv=st.floats(-2.0, 15.0), p_v0=st.floats(15.0, 35.0),
+       p_t=st.floats(1.2, 3.5), p_a1=st.floats(-2.0, 1.0), p_a3=st.floats(0.0, 3.0),
+       side=st.sampled_from([-1.0, 1.0]))
+def test_fast_drivers_agree_with_a_slow_reference(gap: float, dv: float, p_v0: float,
+                                                  p_t: float, p_a1: float, p_a3: float,
+                                                  side: float) -> None:
+    p_y1 = side * 3.6 * math.pi / (2.0 * p_v0 * p_t**2)
+    params = {"p_y1": p_y1, "p_t": p_t, "p_a1": p_a1, "p_a2": 0.5, "p_a3": p_a3,
+              "p_v0": p_v0, "dv": dv, "gap": gap}
+    try:
+        scen = build_scenario(params)
+    except ValueError:
+        assume(False)
+        return
+    s = CriticalitySettings()
+    c = evaluate_criticality(scen)
+    for driver, name in (("r157", "r157_cc"), ("rss", "rss")):
+        fast_hit = bool(c[f"{name}_collision"])
+        # near-misses and touches within a few cm are below both models' resolution
+        assume(fast_hit or float(c[f"{name}_min_gap"]) > 0.05)  # type: ignore[arg-type]
+        assume(not fast_hit or float(c[f"{name}_impact_speed"]) > 0.1)  # type: ignore[arg-type]
+        ref_hit, ref_speed = _reference(scen, driver, s)
+        assert fast_hit is ref_hit, (driver, c.to_record())
+        if ref_hit:
+            assert float(c[f"{name}_impact_speed"]) == pytest.approx(  # type: ignore[arg-type]
+                ref_speed, abs=0.05)
+
+
+# --------------------------------------------------------------------------- TNO
+def _tno_scenario(ev: pd.DataFrame) -> ConcreteScenario:
+    t = ev["t"].to_numpy(float)
+    t = t - t[0]
+    v = ev["ego_v"].to_numpy(float)
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    z = np.zeros_like(t)
+    row = ev.iloc[0]
+    ego = Track("ego", float(row.ego_length), float(row.ego_width), x, z, z, v)
+    xc = x + ev["target_dx"].to_numpy(float)
+    yc = ev["target_dy"].to_numpy(float)
+    psi = np.arctan2(np.gradient(yc, t), np.gradient(xc, t))
+    cut = Track("cutter", float(row.target_length), float(row.target_width), xc, yc, psi,
+                ev["target_v"].to_numpy(float))
+    return ConcreteScenario(t=t, ego=ego, objects=(cut,),
+                            provenance={"lane_width": float(row.lane_width)})
+
+
+@pytest.mark.slow
+def test_real_tno_cut_ins_are_no_conflict_or_preventable() -> None:
+    from datasets.embedded import load_default_events
+
+    events = load_default_events()
+    counts: dict[str, int] = {}
+    for _, ev in events.groupby("event_id", sort=True):
+        c = evaluate_criticality(_tno_scenario(ev))
+        counts[c.category] = counts.get(c.category, 0) + 1
+    assert sum(counts.values()) == 208
+    assert set(counts) <= {"no_conflict", "preventable"}, counts
