@@ -236,11 +236,32 @@ def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
 
 
 @njit(cache=True)
+def _rss_danger(x: float, y: float, p: float, vc: float, s: float, ve: float, ehl: float,
+                ehw: float, chl: float, chw: float, rho: float, a_acc: float, b_min: float,
+                b_max: float, mu: float, a_lat: float) -> bool:  # pragma: no cover - jit
+    """Both RSS distances violated (see :func:`rss_trigger`)."""
+    if x <= s:
+        return False
+    c = math.cos(p)
+    sn = math.sin(p)
+    vf = max(vc * c, 0.0)
+    d_long = (ve * rho + 0.5 * a_acc * rho * rho + (ve + rho * a_acc) ** 2 / (2.0 * b_min)
+              - vf * vf / (2.0 * b_max))
+    if x - s - ehl - chl >= d_long:
+        return False
+    lat_gap = abs(y) - ehw - (chl * abs(sn) + chw * abs(c))
+    toward = -vc * sn if y > 0.0 else vc * sn
+    v = max(toward, 0.0)
+    d_lat = mu + (2.0 * v + a_lat * rho) * rho / 2.0 + (v + a_lat * rho) ** 2 / (2.0 * a_lat)
+    return lat_gap < d_lat
+
+
+@njit(cache=True)
 def rss_trigger(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
                 cv: FloatArray, es: FloatArray, ev: FloatArray, ehl: float, ehw: float,
                 chl: float, chw: float, rho: float, a_acc: float, b_min: float,
                 b_max: float, mu: float, a_lat: float) -> float:  # pragma: no cover - jit
-    """First grid time at which the scripted ego is in an RSS-dangerous situation.
+    """First time at which the scripted ego is in an RSS-dangerous situation, NaN: never.
 
     Longitudinal (Shalev-Shwartz et al. 2017, Def. 1): the cutter's centre is ahead and
     the gap g = cs - es - (L_c + L_e)/2 is below
@@ -248,28 +269,27 @@ def rss_trigger(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: Float
     (v_r ego speed, v_f the cutter's speed along the ego's heading). Lateral: the lateral
     clearance between the boxes is below
     d_lat = mu + (2 v + a_lat rho) rho / 2 + (v + a_lat rho)^2 / (2 a_lat),
-    v the cutter's lateral speed towards the ego (>= 0), the ego having none.
+    v the cutter's lateral speed towards the ego (>= 0), the ego having none. Refined by
+    bisection between the grid steps (cutter and ego interpolated).
     """
     n = cs.shape[0]
     for k in range(n):
-        c = math.cos(cpsi[k])
-        sn = math.sin(cpsi[k])
-        if cs[k] <= es[k]:
+        if not _rss_danger(cs[k], cd[k], cpsi[k], cv[k], es[k], ev[k], ehl, ehw, chl, chw,
+                           rho, a_acc, b_min, b_max, mu, a_lat):
             continue
-        vr = ev[k]
-        vf = max(cv[k] * c, 0.0)
-        d_long = (vr * rho + 0.5 * a_acc * rho * rho + (vr + rho * a_acc) ** 2 / (2.0 * b_min)
-                  - vf * vf / (2.0 * b_max))
-        g = cs[k] - es[k] - ehl - chl
-        if g >= d_long:
-            continue
-        half_lat = chl * abs(sn) + chw * abs(c)
-        lat_gap = abs(cd[k]) - ehw - half_lat
-        toward = -cv[k] * sn if cd[k] > 0.0 else cv[k] * sn
-        v = max(toward, 0.0)
-        d_lat = mu + (2.0 * v + a_lat * rho) * rho / 2.0 + (v + a_lat * rho) ** 2 / (2.0 * a_lat)
-        if lat_gap < d_lat:
-            return t0 + k * h
+        if k == 0:
+            return t0
+        a = t0 + (k - 1) * h
+        b = t0 + k * h
+        for _ in range(_BISECT):
+            m = 0.5 * (a + b)
+            x, y, p, vc = _cutter_at(m, t0, h, cs, cd, cpsi, cv)
+            if _rss_danger(x, y, p, vc, _interp(es, t0, h, m), _interp(ev, t0, h, m), ehl,
+                           ehw, chl, chw, rho, a_acc, b_min, b_max, mu, a_lat):
+                b = m
+            else:
+                a = m
+        return b
     return np.nan
 
 

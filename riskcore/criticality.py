@@ -125,7 +125,11 @@ class CriticalitySettings:
         bisection between steps.
     tail : float
         The simulations continue past the scenario's end (both vehicles at constant
-        velocity) for this long, s (10), plus the time to close the gap if it is closing.
+        velocity) for this long, s (10), plus the time to close the gap if it is closing,
+        at most ``follow_horizon``.
+    follow_horizon : float
+        A gap that would close more than this long after the scenario's end is taken as
+        no conflict, s (60): e.g. 6 m closing at 4 mm/s.
     ttr_tail : float
         The TTR scan's horizon runs this long past the constant-speed collision, s (1.0).
     alarm_level : float
@@ -145,6 +149,7 @@ class CriticalitySettings:
     rss_lat_accel_max: float = 1.0
     step: float = 0.01
     tail: float = 10.0
+    follow_horizon: float = 60.0
     ttr_tail: float = 1.0
     alarm_level: float = 0.5
 
@@ -310,8 +315,8 @@ def _frames(t: FloatArray, ego: Track, cutter: Track, s: CriticalitySettings) ->
     # how long past the end: closing at the end adds the time to close the gap
     gap_end = cs_k[-1] - s_e[-1] - ehl - chl
     closing = ego.v[-1] - cutter.v[-1] * math.cos(rel[-1])
-    tail = s.tail + (gap_end / closing if closing > 0 and gap_end > 0 else 0.0)
-    tail = min(tail, 600.0)
+    tail = s.tail + min(gap_end / closing if closing > 0 and gap_end > 0 else 0.0,
+                        s.follow_horizon)
     h = s.step
     n = math.floor((t[-1] + tail - t[0]) / h) + 1
     tg = t[0] + np.arange(n) * h
@@ -506,10 +511,10 @@ def conflict_resolution(t: FloatArray, ego: Track, cutter: Track,
 
     The motion after ``t[-1]`` is taken at constant velocity (as in the simulations), so
     ``t[-1]`` should be at or after the moment both vehicles stop changing speed and
-    heading. How: ``"contact"`` (the scripted ego hits the cutter), ``"left_behind"``
-    (the gap still shrinks at ``t[-1]`` but the cutter is not in the ego's lane: the time
-    its front passes the ego's rear), ``"settled"`` (no contact and the gap no longer
-    shrinks at ``t[-1]``: ``t[-1]``).
+    heading. How: ``"contact"`` (the scripted ego hits the cutter within the simulated
+    time, see ``CriticalitySettings.follow_horizon``), ``"left_behind"`` (the ego is
+    still faster at ``t[-1]`` but the cutter is not in the ego's lane: the time its front
+    passes the ego's rear), ``"settled"`` (otherwise: ``t[-1]``).
     """
     s = settings or CriticalitySettings()
     f = _frames(t, ego, cutter, s)
@@ -521,7 +526,10 @@ def conflict_resolution(t: FloatArray, ego: Track, cutter: Track,
     k = round((t_end - f.t0) / f.h)
     closing = f.ev[k] - f.cv[k] * math.cos(f.cpsi[k])
     ahead = f.cs[k] + f.chl - (f.es[k] - f.ehl)
-    if closing > 0 and ahead > 0:
+    p = f.cpsi[k]
+    in_lane, _, _ = _ck.band_range(f.cs[k], f.cd[k], math.cos(p), math.sin(p), f.chl, f.chw,
+                                   f.ehw)
+    if closing > 0 and ahead > 0 and not in_lane and ahead / closing <= s.follow_horizon:
         return t_end + float(ahead / closing), "left_behind"
     return t_end, "settled"
 
