@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
-.PHONY: install run test lint types pytest services bench clean
+.PHONY: install run test lint types pytest services bench clean qc-env
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -31,10 +31,22 @@ types: install
 pytest: install services
 	$(BIN)/pytest -n 2 --dist loadfile $(PYTEST_ARGS)
 
-test: lint types pytest
+test: lint types qc-env pytest
+
+# The ASAM Quality Checker (tests/app/test_exports_qc.py) in its own environment: its
+# numpy < 2 pin must not touch .venv.
+QC_VENV  := .venv-qc
+QC_STAMP := $(QC_VENV)/.installed-stamp
+
+$(QC_STAMP): scripts/qc-requirements.txt
+	test -x $(QC_VENV)/bin/python || $(PYTHON) -m venv $(QC_VENV)
+	$(QC_VENV)/bin/python -m pip install --quiet -r scripts/qc-requirements.txt
+	touch $(QC_STAMP)
+
+qc-env: $(QC_STAMP)
 
 bench: install
 	for f in benchmarks/bench_*.py; do echo "== $$f"; $(BIN)/python $$f || exit 1; done
 
 clean:
-	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(QC_VENV) .mypy_cache .ruff_cache .pytest_cache build *.egg-info
