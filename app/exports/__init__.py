@@ -22,17 +22,19 @@ Formats (``EXPORT_FORMATS``), details in docs/exports.md:
     The same rows, written in row groups with ``pyarrow.parquet.ParquetWriter``; the
     manifest is stored as JSON in the file's key-value metadata under ``scengen.manifest``.
 ``xosc``
-    One zip: ``manifest.json``, ``scenarios/NNNNNN.xosc`` (OpenSCENARIO 1.2, one per
-    scenario, exact trajectories as timed polyline vertices) and one shared straight
-    multi-lane OpenDRIVE road ``road.xodr``. Every file is validated against the XSD that
-    ``scenariogeneration`` ships.
+    One zip: ``manifest.json``, ``scenario_NNNNNNN.xosc`` (OpenSCENARIO 1.2, one per
+    scenario, mode ``test`` (default: the ego is the system under test, the cutter starts
+    on a trigger) or ``replay`` (both scripted); positions are rear axles), the catalogue
+    as one logical scenario (``cutin_logical.xosc`` + ``cutin_distribution.xosc``) and one
+    shared straight multi-lane OpenDRIVE road ``road.xodr``. Every file is validated
+    against the XSD that ``scenariogeneration`` ships.
 
 Public API
 ----------
 - ``EXPORT_FORMATS``
 - ``ExportError`` (a ``ValueError``): bad input; the message names what is wrong.
 - ``scenario_row(scenario, summary) -> dict``
-- ``export_catalogue(fmt, items, manifest, out) -> Path``
+- ``export_catalogue(fmt, items, manifest, out, *, mode=None) -> Path``
 - ``build_manifest(*, seed, model_hash, sampler_settings, constraints, p_region, extra=None)``
 - ``read_jsonl(path) -> Iterator[tuple[ConcreteScenario, dict]]`` and
   ``read_jsonl_manifest(path) -> dict``

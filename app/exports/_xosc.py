@@ -1,48 +1,30 @@
-"""OpenSCENARIO 1.2 export: one zip with every scenario as a ``.xosc``, one road, an index.
+"""OpenSCENARIO 1.2 export: one zip with every scenario as a ``.xosc``, the catalogue as
+one logical scenario, one road, an index. The documents are built in ``_osc``.
 
 Zip layout (entries sorted by name, fixed timestamps, so the same catalogue gives the
 same bytes)::
 
+    catalogs/scengen_cutter_trajectories.xosc   Trajectory catalogue of the logical scenario
     catalogue.csv                 the CSV export's rows with a leading ``file`` column
+    cutin_distribution.xosc       deterministic ParameterValueDistribution, one set a scenario
+    cutin_logical.xosc            the parameterised test-mode scenario
+    cutin_weights.csv             permutation, index, file, exposure weight
     manifest.json                 the manifest plus an ``export`` section (see below)
     road.xodr                     OpenDRIVE 1.7: one straight one-way multi-lane road
-    scenario_0000000.xosc         one OpenSCENARIO 1.2 file per scenario (catalogue index)
+    scenario_0000000.xosc         one OpenSCENARIO 1.2 file per scenario, in ``mode``
     ...
 
-Coordinates: scengen's road frame (x along the road in the driving direction, y to the
-left, heading psi counter-clockwise from +x, z up) *is* the OpenSCENARIO/OpenDRIVE world
-frame (ISO 8855 right-handed, heading counter-clockwise from +x): x, y and psi are written
-unchanged as ``WorldPosition(x, y, h=psi)``. The ego lane's centre line is y = 0.
-
-Reference point: OpenSCENARIO positions refer to a vehicle's reference point and the
-``BoundingBox`` centre is given relative to it. scengen positions are box centres, so each
-vehicle's bounding box has its centre at the reference point (``Center x=0 y=0``,
-z = half the height) and the trajectory vertices are the scengen centres as they are.
-Simulators that put the reference point on the rear axle read the box centre from the
-file, so they place the vehicle correctly.
-
-Trajectories: every vehicle (ego included) gets a ``FollowTrajectoryAction`` whose
-``Trajectory`` shape is a ``Polyline`` with one ``Vertex`` per time step (time
-t_i - t_0, ``WorldPosition(x_i, y_i, h=psi_i)``), ``TimeReference/Timing`` absolute with
-scale 1 and offset 0, following mode ``position``. Simulation time 0 is the scenario's
-first time step; for the usual grid that starts at t_0 = 0 the vertex times are the
-scenario's times exactly. A grid that starts elsewhere is shifted rather than expressed
-with the ``Timing`` offset, because simulators disagree on that offset's sign (esmini
-looks up trajectory time = simulation time * scale + offset); t_0 is kept in the file
-header's ``scengen.t0`` property. ``Init`` teleports each vehicle to its first vertex with
-its first speed; the storyboard stops at simulation time t_last - t_0.
-
-Road: the reference line is the road's left edge; all lanes are right lanes (ids -1, -2,
-...) driving in +x, ``lane_width`` wide (the scenario's ``params["lane_width"]``, else its
-``provenance["lane_width"]``, else ``DEFAULT_LANE_WIDTH``; all scenarios of a catalogue
-must agree). The ego lane has
-id -(n_left + 1) and its centre at y = 0; there are at least one lane to its left and one
-to its right, and as many more as the vehicles' centres need. The road spans every
+Coordinates: scengen's road frame is the OpenSCENARIO/OpenDRIVE world frame; the ego
+lane's centre line is y = 0. Positions are rear axles (see ``_osc``). Road: the reference
+line is the road's left edge; all lanes are right lanes (ids -1, -2, ...) driving in +x,
+``lane_width`` wide (``params["lane_width"]``, else ``provenance["lane_width"]``, else
+``DEFAULT_LANE_WIDTH``; all scenarios of a catalogue must agree); at least one lane left
+and one right of the ego lane, more as the vehicles' centres need; the road spans every
 vehicle's x range plus ``ROAD_MARGIN`` m on both sides.
 
 Validation: each ``.xosc`` against ``OpenSCENARIO_1_2.xsd`` and the ``.xodr`` against
-``opendrive_17_core.xsd`` (and its included siblings), both shipped with
-``scenariogeneration``; any error fails the export with the first schema messages.
+``opendrive_17_core.xsd``, both shipped with ``scenariogeneration``; any error fails the
+export with the first schema messages. Details in docs/exports.md.
 """
 
 from __future__ import annotations
