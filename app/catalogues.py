@@ -67,7 +67,7 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "chunks": {"total": row.n_chunks, "done": len(chunks)},
         "scenarios_stored": stored,
         "progress": len(chunks) / row.n_chunks if row.n_chunks else 1.0,
-        "p_region": domain.jsonable(domain.decode_floats(row.p_region)),
+        "p_region": row.p_region,
         "summary": stats,
         "error": row.error,
         "created_at": row.created_at.isoformat(),
@@ -163,7 +163,7 @@ def manifest(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     with ctx.db.session() as s:
         row = repo.get_catalogue(s, catalogue_id)
         model = repo.get_model(s, row.model_id, field="model")
-    p = domain.decode_floats(row.p_region) if row.p_region else None
+    p = jsonconv.decode(row.p_region) if row.p_region else None
     return build_manifest(
         seed=row.seed, model_hash=model.model_hash,
         sampler_settings={"method": row.spec.get("method", "auto"),

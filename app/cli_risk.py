@@ -1,7 +1,9 @@
 """``scengen risk SCENARIO.json``: score a concrete scenario with riskcore, print JSON.
 
 The input is the concrete-scenario JSON form (riskcore.scenario; docs/riskcore.md). The
-output is ``ScenarioRisk.to_dict()`` (plain JSON; +inf written as null). Settings of Table
+output is the same report as ``POST /risk``: summary, per-step series and per-object series
+(``--samples`` adds every object's per-sample Monte-Carlo arrays, ``--summary`` prints only
+the summary); +inf is written as "Infinity" (the service's JSON convention). Settings of Table
 II and the ego's capabilities can be overridden on the command line. User errors (missing
 file, bad JSON, a malformed scenario, bad settings) end as one line
 ``scengen: error: ...`` naming the file and field, with exit code 2 (see app/cli.py).
@@ -42,6 +44,8 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     p.add_argument("--pretty", action="store_true", help="indent the JSON output")
     p.add_argument("--summary", action="store_true",
                    help="print only the flat summary (risk, min TTR, ...)")
+    p.add_argument("--samples", action="store_true",
+                   help="include the per-sample Monte-Carlo arrays (large)")
     p.add_argument("--surfaces", metavar="FILE", default=None,
                    help="input-surfaces file (default: the packaged one)")
     for flag, dest, typ, text in _SETTING_OPTIONS:
@@ -80,7 +84,14 @@ def _run(args: argparse.Namespace) -> int:
         result = evaluate_scenario(ConcreteScenario.from_dict(data), settings, surfaces)
     except (ScenarioError, SceneError) as exc:  # name the file as well as the field
         raise ScenarioError(f"{args.scenario}: {exc}") from None
-    out = result.summary() if args.summary else result.to_dict()
-    sys.stdout.write(json.dumps(out, indent=2 if args.pretty else None, allow_nan=False))
+    from app import jsonconv
+    from app.domain.risk import risk_report
+
+    report = risk_report(result, samples=args.samples)
+    out = report["summary"] if args.summary else report
+    text = jsonconv.dumps(out)
+    if args.pretty:
+        text = json.dumps(json.loads(text), indent=2)
+    sys.stdout.write(text)
     sys.stdout.write("\n")
     return 0

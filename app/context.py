@@ -15,10 +15,11 @@ from typing import Any
 
 import pandas as pd
 
-from app import domain
+from app import domain, jsonconv
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import DatasetRow, ModelRow
+from app.errors import ServiceUnavailable
 from app.jobs.executors import ChunkExecutor, make_executor
 from app.jobs.runner import CatalogueRunner
 from app.settings import Settings
@@ -52,9 +53,9 @@ class ServiceContext:
         if load_defaults:
             try:
                 ctx.load_defaults()
-            except NotImplementedError as exc:
-                # the service still answers (health, stored catalogues); the routes that
-                # need the model say what is missing
+            except (OSError, ValueError) as exc:
+                # embedded data unreadable or its model cannot be fitted: the service still
+                # answers (health, stored catalogues); the routes that need the model say why
                 ctx.startup_error = str(exc)
                 log.warning("embedded dataset/model not available: %s", exc)
         return ctx
@@ -118,7 +119,7 @@ class ServiceContext:
     def model_row(model_id: str, dataset_id: str, fitted: domain.FittedModel,
                   options: dict[str, Any], is_default: bool = False) -> ModelRow:
         return ModelRow(id=model_id, dataset_id=dataset_id, is_default=is_default,
-                        options=domain.jsonable(options), n_components=fitted.n_components,
+                        options=jsonconv.encode(options), n_components=fitted.n_components,
                         model_hash=fitted.model_hash, model_json=fitted.model_json,
                         bic_curve=fitted.bic_curve, fit_report=fitted.fit_report)
 
@@ -138,7 +139,7 @@ class ServiceContext:
     def resolve_model_id(self, model_id: str | None) -> str:
         if model_id in (None, "", "default"):
             if self.default_model_id is None:
-                raise domain.DomainUnavailable(
+                raise ServiceUnavailable(
                     f"no default model: {self.startup_error or 'not loaded'}")
             return self.default_model_id
         assert model_id is not None

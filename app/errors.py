@@ -7,7 +7,7 @@ Exception hierarchy::
     ├── InvalidInput              422  a value the domain rejects (names the field)
     ├── PayloadTooLarge           413  an upload over the size limit
     ├── Conflict                  409  the resource is not in a state that allows it
-    └── DomainUnavailable         501  a domain function has not landed yet
+    └── ServiceUnavailable        503  the service cannot answer yet (no default model)
 
 Every error body is ``{"error": {"status": <int>, "message": <str>, "field": <str|null>}}``;
 ``field`` is a dotted path such as ``body.n`` or ``query.format`` when one field is to blame.
@@ -53,8 +53,8 @@ class Conflict(ServiceError, ValueError):
     status = 409
 
 
-class DomainUnavailable(ServiceError, NotImplementedError):
-    status = 501
+class ServiceUnavailable(ServiceError):
+    status = 503
 
 
 def error_body(status: int, message: str, field: str | None = None) -> dict[str, Any]:

@@ -13,7 +13,7 @@ from typing import Any
 
 import pydantic_core
 
-__all__ = ["decode", "dumps", "encode"]
+__all__ = ["decode", "dumps", "encode", "plot_values"]
 
 _NONFINITE = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan}
 
@@ -43,4 +43,18 @@ def decode(value: Any) -> Any:
         return [decode(v) for v in value]
     if isinstance(value, str) and value in _NONFINITE:
         return _NONFINITE[value]
+    return value
+
+
+def plot_values(value: Any) -> Any:
+    """Plot data for the dashboard: like :func:`encode` but non-finite floats become null,
+    which plotly draws as a gap (the one place where the service writes null for inf)."""
+    if isinstance(value, dict):
+        return {str(k): plot_values(v) for k, v in value.items()}
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    if isinstance(value, list | tuple):
+        return [plot_values(v) for v in value]
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
     return value

@@ -24,7 +24,10 @@ SamplerName = Literal["auto", "rejection", "mcmc"]
 
 
 class ApiModel(BaseModel):
-    """Base of every response model: the service's JSON convention for inf/NaN."""
+    """Base of every response model: the service's JSON convention for inf/NaN.
+
+    FastAPI's response path keeps the convention for typed float fields but not for floats
+    inside ``Any`` or union-with-str values: pass those through ``app.jsonconv.encode``."""
 
     model_config = ConfigDict(ser_json_inf_nan="strings")
 

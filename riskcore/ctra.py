@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riskcore import _kernels
+from riskcore.errors import RiskcoreError
 
 __all__ = ["ctra_states"]
 
@@ -60,9 +61,9 @@ def ctra_states(x0: ArrayLike, y0: ArrayLike, psi0: ArrayLike, v0: ArrayLike, a:
     shape = arrays[0].shape
     flat = [np.ascontiguousarray(q).ravel() for q in arrays]
     if not all(np.isfinite(q).all() for q in flat):
-        raise ValueError("ctra_states: inputs must be finite")
+        raise RiskcoreError("ctra_states: inputs must be finite")
     if (flat[3] < 0).any() or (flat[6] < 0).any():
-        raise ValueError("ctra_states: v0 and tau must be >= 0")
+        raise RiskcoreError("ctra_states: v0 and tau must be >= 0")
     out = np.empty((flat[0].shape[0], 4))
     _kernels.ctra_many(flat[0], flat[1], flat[2], flat[3], flat[4], flat[5], flat[6], out)
     return (out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape),

@@ -19,7 +19,13 @@ __all__ = ["RiskcoreError", "SceneError", "SettingsError", "SurfaceError"]
 
 
 class RiskcoreError(ValueError):
-    """Base class: bad input to riskcore. The message names the field and the problem."""
+    """Base class: bad input to riskcore. The message names the field and the problem;
+    ``field`` holds the field's dotted path (e.g. ``"ego.v[3]"``) when one field is to
+    blame, else None."""
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
 
 
 class SettingsError(RiskcoreError):

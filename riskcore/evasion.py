@@ -21,6 +21,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 from numpy.typing import NDArray
 
+from riskcore.errors import RiskcoreError
 from riskcore.settings import RiskSettings
 
 __all__ = ["MANOEUVRES", "Accelerate", "Brake", "Manoeuvre", "Steer", "evasion_label",
@@ -60,7 +61,7 @@ class Steer(Manoeuvre):
 
     def __init__(self, direction: int) -> None:
         if direction not in (1, -1):
-            raise ValueError("Steer: direction must be +1 (left) or -1 (right)")
+            raise RiskcoreError("Steer: direction must be +1 (left) or -1 (right)")
         self.direction = direction
         self.name = "steer_left" if direction == 1 else "steer_right"
 

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riskcore import _kernels
+from riskcore.errors import RiskcoreError
 
 __all__ = ["boxes_overlap", "time_headway", "ttc_constant_velocity"]
 
@@ -23,12 +24,12 @@ FloatArray = NDArray[np.float64]
 def _boxes(boxes: ArrayLike, name: str) -> FloatArray:
     arr = np.asarray(boxes, dtype=np.float64)
     if arr.ndim < 1 or arr.shape[-1] != 5:
-        raise ValueError(f"{name}: expected shape (..., 5) = [x, y, psi, length, width], "
+        raise RiskcoreError(f"{name}: expected shape (..., 5) = [x, y, psi, length, width], "
                          f"got {arr.shape}")
     if not np.isfinite(arr).all():
-        raise ValueError(f"{name}: values must be finite")
+        raise RiskcoreError(f"{name}: values must be finite")
     if (arr[..., 3:] <= 0).any():
-        raise ValueError(f"{name}: length and width must be > 0")
+        raise RiskcoreError(f"{name}: length and width must be > 0")
     return arr
 
 
@@ -109,7 +110,7 @@ def _ttc_thw(box_a: ArrayLike, v_a: ArrayLike, box_b: ArrayLike, v_b: ArrayLike
     va = np.asarray(v_a, dtype=np.float64)
     vb = np.asarray(v_b, dtype=np.float64)
     if not (np.isfinite(va).all() and np.isfinite(vb).all()):
-        raise ValueError("speeds must be finite")
+        raise RiskcoreError("speeds must be finite")
     shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1], va.shape, vb.shape)
     a = np.ascontiguousarray(np.broadcast_to(a, (*shape, 5)).reshape(-1, 5))
     b = np.ascontiguousarray(np.broadcast_to(b, (*shape, 5)).reshape(-1, 5))

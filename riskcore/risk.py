@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riskcore import _kernels
+from riskcore.errors import RiskcoreError
 
 __all__ = ["object_risk", "risk_dependent", "risk_independent", "ttr_weight"]
 
@@ -37,10 +38,10 @@ def ttr_weight(ttr: ArrayLike, t_pnr: float = 0.5, t_max: float = 2.0,
     ndarray of the shape of ``ttr``
     """
     if not 0 <= t_pnr < t_max or m < 0:
-        raise ValueError("ttr_weight: need 0 <= t_pnr < t_max and m >= 0")
+        raise RiskcoreError("ttr_weight: need 0 <= t_pnr < t_max and m >= 0")
     x = np.asarray(ttr, dtype=np.float64)
     if np.isnan(x).any():
-        raise ValueError("ttr_weight: ttr must not be NaN")
+        raise RiskcoreError("ttr_weight: ttr must not be NaN")
     flat = np.ascontiguousarray(x).ravel()
     return _kernels.ttr_weight_many(flat, float(t_pnr), float(t_max), float(m)).reshape(x.shape)
 
@@ -54,10 +55,10 @@ def object_risk(weight: ArrayLike, g: ArrayLike) -> float:
     w = np.asarray(weight, dtype=np.float64)
     gg = np.asarray(g, dtype=np.float64)
     if w.shape != gg.shape or w.ndim != 1 or w.shape[0] == 0:
-        raise ValueError("object_risk: weight and g must be 1-d of the same non-zero length")
+        raise RiskcoreError("object_risk: weight and g must be 1-d of the same non-zero length")
     den = float(np.sum(w))
     if not den > 0:
-        raise ValueError("object_risk: weights must sum to > 0")
+        raise RiskcoreError("object_risk: weights must sum to > 0")
     return float(_kernels.weighted_mean(np.ascontiguousarray(w), np.ascontiguousarray(gg)))
 
 
@@ -91,12 +92,12 @@ def risk_dependent(g: ArrayLike, p: ArrayLike) -> float:
     gg = np.ascontiguousarray(g, dtype=np.float64)
     pp = np.ascontiguousarray(p, dtype=np.float64)
     if gg.ndim != 2 or gg.shape != pp.shape:
-        raise ValueError(f"risk_dependent: g and p must have the same shape (K, S), got "
+        raise RiskcoreError(f"risk_dependent: g and p must have the same shape (K, S), got "
                          f"{gg.shape} and {pp.shape}")
     if gg.shape[0] == 0:
         return 0.0
     if gg.shape[1] == 0 or not (np.isfinite(gg).all() and np.isfinite(pp).all()):
-        raise ValueError("risk_dependent: need S >= 1 and finite values")
+        raise RiskcoreError("risk_dependent: need S >= 1 and finite values")
     if (gg < 0).any() or (pp < 0).any():
-        raise ValueError("risk_dependent: g and p must be >= 0")
+        raise RiskcoreError("risk_dependent: g and p must be >= 0")
     return float(_kernels.expected_max(gg, pp))

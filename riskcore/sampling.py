@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from riskcore.errors import RiskcoreError
+
 __all__ = ["input_grid", "standard_grid"]
 
 FloatArray = NDArray[np.float64]
@@ -28,7 +30,7 @@ def standard_grid(n: int, sigma_range: float) -> FloatArray:
     ndarray of shape (n,)
     """
     if n < 1:
-        raise ValueError("standard_grid: n must be >= 1")
+        raise RiskcoreError("standard_grid: n must be >= 1")
     if n == 1:
         return np.zeros(1)
     i = np.arange(n, dtype=np.float64)

@@ -53,28 +53,33 @@ class ScenarioError(RiskcoreError):
 
 def _as_series(value: Any, where: str, n: int | None) -> FloatArray:
     if not isinstance(value, list | tuple | np.ndarray):
-        raise ScenarioError(f"{where}: expected a list of numbers, got {type(value).__name__}")
+        raise ScenarioError(f"{where}: expected a list of numbers, got {type(value).__name__}",
+                            field=where)
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ScenarioError(f"{where}: expected a list of numbers ({exc})") from None
+        raise ScenarioError(f"{where}: expected a list of numbers ({exc})", field=where) from None
     if arr.ndim != 1:
-        raise ScenarioError(f"{where}: expected a flat list of numbers, got shape {arr.shape}")
+        raise ScenarioError(f"{where}: expected a flat list of numbers, got shape {arr.shape}",
+                            field=where)
     if n is not None and arr.shape[0] != n:
-        raise ScenarioError(f"{where}: has {arr.shape[0]} values but t has {n} (ragged series)")
+        raise ScenarioError(f"{where}: has {arr.shape[0]} values but t has {n} (ragged series)",
+                            field=where)
     bad = ~np.isfinite(arr)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ScenarioError(f"{where}[{i}]: value {float(arr[i])!r} is not a finite number")
+        raise ScenarioError(f"{where}[{i}]: value {float(arr[i])!r} is not a finite number",
+                            field=f"{where}[{i}]")
     return arr
 
 
 def _as_positive(value: Any, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ScenarioError(f"{where}: expected a number, got {type(value).__name__}")
+        raise ScenarioError(f"{where}: expected a number, got {type(value).__name__}", field=where)
     x = float(value)
     if not math.isfinite(x) or x <= 0.0:
-        raise ScenarioError(f"{where}: must be a positive finite number of metres, got {value!r}")
+        raise ScenarioError(f"{where}: must be a positive finite number of metres, got {value!r}",
+                            field=where)
     return x
 
 
@@ -120,15 +125,16 @@ class Track:
     @classmethod
     def from_dict(cls, data: Any, where: str, n: int) -> Track:
         if not isinstance(data, Mapping):
-            raise ScenarioError(f"{where}: expected an object, got {type(data).__name__}")
+            raise ScenarioError(f"{where}: expected an object, got {type(data).__name__}",
+                                field=where)
         unknown = sorted(set(data) - _TRACK_KEYS)
         if unknown:
-            raise ScenarioError(f"{where}: unknown field(s) {', '.join(unknown)}")
+            raise ScenarioError(f"{where}: unknown field(s) {', '.join(unknown)}", field=where)
         for key in ("id", "length", "width", *_SERIES):
             if key not in data:
-                raise ScenarioError(f"{where}.{key}: missing")
+                raise ScenarioError(f"{where}.{key}: missing", field=f"{where}.{key}")
         if not isinstance(data["id"], str) or not data["id"]:
-            raise ScenarioError(f"{where}.id: expected a non-empty string")
+            raise ScenarioError(f"{where}.id: expected a non-empty string", field=f"{where}.id")
         series = {key: _as_series(data[key], f"{where}.{key}", n) for key in _SERIES}
         optional = {
             key: None if data.get(key) is None else _as_series(data[key], f"{where}.{key}", n)
@@ -191,45 +197,48 @@ class ConcreteScenario:
             raise ScenarioError(f"scenario: unknown field(s) {', '.join(unknown)}")
         schema = data.get("schema", SCHEMA)
         if schema != SCHEMA:
-            raise ScenarioError(f"schema: expected {SCHEMA!r}, got {schema!r}")
+            raise ScenarioError(f"schema: expected {SCHEMA!r}, got {schema!r}", field="schema")
         if "t" not in data:
-            raise ScenarioError("t: missing")
+            raise ScenarioError("t: missing", field="t")
         t = _as_series(data["t"], "t", None)
         if t.shape[0] < 2:
-            raise ScenarioError("t: needs at least 2 time steps")
+            raise ScenarioError("t: needs at least 2 time steps", field="t")
         steps = np.diff(t)
         if (steps <= 0).any():
             i = int(np.flatnonzero(steps <= 0)[0]) + 1
-            raise ScenarioError(f"t[{i}]: time must be strictly increasing ({t[i - 1]} -> {t[i]})")
+            raise ScenarioError(f"t[{i}]: time must be strictly increasing ({t[i - 1]} -> {t[i]})",
+                                field=f"t[{i}]")
         n = t.shape[0]
         if "ego" not in data:
-            raise ScenarioError("ego: missing")
+            raise ScenarioError("ego: missing", field="ego")
         ego = Track.from_dict(data["ego"], "ego", n)
         raw_objects = data.get("objects", [])
         if not isinstance(raw_objects, list):
-            raise ScenarioError("objects: expected a list")
+            raise ScenarioError("objects: expected a list", field="objects")
         objects = tuple(
             Track.from_dict(obj, f"objects[{i}]", n) for i, obj in enumerate(raw_objects)
         )
         ids = [ego.id] + [o.id for o in objects]
         if len(set(ids)) != len(ids):
-            raise ScenarioError("objects: ids must be unique and differ from the ego's")
+            raise ScenarioError("objects: ids must be unique and differ from the ego's",
+                                field="objects")
         params_raw = data.get("params") or {}
         if not isinstance(params_raw, Mapping):
-            raise ScenarioError("params: expected an object of numbers")
+            raise ScenarioError("params: expected an object of numbers", field="params")
         params: dict[str, float] = {}
         for key, value in params_raw.items():
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ScenarioError(f"params.{key}: expected a number")
+                raise ScenarioError(f"params.{key}: expected a number", field=f"params.{key}")
             if not math.isfinite(value):
-                raise ScenarioError(f"params.{key}: value {value!r} is not a finite number")
+                raise ScenarioError(f"params.{key}: value {value!r} is not a finite number",
+                                    field=f"params.{key}")
             params[str(key)] = float(value)
         seed = data.get("seed")
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-            raise ScenarioError("seed: expected an integer or null")
+            raise ScenarioError("seed: expected an integer or null", field="seed")
         provenance = data.get("provenance") or {}
         if not isinstance(provenance, Mapping):
-            raise ScenarioError("provenance: expected an object")
+            raise ScenarioError("provenance: expected an object", field="provenance")
         obj = object.__new__(cls)
         for name, value in (("t", t), ("ego", ego), ("objects", objects), ("params", params),
                             ("seed", seed), ("provenance", dict(provenance))):

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from app import catalogues as catalogue_service
-from app import domain
+from app import domain, jsonconv
 from app.context import ServiceContext
 from app.dashboard.aggregate import (
     MAX_BINS,
@@ -168,7 +168,7 @@ def _points(frame: pd.DataFrame, names: Sequence[str], limit: int) -> dict[str, 
     out: dict[str, Any] = {}
     for name in names:
         col = _column(frame, name)
-        out[name] = domain.jsonable(col[idx]) if col.size else []
+        out[name] = jsonconv.plot_values(col[idx]) if col.size else []
     return {"n_total": len(frame), "n_shown": int(idx.size), "values": out}
 
 
@@ -223,9 +223,10 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
             if name in features:
                 grid = np.linspace(edges[0] - pad, edges[-1] + pad, DENSITY_POINTS)
                 dens = domain.marginal_density(model, name, grid)
-                entry["density"] = {"x": domain.jsonable(grid), "y": domain.jsonable(dens)}
+                entry["density"] = {"x": jsonconv.plot_values(grid),
+                                    "y": jsonconv.plot_values(dens)}
             else:
-                entry["fixed"] = domain.jsonable(getattr(model, "fixed_", {}).get(name))
+                entry["fixed"] = jsonconv.plot_values(getattr(model, "fixed_", {}).get(name))
             params.append(entry)
         return {
             "model": mid,
@@ -261,8 +262,8 @@ def _shift(reference: pd.DataFrame, constrained: pd.DataFrame) -> list[dict[str,
             "label": PARAM_LABELS.get(name, name),
             "unconstrained": histogram(ref, edges),
             "constrained": histogram(con, edges),
-            "mean_unconstrained": domain.finite_or_none(np.mean(ref)) if ref.size else None,
-            "mean_constrained": domain.finite_or_none(np.mean(con)) if con.size else None,
+            "mean_unconstrained": jsonconv.plot_values(np.mean(ref)) if ref.size else None,
+            "mean_constrained": jsonconv.plot_values(np.mean(con)) if con.size else None,
         })
     return out
 
@@ -287,7 +288,7 @@ def shift_preview(ctx: ServiceContext, model_id: str, constraint_text: str, n: i
             "n": n,
             "seed": seed,
             "n_reference": len(reference),
-            "p_region": domain.jsonable(drawn.p_region),
+            "p_region": jsonconv.plot_values(drawn.p_region),
             "parameters": _shift(reference, drawn.params),
         }
 
@@ -373,7 +374,7 @@ def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
             "n": len(constrained),
             "seed": crow.seed,
             "n_reference": len(reference),
-            "p_region": domain.jsonable(domain.decode_floats(crow.p_region)),
+            "p_region": jsonconv.plot_values(jsonconv.decode(crow.p_region)),
             "parameters": _shift(reference, constrained),
         }
 
@@ -384,7 +385,7 @@ def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
 # --------------------------------------------------------------------------- view 3
 def _diagnostics(chunks: Sequence[Any]) -> dict[str, Any]:
     """Sampler diagnostics over a catalogue's chunks (each chunk is sampled on its own)."""
-    per = [domain.decode_floats(c.diagnostics or {}).get("sampler") or {} for c in chunks]
+    per = [jsonconv.decode(c.diagnostics or {}).get("sampler") or {} for c in chunks]
     methods = sorted({str(d.get("method")) for d in per if d.get("method")})
 
     def values(key: str) -> list[float]:
@@ -460,9 +461,9 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
             "n_no_collision": int(np.sum(np.isinf(min_ttr))),
             "evasion": shares(evasion, none_label="no collision"),
             "scatter": {
-                "index": domain.jsonable(idx[keep]),
-                "ttc": domain.jsonable(ttc[keep]),
-                "risk": domain.jsonable(risk[keep]),
+                "index": jsonconv.plot_values(idx[keep]),
+                "ttc": jsonconv.plot_values(ttc[keep]),
+                "risk": jsonconv.plot_values(risk[keep]),
                 "n_total": int(idx.size),
                 "n_plottable": int((np.isfinite(ttc) & np.isfinite(risk)).sum()),
                 "n_shown": int(keep.size),
@@ -509,8 +510,8 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
             "index": row.idx,
             "params": row.params,
             "trajectory_source": source,
-            "ttc": domain.finite_or_none(row.ttc),
-            "risk": domain.finite_or_none(row.risk),
+            "ttc": jsonconv.plot_values(row.ttc),
+            "risk": jsonconv.plot_values(row.risk),
             "lane_width": prov.get("lane_width"),
             "t": data["t"],
             "ego": _track(data["ego"]),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 import os
 from collections.abc import Iterable, Iterator, Mapping
@@ -16,6 +15,7 @@ from app.exports._common import (
     check_flat_value,
     jsonable,
 )
+from app.versions import versions
 from datasets.cutin_model import PARAM_NAMES, ttc_from_gap_dv
 from riskcore.scenario import ConcreteScenario
 
@@ -260,13 +260,7 @@ def build_manifest(
 
 def package_versions() -> dict[str, str | None]:
     """Installed versions of scengen and the packages behind its numbers (None: absent)."""
-    out: dict[str, str | None] = {"scengen": __version__}
-    for name in VERSION_PACKAGES:
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = None
-    return out
+    return versions(VERSION_PACKAGES)
 
 
 def export_catalogue(

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from app import domain
+from app import domain, jsonconv
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
@@ -41,7 +41,7 @@ class _Either:
 def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
     """The executor-side spec of a catalogue row (adds the model's JSON and P(A))."""
     spec = dict(row.spec)
-    p_region = domain.decode_floats(row.p_region) if row.p_region else None
+    p_region = jsonconv.decode(row.p_region) if row.p_region else None
     estimate = p_region.get("estimate") if isinstance(p_region, dict) else None
     return CatalogueSpec(
         n=row.n, seed=row.seed, chunk_size=row.chunk_size, model_json=model_json,
@@ -56,7 +56,7 @@ def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
     """P(A) of the catalogue's region: one estimate from the catalogue's seed."""
     model = domain.load_model(spec.model_json)
     constraints = domain.parse_constraints(spec.constraints)
-    return domain.encode_floats(domain.estimate_region(model, constraints,
+    return jsonconv.encode(domain.estimate_region(model, constraints,
                                                        region_seed(spec.seed)))
 
 

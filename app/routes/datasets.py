@@ -11,7 +11,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, File, Form, Query, UploadFile
 from fastapi.responses import Response
 
-from app import domain
+from app import domain, jsonconv
 from app.db import repository as repo
 from app.db.models import DatasetRow
 from app.deps import ContextDep, SessionDep
@@ -68,7 +68,7 @@ def parameter_table(
         "offset": offset,
         "limit": limit,
         "columns": [str(c) for c in table.columns],
-        "rows": domain.jsonable(page.to_dict(orient="records")),
+        "rows": jsonconv.encode(page.to_dict(orient="records")),
     }
 
 
@@ -103,7 +103,7 @@ def upload_dataset(
             row = DatasetRow(id=dataset_id, name=name or paths[0].name, kind=kind,
                              embedded=False, data_hash=data_hash, n_cutins=len(table),
                              table_path=f"datasets/{dataset_id}/table.parquet",
-                             report=domain.jsonable(report))
+                             report=jsonconv.encode(report))
             s.add(row)
     except BaseException:
         shutil.rmtree(final, ignore_errors=True)

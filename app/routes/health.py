@@ -7,8 +7,8 @@ from typing import Any
 from fastapi import APIRouter
 from sqlalchemy import text
 
-from app import domain
 from app.deps import ContextDep
+from app.versions import versions
 
 router = APIRouter(tags=["service"])
 
@@ -29,4 +29,4 @@ def health(ctx: ContextDep) -> dict[str, Any]:
 
 @router.get("/version", summary="Versions of scengen and its numerical libraries")
 def version() -> dict[str, Any]:
-    return {"versions": domain.versions()}
+    return {"versions": versions()}

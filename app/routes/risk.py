@@ -4,15 +4,40 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body
+from fastapi import APIRouter, Body, Query
+from pydantic import Field
 
-from app import domain
+from app import domain, jsonconv
+from app.schemas import ApiModel
 
 router = APIRouter(prefix="/risk", tags=["risk"])
 
 
-@router.post("", summary="TTR Monte-Carlo risk of a concrete scenario (its JSON form, "
-             "schema scengen.concrete-scenario/1): per-step series and summary")
-def score(scenario: Annotated[dict[str, Any], Body(
-        description="a concrete scenario in the JSON form of riskcore.scenario")]) -> Any:
-    return domain.score_posted(scenario)
+class RiskReport(ApiModel):
+    """A scenario's Monte-Carlo TTR risk (layout ``scengen.scenario-risk/1``)."""
+
+    format: str
+    settings: dict[str, Any] = Field(description="riskcore's RiskSettings used")
+    surfaces: dict[str, Any] = Field(description="input surfaces: source, interim")
+    summary: dict[str, float | str | None] = Field(
+        description="the scored record's fields: risk, risk_ind, min_ttr, ...")
+    evasion_bits: dict[str, int]
+    series: dict[str, list[float]] = Field(
+        description="per step: t, r_dep, r_ind, min_ttr, ttc, wttc, thw")
+    objects: list[dict[str, Any]] = Field(
+        description="per object: id, per-step series, and with samples=true the "
+        "per-sample arrays (a, omega, weight, ttr, collision_time, evasion)")
+
+
+@router.post("", response_model=RiskReport,
+             summary="TTR Monte-Carlo risk of a concrete scenario (its JSON form, schema "
+             "scengen.concrete-scenario/1): summary and per-step series")
+def score(
+    scenario: Annotated[dict[str, Any], Body(
+        description="a concrete scenario in the JSON form of riskcore.scenario")],
+    samples: Annotated[bool, Query(description="include every object's per-sample "
+                                   "Monte-Carlo arrays (large: ~0.9 MB for 10 s)")] = False,
+) -> RiskReport:
+    # encoded first: FastAPI loses ser_json_inf_nan inside ``Any`` and union values
+    return RiskReport.model_validate(jsonconv.encode(domain.score_posted(scenario,
+                                                                         samples=samples)))

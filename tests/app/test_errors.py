@@ -9,11 +9,11 @@ from pydantic import BaseModel
 
 from app.errors import (
     Conflict,
-    DomainUnavailable,
     InvalidInput,
     NotFound,
     PayloadTooLarge,
     ServiceError,
+    ServiceUnavailable,
     install_error_handlers,
 )
 
@@ -30,7 +30,7 @@ def _app() -> FastAPI:
         "invalid": InvalidInput("n is too big", field="body.n"),
         "large": PayloadTooLarge("too big"),
         "conflict": Conflict("not finished"),
-        "unavailable": DomainUnavailable("sampler.sample is not available yet"),
+        "unavailable": ServiceUnavailable("no default model: not loaded"),
     }
 
     @app.get("/raise/{kind}")
@@ -51,7 +51,7 @@ def _app() -> FastAPI:
     ("invalid", 422, "body.n"),
     ("large", 413, None),
     ("conflict", 409, None),
-    ("unavailable", 501, None),
+    ("unavailable", 503, None),
 ])
 def test_service_errors_have_the_common_shape(kind: str, status: int, field: str | None) -> None:
     with TestClient(_app()) as client:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from app import domain
+from app import domain, jsonconv
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
@@ -106,7 +106,7 @@ def store_synthetic_catalogue(db: Database, data_dir: Path, model_id: str, n: in
                                      "method": "mc"},
                            finished_at=utcnow()))
     for c in range(n_chunks):
-        chunk = [dict(r, summary=domain.encode_floats(r["summary"]))
+        chunk = [dict(r, summary=jsonconv.encode(r["summary"]))
                  for r in rows if r["chunk_index"] == c]
         diag = {"sampler": {"method": "rejection", "acceptance_rate": 0.1 * (c + 1),
                             "ess": float(len(chunk)), "n_draws": 10 * len(chunk)}}

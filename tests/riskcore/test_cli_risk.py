@@ -33,10 +33,13 @@ def _write(tmp_path: Path, data: Any, text: str | None = None) -> str:
 
 def test_prints_the_result_as_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _write(tmp_path, _scenario())
-    assert main(["risk", path]) == 0
+    assert main(["risk", path]) == 0  # the summary report by default (issue 13)
+    brief = json.loads(capsys.readouterr().out)
+    assert "samples" not in brief["objects"][0]
+    assert main(["risk", path, "--samples"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["format"] == "scengen.scenario-risk/1"
-    assert len(out["series"]["r_dep"]) == 21
+    assert len(out["series"]["r_dep"]) == 21 and brief["series"] == out["series"]
     samples = out["objects"][0]["samples"]
     assert len(samples["ttr"]) == 21 and len(samples["ttr"][0]) == 100
     assert len(samples["weight"][0]) == len(samples["evasion"][0]) == 100
@@ -48,7 +51,7 @@ def test_pretty_summary_and_overrides(tmp_path: Path,
                                       capsys: pytest.CaptureFixture[str]) -> None:
     path = _write(tmp_path, _scenario())
     assert main(["risk", path, "--pretty", "--horizon", "2", "--n-a", "4", "--t-pnr", "0.3",
-                 "--brake-max", "9"]) == 0
+                 "--brake-max", "9", "--samples"]) == 0
     text = capsys.readouterr().out
     assert text.startswith("{\n  ")
     out = json.loads(text)

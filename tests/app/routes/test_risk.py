@@ -29,7 +29,7 @@ def test_a_far_away_car_is_no_risk(client: Any) -> None:
     assert r.status_code == 200, r.text
     summary = r.json()["summary"]
     assert summary["risk"] == 0.0
-    assert summary["min_ttr"] is None  # infinite: no predicted collision
+    assert summary["min_ttr"] == "Infinity"  # no predicted collision (the JSON convention)
 
 
 def test_a_stopped_car_just_ahead_in_the_ego_lane_is_high_risk(client: Any) -> None:
@@ -38,7 +38,13 @@ def test_a_stopped_car_just_ahead_in_the_ego_lane_is_high_risk(client: Any) -> N
     assert r.status_code == 200, r.text
     body = r.json()
     assert body["summary"]["risk"] > 0.5
-    assert body["risk"]  # the per-step series are there
+    assert max(body["series"]["r_dep"]) == body["summary"]["risk"]
+    assert "samples" not in body["objects"][0]  # the summary by default (issue 13)
+    full = client.post("/risk", params={"samples": True},
+                       json=_scenario(cutter_y=0.0, cutter_x0=19.5, cutter_v=0.0)).json()
+    assert full["series"] == body["series"]
+    ttr = full["objects"][0]["samples"]["ttr"]
+    assert len(ttr) == len(body["series"]["t"]) and len(ttr[0]) == 100
 
 
 @pytest.mark.parametrize(("mutate", "field"), [

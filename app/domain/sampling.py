@@ -1,0 +1,92 @@
+"""Constrained sampling for the service: constraints, samples, P(A)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from app import jsonconv
+from app.errors import InvalidInput
+from sampler import (
+    Constraint,
+    CutInGMM,
+    EmptyRegionError,
+    PRegion,
+    SamplerError,
+    estimate_p_region,
+    parse_constraint,
+)
+from sampler import sample as sampler_sample
+
+__all__ = ["SampleResult", "estimate_region", "parse_constraints", "sample"]
+
+
+def parse_constraints(texts: Sequence[str], field: str = "body.constraints") -> list[Constraint]:
+    """Parse constraint texts; a bad one is InvalidInput naming its position. The sampler's
+    message already quotes the constraint."""
+    out = []
+    for i, text in enumerate(texts):
+        try:
+            out.append(parse_constraint(text))
+        except SamplerError as exc:
+            raise InvalidInput(str(exc), field=f"{field}.{i}") from None
+    return out
+
+
+@dataclass(frozen=True)
+class SampleResult:
+    """What the service keeps of a sampler SampleSet."""
+
+    params: pd.DataFrame  # columns PARAM_NAMES, one row per sample
+    weights: NDArray[np.float64]  # exposure weight per sample
+    p_region: dict[str, Any]  # {"estimate", "ci": [lo, hi], ...}
+    diagnostics: dict[str, Any]
+    lane_width: float  # m, the region's lane width: build the scenarios with it
+
+
+def region_dict(pr: PRegion) -> dict[str, Any]:
+    """A PRegion as JSON: its fields plus ``ci`` = [ci_low, ci_high]."""
+    out = dict(pr.to_dict())
+    out["ci"] = [out.get("ci_low"), out.get("ci_high")]
+    encoded: dict[str, Any] = jsonconv.encode(out)
+    return encoded
+
+
+def _sampling_error(exc: ValueError) -> InvalidInput:
+    if isinstance(exc, EmptyRegionError):
+        return InvalidInput(f"the region is (practically) empty: {exc}",
+                            field="body.constraints")
+    return InvalidInput(f"sampling failed: {exc}", field="body")
+
+
+def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int,
+           method: str = "auto") -> SampleResult:
+    """``n`` samples of ``model`` in the region (``sampler.sample``)."""
+    try:
+        ss = sampler_sample(model, list(constraints), n, seed, method)
+    except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
+        raise _sampling_error(exc) from None
+    diagnostics = jsonconv.encode(dict(ss.diagnostics))
+    diagnostics["method"] = ss.method
+    diagnostics["requested_method"] = ss.requested
+    return SampleResult(
+        params=ss.params,
+        weights=np.asarray(ss.exposure_weights, dtype=np.float64),
+        p_region=region_dict(ss.p_region),
+        diagnostics=diagnostics,
+        lane_width=float(ss.region.lane_width),
+    )
+
+
+def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
+                    seed: int) -> dict[str, Any]:
+    """P(A) of the constraint region under the model: ``{"estimate", "ci": [lo, hi], ...}``."""
+    try:
+        return region_dict(estimate_p_region(model, list(constraints), seed))
+    except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
+        raise _sampling_error(exc) from None
