@@ -114,6 +114,7 @@ class ScenarioRow(Base):
         UniqueConstraint("catalogue_id", "idx", name="uq_scenario_idx"),
         Index("ix_scenario_risk", "catalogue_id", "risk"),
         Index("ix_scenario_ttc", "catalogue_id", "ttc"),
+        Index("ix_scenario_weight", "catalogue_id", "exposure_weight"),
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)

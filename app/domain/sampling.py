@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -17,11 +17,13 @@ from sampler import (
     CutInGMM,
     EmptyRegionError,
     PRegion,
+    PRegionEstimator,
     SamplerError,
     estimate_p_region,
     parse_constraint,
 )
 from sampler import sample as sampler_sample
+from sampler.problem import Problem
 
 __all__ = ["SampleResult", "estimate_region", "parse_constraints", "sample"]
 
@@ -64,11 +66,40 @@ def _sampling_error(exc: ValueError) -> InvalidInput:
     return InvalidInput(f"sampling failed: {exc}", field="body")
 
 
+class KnownRegion(PRegionEstimator):
+    """The sampler's estimator when P(A) (and P(B)) are already known for the region: a
+    catalogue estimates them once and every chunk reuses them instead of spending
+    ``n_bounds`` draws on P(B) and an estimate of P(A) it would throw away."""
+
+    def __init__(self, known: PRegion) -> None:
+        super().__init__()
+        self.known = known
+
+    def p_bounds(self, problem: Problem, rng: np.random.Generator) -> tuple[float, float, float]:
+        lo, hi = self.known.p_bounds_ci
+        return self.known.p_bounds, lo, hi
+
+    def estimate(self, problem: Problem, rng: np.random.Generator, **kwargs: Any) -> PRegion:
+        return self.known
+
+    def from_subset(self, problem: Problem, *args: Any, **kwargs: Any) -> PRegion:
+        return self.known
+
+
+def region_of(data: dict[str, Any]) -> PRegion:
+    """A stored P(A) dict (``region_dict``, maybe JSON-encoded) back as a PRegion."""
+    values = jsonconv.decode(data)
+    names = {f.name for f in fields(PRegion)}
+    return PRegion.from_dict({k: v for k, v in values.items() if k in names})
+
+
 def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int,
-           method: str = "auto") -> SampleResult:
-    """``n`` samples of ``model`` in the region (``sampler.sample``)."""
+           method: str = "auto", known_region: dict[str, Any] | None = None) -> SampleResult:
+    """``n`` samples of ``model`` in the region (``sampler.sample``). ``known_region``: the
+    region's P(A) dict when it is already estimated (reused, not estimated again)."""
+    estimator = None if known_region is None else KnownRegion(region_of(known_region))
     try:
-        ss = sampler_sample(model, list(constraints), n, seed, method)
+        ss = sampler_sample(model, list(constraints), n, seed, method, estimator=estimator)
     except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
         raise _sampling_error(exc) from None
     diagnostics = jsonconv.encode(dict(ss.diagnostics))

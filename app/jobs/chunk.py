@@ -11,6 +11,7 @@ refuses is a row with ``error`` set, not a failed chunk.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
@@ -21,6 +22,7 @@ import numpy as np
 from app import domain, jsonconv
 from app.db import chunkfile
 from riskcore.scenario import ConcreteScenario
+from sampler import Constraint, CutInGMM
 from sampler.record import ScenarioRecord, score_rows, score_vector
 
 #: spawn-key prefixes that keep the seed streams apart
@@ -57,6 +59,8 @@ class CatalogueSpec:
     store_trajectories: bool = True
     #: the catalogue's P(A) estimate: each scenario's exposure weight is p_region / n
     p_region: float | None = None
+    #: the catalogue's whole P(A) record (with P(B)): every chunk reuses it
+    region: dict[str, Any] | None = None
 
     @property
     def n_chunks(self) -> int:
@@ -115,13 +119,18 @@ def scenario_row(record: ScenarioRecord, chunk_index: int) -> dict[str, Any]:
     }
 
 
+@functools.lru_cache(maxsize=4)
+def _prepared(model_json: str, constraints: tuple[str, ...]) -> tuple[CutInGMM, list[Constraint]]:
+    """The model and constraints of a catalogue, parsed once per worker process."""
+    return domain.load_model(model_json), domain.parse_constraints(constraints)
+
+
 def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     """Sample, build and (optionally) score chunk ``index`` of the catalogue."""
     start, stop = spec.bounds(index)
-    model = domain.load_model(spec.model_json)
-    constraints = domain.parse_constraints(spec.constraints)
+    model, constraints = _prepared(spec.model_json, spec.constraints)
     drawn = domain.sample(model, constraints, stop - start, chunk_seed(spec.seed, index),
-                          method=spec.method)
+                          method=spec.method, known_region=spec.region)
     weights = spec.p_region / spec.n if spec.p_region is not None else drawn.weights
     rows: list[dict[str, Any]] = []
     scenarios: list[dict[str, Any] | None] = []

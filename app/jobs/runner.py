@@ -49,6 +49,7 @@ def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
         score=bool(spec.get("score", True)),
         store_trajectories=bool(spec.get("store_trajectories", True)),
         p_region=None if estimate is None else float(estimate),
+        region=row.p_region,
     )
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from sqlalchemy import func, inspect, select, text
 from sqlalchemy.exc import IntegrityError
@@ -41,7 +42,7 @@ def test_migrations_create_the_schema_and_are_idempotent(database_url: str) -> N
     assert {"datasets", "models", "catalogues", "catalogue_chunks",
             "catalogue_scenarios", "alembic_version"} <= names
     with db.engine.connect() as conn:
-        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0002"
+        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0003"
     db.dispose()
 
 
@@ -119,4 +120,37 @@ def test_delete_removes_rows_and_files(database_url: str, tmp_path: Path) -> Non
         with pytest.raises(NotFound):
             repo.get_catalogue(s, "cat-1")
     assert not (tmp_path / "catalogues" / "cat-1").exists()
+    db.dispose()
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 40])
+def test_sql_statistics_equal_numpy_on_the_finite_values(database_url: str, tmp_path: Path,
+                                                         n: int) -> None:
+    # issue 13: the status statistics come from SQL; numpy on the same values is the reference
+    rng = np.random.default_rng(n)
+    ttc = rng.exponential(2.0, n)
+    ttc[::3] = math.inf  # opening gaps: not in the statistics
+    risk = rng.uniform(0.0, 1.0, n)
+    rows = [{"idx": i, "chunk_index": 0, "params": {}, "ttc": float(ttc[i]),
+             "risk": None if i % 5 == 4 else float(risk[i]), "exposure_weight": 0.5,
+             "summary": {}} for i in range(n)]
+    db = _store(database_url)
+    _catalogue(db, n=n)
+    with db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 0, rows, None, None, {})
+    with db.session() as s:
+        stats = repo.summary_statistics(s, "cat-1")
+    for name, values in (("ttc", ttc), ("risk", np.array([r["risk"] for r in rows
+                                                          if r["risk"] is not None]))):
+        finite = values[np.isfinite(values)]
+        got = stats[name]
+        if finite.size == 0:
+            assert got == {"count": 0}
+            continue
+        assert got["count"] == finite.size
+        assert got["min"] == finite.min() and got["max"] == finite.max()
+        assert got["mean"] == pytest.approx(finite.mean(), rel=1e-12)
+        assert got["p50"] == pytest.approx(np.quantile(finite, 0.5), rel=1e-12)
+        assert got["p95"] == pytest.approx(np.quantile(finite, 0.95), rel=1e-12)
+    assert stats["exposure_weight"]["p95"] == 0.5
     db.dispose()
