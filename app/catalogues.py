@@ -77,12 +77,11 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
 
 
 def record_of(row: ScenarioRow) -> ScenarioRecord:
-    """The stored scenario as the service's one scored-record schema."""
-    scores = jsonconv.decode(row.summary or {})
-    return ScenarioRecord(index=row.idx, params=row.params,
-                          ttc=math.inf if row.ttc is None else row.ttc,
-                          exposure_weight=row.exposure_weight, error=row.error,
-                          **{k: scores.get(k) for k in SCORE_FIELDS})
+    """The stored scenario as the service's one scored-record schema (from its columns)."""
+    scores = {k: getattr(row, "class_" if k == "class" else k) for k in SCORE_FIELDS}
+    return ScenarioRecord.model_validate({
+        "index": row.idx, "params": row.params, "ttc": math.inf if row.ttc is None else row.ttc,
+        "exposure_weight": row.exposure_weight, "error": row.error, **scores})
 
 
 def export_summary(row: ScenarioRow) -> dict[str, Any]:

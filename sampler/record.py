@@ -1,7 +1,9 @@
 """One parameter vector -> one scored scenario record: the single join of sampler and riskcore.
 
 :func:`score_vector` builds the concrete scenario of a cut-in parameter vector
-(``sampler.builder.build_scenario``) and scores it (``riskcore.evaluate_scenario``); it is
+(``sampler.builder.build_scenario``) and scores it with its criticality record
+(``riskcore.criticality.evaluate_criticality``: the perception moment, the reference
+drivers, ``btn``, the class, Wagner's risk at t_p and its peak); it is
 what ``POST /scenarios``, every catalogue chunk, ``scengen sample --score`` and
 :func:`sampler.scoring.score_samples` call, so the same vector with the same lane width gives
 the same :class:`ScenarioRecord` whichever way it is asked for.
@@ -31,57 +33,80 @@ import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field
 
 from datasets.cutin_model import PARAM_NAMES, ttc_from_gap_dv
+from riskcore.criticality import CRITICALITY_FIELDS, CriticalitySettings, evaluate_criticality
 from riskcore.scenario import ConcreteScenario
-from riskcore.scenario_risk import ScenarioRisk, evaluate_scenario
 from riskcore.settings import RiskSettings
 from riskcore.surfaces import InputSurfaces
 from sampler.builder import build_scenario
 
-__all__ = ["SCORE_FIELDS", "ScenarioRecord", "score_rows", "score_scenario", "score_vector"]
+__all__ = ["SCORE_FIELDS", "ScenarioRecord", "score_rows", "score_vector"]
 
-#: the record's score fields, in order (all None when unscored or on error)
-SCORE_FIELDS = ("risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw",
-                "min_ttr_evasion", "t_of_max_risk")
+#: the record's score fields: the criticality record's flat names, in order (all None when
+#: unscored or on error)
+SCORE_FIELDS: tuple[str, ...] = tuple(CRITICALITY_FIELDS)
+
+
+def _doc(name: str) -> str:
+    spec = CRITICALITY_FIELDS[name]
+    unit = f" [{spec.unit}]" if spec.unit not in ("", "-") else ""
+    return spec.doc + unit
+
+
+def _criticality(name: str) -> Any:
+    return Field(default=None, description=_doc(name))
 
 
 class ScenarioRecord(BaseModel):
     """A sampled cut-in with its scores: one row of a catalogue, one item of
     ``POST /scenarios``, one line of ``scengen sample --score``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="strings")
+    model_config = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="strings",
+                              populate_by_name=True, serialize_by_alias=True)
 
     index: int = Field(description="position in the request or catalogue (0 .. n-1)")
     params: dict[str, float] = Field(description="the cut-in parameter vector (SI units)")
     ttc: float = Field(description="initial time to collision gap / dv in s (+inf: opening)")
     exposure_weight: float | None = Field(
         default=None, description="the scenario's share of P(A) (weight for rates on the road)")
-    risk: float | None = Field(default=None, description="max scripted-ego r_dep over the run")
-    risk_ind: float | None = Field(default=None, description="max r_ind over the run")
-    min_ttr: float | None = Field(default=None, description="smallest TTR over the run, s")
-    min_ttc: float | None = Field(default=None, description="smallest TTC over the run, s")
-    min_wttc: float | None = Field(default=None, description="smallest worst-case TTC, s")
-    min_thw: float | None = Field(default=None, description="smallest time headway, s")
-    min_ttr_evasion: str | None = Field(
-        default=None, description="evasion label of the smallest TTR (null: no collision)")
-    t_of_max_risk: float | None = Field(default=None, description="time of the max risk, s")
+    # the criticality record (riskcore.criticality.CRITICALITY_FIELDS; null: not scored)
+    t_p: float | None = _criticality("t_p")
+    t_cross: float | None = _criticality("t_cross")
+    ttr_true: float | None = _criticality("ttr_true")
+    ttr_manoeuvre: str | None = _criticality("ttr_manoeuvre")
+    a_req: float | None = _criticality("a_req")
+    btn: float | None = _criticality("btn")
+    class_: str | None = Field(default=None, alias="class", description=_doc("class"))
+    none_collision: bool | None = _criticality("none_collision")
+    none_impact_speed: float | None = _criticality("none_impact_speed")
+    none_min_gap: float | None = _criticality("none_min_gap")
+    r157_cc_collision: bool | None = _criticality("r157_cc_collision")
+    r157_cc_impact_speed: float | None = _criticality("r157_cc_impact_speed")
+    r157_cc_min_gap: float | None = _criticality("r157_cc_min_gap")
+    r157_cc_t_brake: float | None = _criticality("r157_cc_t_brake")
+    rss_collision: bool | None = _criticality("rss_collision")
+    rss_impact_speed: float | None = _criticality("rss_impact_speed")
+    rss_min_gap: float | None = _criticality("rss_min_gap")
+    rss_t_brake: float | None = _criticality("rss_t_brake")
+    r_dep_tp: float | None = _criticality("r_dep_tp")
+    r_ind_tp: float | None = _criticality("r_ind_tp")
+    r_dep_cross: float | None = _criticality("r_dep_cross")
+    r_ind_cross: float | None = _criticality("r_ind_cross")
+    r_dep_tp_r157: float | None = _criticality("r_dep_tp_r157")
+    r_ind_tp_r157: float | None = _criticality("r_ind_tp_r157")
+    r_dep_cross_r157: float | None = _criticality("r_dep_cross_r157")
+    r_ind_cross_r157: float | None = _criticality("r_ind_cross_r157")
+    alarm_time: float | None = _criticality("alarm_time")
+    risk_peak: float | None = _criticality("risk_peak")
     error: str | None = Field(default=None, description="why the vector has no scores "
                               "('build: ...' or 'score: ...'); null when it was scored")
     scenario: dict[str, Any] | None = Field(
         default=None, description="the concrete scenario (scengen.concrete-scenario/1) when "
         "asked for")
 
-    def scores(self) -> dict[str, float | str | None]:
-        """The score fields (``SCORE_FIELDS``) as a flat dict."""
-        return {name: getattr(self, name) for name in SCORE_FIELDS}
-
-
-def score_scenario(risk: ScenarioRisk) -> dict[str, float | str | None]:
-    """The record's score fields of a riskcore result (+inf kept)."""
-    k = risk.step_of_max_risk
-    return {"risk": float(risk.risk), "risk_ind": float(risk.risk_ind),
-            "min_ttr": float(risk.min_ttr), "min_ttc": float(risk.min_ttc),
-            "min_wttc": float(risk.min_wttc), "min_thw": float(risk.min_thw),
-            "min_ttr_evasion": risk.min_ttr_evasion, "t_of_max_risk": float(risk.t[k])}
+    def scores(self) -> dict[str, float | bool | str | None]:
+        """The score fields (``SCORE_FIELDS``, the criticality record) as a flat dict."""
+        return {name: getattr(self, "class_" if name == "class" else name)
+                for name in SCORE_FIELDS}
 
 
 def score_vector(
@@ -97,6 +122,7 @@ def score_vector(
     builder_kwargs: Mapping[str, Any] | None = None,
     settings: RiskSettings | None = None,
     surfaces: InputSurfaces | None = None,
+    criticality: CriticalitySettings | None = None,
 ) -> tuple[ScenarioRecord, ConcreteScenario | None]:
     """Build and score one parameter vector.
 
@@ -121,7 +147,10 @@ def score_vector(
     builder_kwargs : mapping, optional
         More ``build_scenario`` arguments (``dt``, ``duration``, ...).
     settings, surfaces : optional
-        riskcore's ``RiskSettings`` and ``InputSurfaces`` (defaults when None).
+        riskcore's ``RiskSettings`` and ``InputSurfaces`` for Wagner's risk and the TTR
+        scan (defaults when None).
+    criticality : CriticalitySettings, optional
+        The reference drivers' settings (defaults when None).
 
     Returns
     -------
@@ -145,10 +174,11 @@ def score_vector(
         fields["scenario"] = scenario.to_dict()
     if score:
         try:
-            risk = evaluate_scenario(scenario, settings=settings, surfaces=surfaces)
+            crit = evaluate_criticality(scenario, lane_width=lane_width, settings=criticality,
+                                        risk_settings=settings, surfaces=surfaces)
         except ValueError as exc:  # riskcore's errors are ValueErrors
             return ScenarioRecord(**fields, error=f"score: {exc}"), scenario
-        fields.update(score_scenario(risk))
+        fields.update(crit.to_record())
     return ScenarioRecord(**fields), scenario
 
 

@@ -26,7 +26,6 @@ from riskcore import (
     evasion_label,
 )
 from riskcore.scenario_risk import RESULT_FORMAT
-from sampler.record import score_scenario
 
 __all__ = ["SERIES", "parse_scenario", "risk_report", "scenario_risk_series", "score_posted"]
 
@@ -38,6 +37,16 @@ _SAMPLES = ("a", "omega", "weight", "ttr", "collision_time")
 #: evasion label of every bit mask of the manoeuvres (None where nothing collides)
 _LABELS = np.array([evasion_label(m, True) for m in range(1 << len(MANOEUVRES))],
                    dtype=object)
+
+
+def score_scenario(risk: ScenarioRisk) -> dict[str, float | str | None]:
+    """The flat summary of a scenario's Wagner risk (+inf kept): its maxima and minima over
+    the run."""
+    k = risk.step_of_max_risk
+    return {"risk": float(risk.risk), "risk_ind": float(risk.risk_ind),
+            "min_ttr": float(risk.min_ttr), "min_ttc": float(risk.min_ttc),
+            "min_wttc": float(risk.min_wttc), "min_thw": float(risk.min_thw),
+            "min_ttr_evasion": risk.min_ttr_evasion, "t_of_max_risk": float(risk.t[k])}
 
 
 def _field(exc: RiskcoreError) -> str:

@@ -106,16 +106,19 @@ class ChunkResult:
 
 
 def scenario_row(record: ScenarioRecord, chunk_index: int) -> dict[str, Any]:
-    """The stored form of a catalogue scenario's record (``ScenarioRow`` columns)."""
+    """The stored form of a catalogue scenario's record (``ScenarioRow`` columns: one per
+    criticality field, ``risk`` = ``risk_peak``, and the scores as JSON for the exports)."""
+    scores = record.scores()
     return {
         "idx": record.index,
         "chunk_index": chunk_index,
         "params": record.params,
         "ttc": record.ttc,
-        "risk": record.risk,
+        "risk": record.risk_peak,
         "exposure_weight": record.exposure_weight,
         "error": record.error,
-        "summary": jsonconv.encode(record.scores()),
+        "summary": jsonconv.encode(scores),
+        **{("class_" if k == "class" else k): v for k, v in scores.items()},
     }
 
 

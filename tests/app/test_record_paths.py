@@ -3,6 +3,7 @@ a catalogue chunk and ``scengen sample --score`` give the same records."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 from pathlib import Path
@@ -15,6 +16,7 @@ from app.cli import main
 from app.db.models import ScenarioRow
 from app.jobs import chunk as chunk_module
 from app.jobs.chunk import CatalogueSpec, compute_chunk
+from riskcore.criticality import CRITICALITY_FIELDS
 from sampler.record import ScenarioRecord
 
 N, SEED = 4, 5
@@ -33,7 +35,7 @@ def test_route_job_and_cli_give_the_same_record(client: Any, tmp_path: Path,
     assert r.status_code == 200, r.text
     route = [ScenarioRecord.model_validate(item) for item in r.json()["scenarios"]]
     assert [rec.index for rec in route] == list(range(N))
-    assert all(rec.error is None and rec.risk is not None for rec in route)
+    assert all(rec.error is None and rec.class_ is not None for rec in route)
 
     # a catalogue chunk drawing the same vectors: chunk 0 sampled with the request's seed
     ctx = _ctx(client)
@@ -60,8 +62,9 @@ def test_route_job_and_cli_give_the_same_record(client: Any, tmp_path: Path,
     assert cli == route
     for rec in route:  # and the record is what it claims, by hand
         assert rec.ttc == pytest.approx(rec.params["gap"] / rec.params["dv"], rel=1e-12)
-        assert rec.ttc < 3.0 and rec.risk is not None and 0.0 <= rec.risk <= 1.0
-        assert rec.min_ttr is not None and (math.isinf(rec.min_ttr) or rec.min_ttr >= 0.0)
+        assert rec.ttc < 3.0 and rec.risk_peak is not None and 0.0 <= rec.risk_peak <= 1.0
+        assert rec.a_req is not None and rec.btn == pytest.approx(rec.a_req / (0.774 * 9.81))
+        assert rec.ttr_true is not None and (math.isinf(rec.ttr_true) or rec.ttr_true >= 0.0)
 
 
 def test_a_refused_vector_is_a_row_with_an_error_not_a_failed_chunk(
@@ -82,7 +85,7 @@ def test_a_refused_vector_is_a_row_with_an_error_not_a_failed_chunk(
     errors = [row["error"] for row in result.rows]
     assert errors[0] is None and errors[2] is None
     assert errors[1] is not None and errors[1].startswith("build: ") and "p_y1" in errors[1]
-    assert result.rows[1]["risk"] is None and result.rows[0]["risk"] is not None
+    assert result.rows[1]["btn"] is None and result.rows[0]["btn"] is not None
     from app.db import chunkfile
 
     assert result.blob is not None
@@ -90,3 +93,16 @@ def test_a_refused_vector_is_a_row_with_an_error_not_a_failed_chunk(
     path.write_bytes(result.blob)
     stored = list(chunkfile.read_scenarios(path))
     assert stored[1] is None and stored[0] is not None and stored[2] is not None
+
+
+def test_record_row_and_migration_carry_every_criticality_field() -> None:
+    migration = importlib.import_module("app.migrations.versions.0004_criticality")
+
+    names = list(CRITICALITY_FIELDS)
+    record_fields = [f.alias or k for k, f in ScenarioRecord.model_fields.items()]
+    assert record_fields[record_fields.index("t_p"):][:len(names)] == names
+    columns = {c.name: c for c in ScenarioRow.__table__.columns}
+    kinds = {"float": "FLOAT", "bool": "BOOLEAN", "str": "TEXT"}
+    for name, spec in CRITICALITY_FIELDS.items():
+        assert str(columns[name].type) == kinds[spec.kind] and columns[name].nullable
+    assert [n for n, _ in migration.COLUMNS] == names

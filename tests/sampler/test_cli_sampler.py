@@ -64,7 +64,7 @@ def test_sample_with_score(model_path: Path, tmp_path: Path) -> None:
     assert main(["sample", str(model_path), "-c", "ttc<4", "-n", "3", "--seed", "2",
                  "--score", "-o", str(out), "-q"]) == 0
     rows = [json.loads(x) for x in out.read_text().splitlines()]
-    assert all(0.0 <= r["risk"] <= 1.0 for r in rows)  # the flat record (issue 13)
+    assert all(0.0 <= r["risk_peak"] <= 1.0 and r["class"] for r in rows)  # the flat record
 
 
 @pytest.mark.parametrize(

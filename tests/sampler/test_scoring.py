@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from datasets.cutin_model import PARAM_NAMES
-from riskcore import evaluate_scenario
+from riskcore.criticality import evaluate_criticality
 from sampler import SamplerError, score_samples
 from sampler.builder import build_scenario
 from tests.sampler.factories import base_params
@@ -26,9 +26,9 @@ def test_serial_order_and_values() -> None:
         assert s.params["gap"] == 5.0 + i and s.error is None
         assert s.ttc == pytest.approx((5.0 + i) / (1.0 + 0.1 * i), rel=1e-12)
         assert s.scenario is not None and s.scenario["provenance"]["sample_index"] == i
-        # the record's risk is riskcore's on the builder's scenario, called directly
-        direct = evaluate_scenario(build_scenario(rows.iloc[i].to_dict()))
-        assert s.risk == direct.risk and s.min_ttr == direct.min_ttr
+        # the record's scores are riskcore's criticality of the builder's scenario
+        direct = evaluate_criticality(build_scenario(rows.iloc[i].to_dict())).to_record()
+        assert s.scores() == direct
 
 
 def test_pool_equals_serial() -> None:
@@ -43,18 +43,19 @@ def test_bad_sample_does_not_stop_the_batch() -> None:
     rows.loc[1, "p_y1"] = 0.0
     out = score_samples(rows)
     assert out[1].error is not None and out[1].error.startswith("build: ")
-    assert "p_y1" in out[1].error and out[1].risk is None
+    assert "p_y1" in out[1].error and out[1].btn is None
     assert out[0].error is None and out[2].error is None and out[0].scenario is None
     assert all(v is None for v in out[1].scores().values())
 
 
-def test_real_riskcore_scores_a_closing_cut_in_higher() -> None:
+def test_real_criticality_ranks_a_closing_cut_in_higher() -> None:
     safe = base_params(dv=-2.0, gap=30.0)  # opening, far ahead
     risky = base_params(dv=6.0, gap=4.0)  # closing fast, close: ttc 0.67 s
     s_safe, s_risky = score_samples([safe, risky])
-    assert s_risky.risk is not None and s_safe.risk is not None
-    assert s_risky.risk > s_safe.risk
-    assert s_risky.min_ttc is not None and s_risky.min_ttc < 1.0
+    assert s_safe.class_ == "no_conflict" and s_safe.btn == 0.0 and not s_safe.none_collision
+    assert s_risky.none_collision and s_risky.btn is not None and s_risky.btn > 0.0
+    assert s_risky.risk_peak is not None and s_safe.risk_peak is not None
+    assert s_risky.risk_peak > s_safe.risk_peak
     assert math.isinf(s_safe.ttc)  # opening gap: +inf, "Infinity" in JSON
     assert '"ttc":"Infinity"' in s_safe.model_dump_json()
 

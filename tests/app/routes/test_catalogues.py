@@ -62,12 +62,12 @@ def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> No
     low = client.get(f"/catalogues/{cid}/scenarios", params={"ttc_max": cut}).json()
     assert low["total"] == sum(1 for t in ttcs if t <= cut)
     assert all(s["ttc"] <= cut for s in low["scenarios"])
-    risks = sorted(s["risk"] for s in all_rows["scenarios"])
+    risks = sorted(s["risk_peak"] for s in all_rows["scenarios"])  # the risk filter's field
     high = client.get(f"/catalogues/{cid}/scenarios", params={"risk_min": risks[-3]}).json()
     assert high["total"] == sum(1 for r in risks if r >= risks[-3])
     for s in all_rows["scenarios"]:
         assert s["params"]["gap"] / s["params"]["dv"] == pytest.approx(s["ttc"])
-        assert set(s) >= {"risk", "risk_ind", "min_ttr", "error"}  # the flat record (issue 13)
+        assert set(s) >= {"risk_peak", "btn", "class", "t_p", "error"}  # the flat record
 
 
 def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
@@ -82,7 +82,7 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     rows = client.get(f"/catalogues/{cid}/scenarios", params={"limit": 100}).json()
     for line, row in zip(scenarios, rows["scenarios"], strict=True):
         assert line["scenario"]["params"] == pytest.approx(row["params"])
-        assert line["summary"]["risk"] == row["risk"]
+        assert line["summary"]["risk_peak"] == row["risk_peak"]
     r = client.get(f"/catalogues/{cid}/export", params={"format": "csv"})
     assert r.status_code == 200
     assert len(list(csv.DictReader(io.StringIO(r.text)))) == N

@@ -24,7 +24,9 @@ def test_ten_cutins_with_ttc_below_3(client: Any) -> None:
         assert p["dv"] > 0 and p["gap"] / p["dv"] < 3.0  # TTC by hand
         assert item["ttc"] == pytest.approx(p["gap"] / p["dv"], rel=1e-12)
         assert item["exposure_weight"] > 0
-        assert 0.0 <= item["risk"] <= 1.0  # the flat scored record (issue 13)
+        # the flat scored record with the criticality record (issues 11, 13)
+        assert 0.0 <= item["risk_peak"] <= 1.0 and item["btn"] >= 0.0
+        assert item["class"] in ("no_conflict", "preventable", "unpreventable", "unavoidable")
         assert item["error"] is None and item["scenario"] is None
 
 
@@ -35,7 +37,7 @@ def test_same_seed_same_answer_and_a_new_seed_differs(client: Any) -> None:
     c = client.post("/scenarios", json={**req, "seed": 43}).json()
     assert a == b
     assert [s["params"] for s in a["scenarios"]] != [s["params"] for s in c["scenarios"]]
-    assert all(s["risk"] is None and s["min_ttr"] is None for s in a["scenarios"])
+    assert all(s["risk_peak"] is None and s["class"] is None for s in a["scenarios"])
 
 
 def test_trajectories_on_request(client: Any) -> None:
