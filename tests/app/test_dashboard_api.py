@@ -222,8 +222,8 @@ def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     stored = client.get(f"/catalogues/{cid}/scenarios", params={"offset": 1, "limit": 1})
     row = stored.json()["scenarios"][0]
     # the risk recomputed for the view is the stored scenario risk (same riskcore)
-    assert view["summary"]["risk"] == pytest.approx(row["risk"], rel=1e-12)
-    assert max(view["series"]["r_dep"]) == pytest.approx(row["risk"], rel=1e-12)
+    assert view["summary"]["risk"] == pytest.approx(row["risk_peak"], rel=1e-12)
+    assert max(view["series"]["r_dep"]) == pytest.approx(row["risk_peak"], rel=1e-12)
     json.dumps(view, allow_nan=False)  # plain JSON
     # without its chunk file (chunk 1 holds scenario 2) the scenario is rebuilt from its
     # stored parameters and seed on the model's lane width: the same risk
@@ -232,7 +232,7 @@ def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     rebuilt = client.get(f"/dashboard/api/catalogues/{cid}/scenarios/2").json()
     assert rebuilt["trajectory_source"] == "rebuilt from the stored parameters"
     row2 = client.get(f"/catalogues/{cid}/scenarios", params={"offset": 2, "limit": 1})
-    assert rebuilt["summary"]["risk"] == pytest.approx(row2.json()["scenarios"][0]["risk"],
+    assert rebuilt["summary"]["risk"] == pytest.approx(row2.json()["scenarios"][0]["risk_peak"],
                                                        rel=1e-12)
     missing = client.get(f"/dashboard/api/catalogues/{cid}/scenarios/3")
     assert missing.status_code == 404 and missing.json()["error"]["field"] == "path.index"

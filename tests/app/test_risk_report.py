@@ -30,7 +30,7 @@ def _same(fast: Any, slow: Any, where: str = "") -> None:
 
 
 def test_report_matches_riskcore_to_dict() -> None:
-    scenario = build_scenario(base_params(dv=6.0, gap=4.0), duration=4.0)
+    scenario = build_scenario(base_params(dv=6.0, gap=4.0))  # adaptive duration
     risk = evaluate_scenario(scenario)
     slow = risk.to_dict()
     fast = risk_report(risk, samples=True)
