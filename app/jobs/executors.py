@@ -2,8 +2,10 @@
 
 All executors have one method, ``run(spec, indices)``, that yields ``ChunkResult``s as
 they finish (any order), keeping at most ``window`` chunks in flight so that a cancelled
-job stops soon, and ``close()``. The chunk function is ``app.jobs.chunk.compute_chunk``;
-the results are the same whichever executor runs it.
+job stops soon, and ``close()``. The local pool and Dask share one loop
+(``FuturesExecutor``) on ``concurrent.futures``: Dask's ``Client.get_executor()`` gives
+the same interface as a ``ProcessPoolExecutor``. The chunk function is
+``app.jobs.chunk.compute_chunk``; the results are the same whichever executor runs it.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import logging
 import multiprocessing
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol
 
 from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk
@@ -56,39 +58,77 @@ class InlineExecutor:
         return None
 
 
-def _windowed(submit: Callable[[int], Any], wait_any: Callable[[set[Any]], set[Any]],
-              result: Callable[[Any], ChunkResult], cancel_all: Callable[[set[Any]], None],
-              indices: Iterable[int], window: int,
-              cancel: Flag | None) -> Iterator[ChunkResult]:
-    pending: set[Any] = set()
-    todo = iter(indices)
-    exhausted = False
-    try:
-        while True:
-            while not exhausted and len(pending) < window:
+class FuturesExecutor:
+    """Runs chunks on any ``concurrent.futures.Executor``, at most ``window`` in flight.
+
+    The one chunk loop of the service: the local process pool and Dask (through
+    ``Client.get_executor()``, which returns standard futures) differ only in how the
+    executor is made and how many chunks keep it busy.
+    """
+
+    name = "futures"
+
+    def __init__(self, fn: ChunkFn = compute_chunk) -> None:
+        self.fn = fn
+        self._executor: Executor | None = None
+        self._lock = threading.Lock()
+
+    # what a subclass provides
+    def _make(self) -> Executor:
+        raise NotImplementedError
+
+    def _window(self) -> int:
+        return 2
+
+    def _shutdown(self, executor: Executor) -> None:
+        executor.shutdown(wait=True, cancel_futures=True)
+
+    def _get(self) -> Executor:
+        with self._lock:
+            if self._executor is None:
+                self._executor = self._make()
+            return self._executor
+
+    def run(self, spec: CatalogueSpec, indices: Iterable[int],
+            cancel: Flag | None = None) -> Iterator[ChunkResult]:
+        """Yield each chunk's result as it finishes (any order); stop submitting when
+        ``cancel`` is set and cancel what has not started."""
+        executor = self._get()
+        window = self._window()
+        pending: set[Future[ChunkResult]] = set()
+        todo = iter(indices)
+        exhausted = False
+        try:
+            while True:
+                while not exhausted and len(pending) < window:
+                    if cancel is not None and cancel.is_set():
+                        exhausted = True
+                        break
+                    i = next(todo, None)
+                    if i is None:
+                        exhausted = True
+                        break
+                    pending.add(executor.submit(self.fn, spec, i))
+                if not pending:
+                    return
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    pending.discard(fut)
+                    yield fut.result()
                 if cancel is not None and cancel.is_set():
-                    exhausted = True
-                    break
-                try:
-                    i = next(todo)
-                except StopIteration:
-                    exhausted = True
-                    break
-                pending.add(submit(i))
-            if not pending:
-                return
-            done = wait_any(pending)
-            for fut in done:
-                pending.discard(fut)
-                yield result(fut)
-            if cancel is not None and cancel.is_set():
-                return
-    finally:
-        if pending:
-            cancel_all(pending)
+                    return
+        finally:
+            for fut in pending:
+                fut.cancel()
+
+    def close(self) -> None:
+        with self._lock:
+            executor, self._executor = self._executor, None
+        if executor is not None:
+            self._shutdown(executor)
 
 
-class LocalPoolExecutor:
+class LocalPoolExecutor(FuturesExecutor):
     """A process pool on this machine (``spawn`` start method: safe under threads)."""
 
     name = "local"
@@ -96,51 +136,21 @@ class LocalPoolExecutor:
     def __init__(self, workers: int, fn: ChunkFn = compute_chunk) -> None:
         if workers < 1:
             raise ValueError(f"local_workers: need at least 1 process, got {workers}")
+        super().__init__(fn)
         self.workers = workers
-        self.fn = fn
-        self._pool: ProcessPoolExecutor | None = None
-        self._lock = threading.Lock()
 
-    def _get_pool(self) -> ProcessPoolExecutor:
-        with self._lock:
-            if self._pool is None:
-                log.info("starting a local process pool with %d workers", self.workers)
-                self._pool = ProcessPoolExecutor(
-                    max_workers=self.workers, mp_context=multiprocessing.get_context("spawn")
-                )
-            return self._pool
+    def _make(self) -> Executor:
+        log.info("starting a local process pool with %d workers", self.workers)
+        return ProcessPoolExecutor(max_workers=self.workers,
+                                   mp_context=multiprocessing.get_context("spawn"))
 
-    def run(self, spec: CatalogueSpec, indices: Iterable[int],
-            cancel: Flag | None = None) -> Iterator[ChunkResult]:
-        pool = self._get_pool()
-
-        def wait_any(pending: set[Any]) -> set[Any]:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            return set(done)
-
-        def result(fut: Any) -> ChunkResult:
-            value: ChunkResult = fut.result()
-            return value
-
-        def cancel_all(pending: set[Any]) -> None:
-            for fut in pending:
-                fut.cancel()
-
-        def submit(i: int) -> Future[ChunkResult]:
-            return pool.submit(self.fn, spec, i)
-
-        yield from _windowed(submit, wait_any, result, cancel_all, indices,
-                             2 * self.workers, cancel)
-
-    def close(self) -> None:
-        with self._lock:
-            if self._pool is not None:
-                self._pool.shutdown(wait=True, cancel_futures=True)
-                self._pool = None
+    def _window(self) -> int:
+        return 2 * self.workers
 
 
-class DaskExecutor:
-    """Chunks on a dask.distributed cluster: a scheduler address or an existing Client."""
+class DaskExecutor(FuturesExecutor):
+    """Chunks on a dask.distributed cluster (a scheduler address or an existing Client),
+    through the client's ``concurrent.futures`` executor."""
 
     name = "dask"
 
@@ -150,9 +160,13 @@ class DaskExecutor:
 
         if client is None and not address:
             raise ValueError("dask_scheduler: need a scheduler address")
+        super().__init__(fn)
         self._own = client is None
         self.client = client if client is not None else Client(address, timeout="30s")
-        self.fn = fn
+
+    def _make(self) -> Executor:
+        executor: Executor = self.client.get_executor(pure=False)
+        return executor
 
     def _window(self) -> int:
         try:
@@ -162,28 +176,11 @@ class DaskExecutor:
             threads = 2
         return max(2, 2 * threads)
 
-    def run(self, spec: CatalogueSpec, indices: Iterable[int],
-            cancel: Flag | None = None) -> Iterator[ChunkResult]:
-        from distributed import wait as dask_wait
-
-        def submit(i: int) -> Any:
-            return self.client.submit(self.fn, spec, i, pure=False)
-
-        def wait_any(pending: set[Any]) -> set[Any]:
-            done = dask_wait(list(pending), return_when="FIRST_COMPLETED").done
-            return set(done)
-
-        def result(fut: Any) -> ChunkResult:
-            value: ChunkResult = fut.result()
-            return value
-
-        def cancel_all(pending: set[Any]) -> None:
-            self.client.cancel(list(pending))
-
-        yield from _windowed(submit, wait_any, result, cancel_all, indices,
-                             self._window(), cancel)
+    def _shutdown(self, executor: Executor) -> None:
+        executor.shutdown(wait=False)  # the client's, not the cluster's
 
     def close(self) -> None:
+        super().close()
         if self._own:
             self.client.close()
 
