@@ -1,4 +1,4 @@
-"""Benchmark of the running service over loopback (issue 5).
+"""Benchmark of the running service over loopback (issues 5 and 13).
 
 Measures, against ``uvicorn app.main:app`` started here in a subprocess:
 
@@ -8,13 +8,27 @@ Measures, against ``uvicorn app.main:app`` started here in a subprocess:
    ``done``;
 3. the same on a two-worker ``dask.distributed.LocalCluster`` (the service reaches it
    through ``SCENGEN_DASK_SCHEDULER``), and the Dask/local ratio;
-4. that both catalogues (same seed) export to the same CSV bytes.
+4. that both catalogues (same seed) export to the same CSV bytes;
+5. ``GET /catalogues/{id}`` (status and statistics) on a stored catalogue of ``--rows``
+   rows (default 100,000; hand-made rows written straight into the store).
 
-Targets: each catalogue ≤ 5 minutes on a 2-core machine, Dask within 1.5× of local.
-Figures measured while other work runs on the machine are noisy: say so when quoting them.
+Before/after (issue 13), measured in the same run, in this process, one core:
 
-    .venv/bin/python benchmarks/bench_service.py                   # the full run
-    .venv/bin/python benchmarks/bench_service.py --catalogue-n 500 --requests 5   # quick
+* scoring 100 sampled vectors: the old path (build, full Wagner run over every step and
+  its summary) against ``sampler.record.score_vector`` (build + criticality record);
+* sampling one catalogue chunk: the old chunk (its own P(B) and a P(A) it threw away)
+  against the catalogue-level estimate reused (``KnownRegion``);
+* the status statistics of the ``--rows`` catalogue: the old code (every value loaded and
+  sorted in Python, kept below as the baseline) against the SQL of
+  ``repository.summary_statistics``.
+
+Targets (issue 13): catalogue of 10,000 ≤ 60 s on 2 cores, Dask within 1.2× of local;
+POST /scenarios n=100 p50 ≤ 0.5 s; GET /catalogues/{id} at 100,000 rows ≤ 50 ms. The load
+average (``/proc/loadavg``) is printed with every figure: figures measured while other
+work runs on the machine are noisy, say so when quoting them.
+
+    .venv/bin/python benchmarks/bench_service.py --model-cache var   # the full run
+    .venv/bin/python benchmarks/bench_service.py --quick             # 1,000-scenario catalogue
 
 The first start fits the default model (a minute or two); ``--model-cache DIR`` copies the
 cached embedded table and model from a data dir that has them (e.g. ``var``).
@@ -37,8 +51,22 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def load() -> str:
+    """The machine's load averages (1, 5, 15 min) and core count, to print with a figure."""
+    try:
+        avg = " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        avg = "n/a"
+    return f"load {avg} on {os.cpu_count()} cores"
+
+
+def note(text: str) -> None:
+    print(f"{text}  [{load()}]", file=sys.stderr, flush=True)
 
 
 def free_port() -> int:
@@ -106,7 +134,8 @@ def latency(base: str, n: int, requests: int) -> dict[str, Any]:
             r.raise_for_status()
             assert len(r.json()["scenarios"]) == n
     return {"n": n, "requests": requests, "p50_s": percentile(times, 0.5),
-            "p95_s": percentile(times, 0.95), "mean_s": statistics.fmean(times)}
+            "p95_s": percentile(times, 0.95), "mean_s": statistics.fmean(times),
+            "load": load()}
 
 
 def catalogue(base: str, n: int, seed: int, chunk_size: int) -> tuple[float, str]:
@@ -124,9 +153,140 @@ def catalogue(base: str, n: int, seed: int, chunk_size: int) -> tuple[float, str
         elapsed = time.perf_counter() - t0
         if state["status"] != "done":
             raise SystemExit(f"catalogue {cid} {state['status']}: {state['error']}")
-        print(f"  catalogue {cid}: {n} scored scenarios in {elapsed:.1f} s, P(A) "
-              f"{state['p_region']['estimate']:.3g}", file=sys.stderr)
+        note(f"  catalogue {cid}: {n} scored scenarios in {elapsed:.1f} s, P(A) "
+             f"{state['p_region']['estimate']:.3g}")
     return elapsed, cid
+
+
+def store_rows(data_dir: Path, rows: int, chunk: int = 10_000) -> str:
+    """A finished catalogue of ``rows`` hand-made rows in the service's store; its id."""
+    from app.db import repository as repo
+    from app.db.database import Database
+    from app.db.models import CatalogueRow, ModelRow
+
+    db = Database(f"sqlite:///{(data_dir / 'scengen.db').resolve()}")
+    rng = np.random.default_rng(0)
+    with db.session() as s:
+        model_id = next(m.id for m in s.query(ModelRow).all() if m.is_default)
+        cid = repo.new_id("cat")
+        s.add(CatalogueRow(id=cid, model_id=model_id, status="done", n=rows, seed=0,
+                           chunk_size=chunk, n_chunks=(rows + chunk - 1) // chunk,
+                           spec={"constraints": ["ttc<3"], "method": "auto", "score": True},
+                           p_region={"estimate": 0.01, "ci": [0.009, 0.011]}))
+    for c in range(0, rows, chunk):
+        k = min(chunk, rows - c)
+        ttc, risk = rng.exponential(1.5, k), rng.uniform(0, 1, k)
+        ttc[::50] = np.inf
+        batch = [{"idx": c + i, "chunk_index": c // chunk, "params": {"gap": 10.0, "dv": 5.0},
+                  "ttc": float(ttc[i]), "risk": float(risk[i]), "risk_peak": float(risk[i]),
+                  "btn": float(risk[i]) * 1.3, "class_": "preventable",
+                  "exposure_weight": 0.01 / rows, "summary": {}} for i in range(k)]
+        with db.session() as s:
+            repo.store_chunk(s, data_dir, cid, c // chunk, batch, None, None, {})
+    db.dispose()
+    return cid
+
+
+def status_latency(base: str, cid: str, requests: int) -> dict[str, Any]:
+    """p50/p95 of GET /catalogues/{id} (status and statistics)."""
+    times: list[float] = []
+    with httpx.Client(base_url=base, timeout=600) as http:
+        http.get(f"/catalogues/{cid}").raise_for_status()
+        for _ in range(requests):
+            t0 = time.perf_counter()
+            http.get(f"/catalogues/{cid}").raise_for_status()
+            times.append(time.perf_counter() - t0)
+    return {"requests": requests, "p50_s": percentile(times, 0.5),
+            "p95_s": percentile(times, 0.95), "load": load()}
+
+
+def old_statistics(session: Any, cid: str) -> dict[str, Any]:
+    """The baseline: the status statistics as computed before issue 13 (every finite value
+    of each column loaded and sorted in Python on every poll)."""
+    import math
+
+    from sqlalchemy import select
+
+    from app.db.models import ScenarioRow
+
+    out: dict[str, Any] = {}
+    for name, col in (("risk", ScenarioRow.risk), ("ttc", ScenarioRow.ttc),
+                      ("exposure_weight", ScenarioRow.exposure_weight)):
+        finite = [v for v in session.scalars(select(col).where(
+            ScenarioRow.catalogue_id == cid, col.is_not(None)))
+            if v is not None and math.isfinite(v)]
+        finite.sort()
+        k = len(finite)
+        out[name] = {"count": k, "p50": finite[(k - 1) // 2], "mean": math.fsum(finite) / k}
+    return out
+
+
+def _best(fn: Any, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def before_after(data_dir: Path, cid: str, chunk_size: int, quick: bool) -> dict[str, Any]:
+    """The old and new code paths on the same inputs, in this process (one core)."""
+    from app import domain
+    from app.db import repository as repo
+    from app.db.database import Database
+    from app.jobs.chunk import CatalogueSpec, compute_chunk
+    from app.jobs.runner import estimate_region
+    from riskcore import evaluate_scenario
+    from sampler.builder import build_scenario
+    from sampler.record import score_vector
+
+    out: dict[str, Any] = {}
+    model_json = sorted((data_dir / "models").glob("default-*.json"))[0].read_text()
+    model = domain.load_model(model_json)
+    drawn = domain.sample(model, domain.parse_constraints(["ttc<3"]), 100, 1)
+    vectors = [{str(k): float(v) for k, v in r.items()} for r in drawn.params.to_dict("records")]
+
+    def old_scoring() -> None:
+        for p in vectors:
+            evaluate_scenario(build_scenario(p, seed=1, lane_width=drawn.lane_width)).summary()
+
+    def new_scoring() -> None:
+        for p in vectors:
+            score_vector(p, lane_width=drawn.lane_width, seed=1)
+
+    old_scoring()  # numba compilation and caches
+    new_scoring()
+    old_s, new_s = _best(old_scoring, 1 if quick else 2), _best(new_scoring, 1 if quick else 3)
+    out["score_100_vectors"] = {"before_s": old_s, "after_s": new_s, "ratio": old_s / new_s,
+                                "load": load()}
+    note(f"  scoring 100 vectors, one core: before {old_s:.2f} s (build + full Wagner run), "
+         f"after {new_s:.2f} s (build + criticality record), x{old_s / new_s:.1f}")
+
+    spec = CatalogueSpec(n=100 * chunk_size, seed=7, chunk_size=chunk_size,
+                         model_json=model_json, constraints=("ttc<3",), score=False,
+                         store_trajectories=False)
+    region = estimate_region(spec)
+    reused = CatalogueSpec(**{**spec.to_dict(), "constraints": ("ttc<3",),
+                              "p_region": region["estimate"], "region": region})
+    compute_chunk(spec, 0)
+    old_c = _best(lambda: compute_chunk(spec, 1), 3)
+    new_c = _best(lambda: compute_chunk(reused, 1), 3)
+    out["sample_chunk"] = {"chunk_size": chunk_size, "before_s": old_c, "after_s": new_c,
+                           "ratio": old_c / new_c, "load": load()}
+    note(f"  sampling a chunk of {chunk_size} (unscored): before {old_c:.3f} s (own P(B), "
+         f"P(A)), after {new_c:.3f} s (catalogue's reused), x{old_c / new_c:.1f}")
+
+    db = Database(f"sqlite:///{(data_dir / 'scengen.db').resolve()}")
+    with db.session() as s:
+        old_q = _best(lambda: old_statistics(s, cid), 3)
+        new_q = _best(lambda: repo.summary_statistics(s, cid), 3)
+    db.dispose()
+    out["status_statistics"] = {"before_s": old_q, "after_s": new_q, "ratio": old_q / new_q,
+                                "load": load()}
+    note(f"  status statistics of the stored catalogue: before {old_q * 1e3:.1f} ms "
+         f"(Python sort), after {new_q * 1e3:.1f} ms (SQL), x{old_q / new_q:.1f}")
+    return out
 
 
 def export_csv(base: str, cid: str) -> bytes:
@@ -149,7 +309,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="write the figures as JSON")
     ap.add_argument("--keep-exports", type=Path, default=None,
                     help="directory to keep both catalogues' CSV exports in")
+    ap.add_argument("--rows", type=int, default=100_000,
+                    help="rows of the stored catalogue whose status is timed")
+    ap.add_argument("--quick", action="store_true",
+                    help="a 1,000-scenario catalogue and 5 requests (minutes, not tens)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.catalogue_n, args.requests = min(args.catalogue_n, 1000), min(args.requests, 5)
 
     work = Path(tempfile.mkdtemp(prefix="scengen-bench-"))
     data_dir = work / "data"
@@ -160,26 +326,35 @@ def main(argv: list[str] | None = None) -> int:
                 shutil.copytree(args.model_cache / sub, data_dir / sub)
     log = work / "server.log"
     results: dict[str, Any] = {"cpu_count": os.cpu_count(), "catalogue_n": args.catalogue_n,
-                               "chunk_size": args.chunk_size, "workers": args.workers}
+                               "chunk_size": args.chunk_size, "workers": args.workers,
+                               "load_at_start": load()}
     try:
         print(f"starting the service (data dir {data_dir}; log {log})", file=sys.stderr)
         server = Server(data_dir, {"SCENGEN_LOCAL_WORKERS": str(args.workers)}, log)
         try:
             server.wait()
-            print(f"POST /scenarios n={args.n} with scoring, {args.requests} requests",
-                  file=sys.stderr)
+            note(f"storing a {args.rows}-row catalogue")
+            big = store_rows(data_dir, args.rows)
+            note("before/after in this process")
+            results["before_after"] = before_after(data_dir, big, args.chunk_size, args.quick)
+            results["status_latency"] = status_latency(server.base, big, 20)
+            note(f"  GET /catalogues/{{id}} at {args.rows} rows: p50 "
+                 f"{results['status_latency']['p50_s'] * 1e3:.1f} ms")
+            note(f"POST /scenarios n={args.n} with scoring, {args.requests} requests")
             results["scenarios_latency"] = latency(server.base, args.n, args.requests)
-            print("catalogue on the local process pool", file=sys.stderr)
+            note(f"  p50 {results['scenarios_latency']['p50_s']:.2f} s")
+            note("catalogue on the local process pool")
             local_s, local_id = catalogue(server.base, args.catalogue_n, args.seed,
                                           args.chunk_size)
             results["catalogue_local_s"] = local_s
+            results["catalogue_local_load"] = load()
             local_csv = export_csv(server.base, local_id)
         finally:
             server.stop()
         if not args.skip_dask:
             from distributed import LocalCluster
 
-            print(f"catalogue on a {args.workers}-worker Dask LocalCluster", file=sys.stderr)
+            note(f"catalogue on a {args.workers}-worker Dask LocalCluster")
             with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                               dashboard_address=":0", host="127.0.0.1") as cluster:
                 server = Server(data_dir, {"SCENGEN_DASK_SCHEDULER": cluster.scheduler_address},
@@ -192,6 +367,7 @@ def main(argv: list[str] | None = None) -> int:
                 finally:
                     server.stop()
             results["catalogue_dask_s"] = dask_s
+            results["catalogue_dask_load"] = load()
             results["dask_over_local"] = dask_s / local_s
             results["same_catalogue"] = dask_csv == local_csv
             if args.keep_exports:
