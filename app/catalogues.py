@@ -18,7 +18,7 @@ from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from riskcore.scenario import ConcreteScenario
 from sampler.record import SCORE_FIELDS, ScenarioRecord
 
-SAMPLER_METHODS = ("auto", "rejection", "mcmc")
+SAMPLER_METHODS = ("auto", "rejection", "mcmc", "subset")
 
 
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],

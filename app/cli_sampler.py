@@ -63,7 +63,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                    help="e.g. 'ttc<3', 'v_ego>=20' (repeatable; all must hold)")
     s.add_argument("-n", type=int, default=100, help="number of samples (100)")
     s.add_argument("--seed", type=int, default=None, help="seed (default: fresh, reported)")
-    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc"), default="auto")
+    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc", "subset"), default="auto")
     s.add_argument("--no-envelope", action="store_true",
                    help="draw from the whole model, not the region's half-space envelope")
     s.add_argument("--lane-width", type=float, default=None, help="lane width in m")

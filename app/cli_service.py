@@ -39,7 +39,8 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                         "(default: ttc<3)")
     create.add_argument("--model", default="default", help="model id (default: the "
                         "embedded data's model)")
-    create.add_argument("--sampler", default="auto", choices=["auto", "rejection", "mcmc"])
+    create.add_argument("--sampler", default="auto",
+                        choices=["auto", "rejection", "mcmc", "subset"])
     create.add_argument("--no-score", action="store_true", help="skip the TTR risk")
     create.add_argument("--chunk-size", type=int, default=None)
     create.add_argument("--no-progress", action="store_true")

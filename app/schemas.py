@@ -20,7 +20,7 @@ __all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord
 #: clients handle int64)
 SEED_MAX = 2**63 - 1
 
-SamplerName = Literal["auto", "rejection", "mcmc"]
+SamplerName = Literal["auto", "rejection", "mcmc", "subset"]
 
 
 class ApiModel(BaseModel):

@@ -16,6 +16,8 @@ Estimators of ``P(A and B)``:
   S of the region (``sampler.envelope``): ``P(A and B) = P(S) k / N``, P(S) exact, the
   interval ``P(S)`` times the Clopper-Pearson interval of ``k / N``. Accurate for rare
   regions when S is tight (ttc < 1 on the TNO model: P(A) ~ 1e-6, P(A | S) ~ 0.05).
+* ``subset`` — subset simulation (``sampler.subset``) when the sampler was ``subset``:
+  its estimate, a log-normal interval from its conservative CoV bound.
 * ``is`` — importance sampling with a defensive mixture (Hesterberg 1995) for rare regions
   (in practice P(A) < 1e-4, where the pilot's ~1e6 draws hit fewer than 100 times):
   proposal ``q = alpha p + (1 - alpha) g`` in z-space, ``g`` a Gaussian mixture (K <= 3 by
@@ -59,12 +61,13 @@ class PRegion:
     ci_low: float
     ci_high: float
     confidence: float
-    method: str  # "mc" or "is"
+    method: str  # "mc", "envelope", "is" or "subset"
     n_draws: int  # draws behind the estimate (model draws for mc, proposal draws for is)
     n_hits: int  # of those, inside the region
     p_bounds: float  # P(B), the model's mass inside the physical bounds
     p_bounds_ci: tuple[float, float]
     p_joint: float  # P(A and B)
+    cov: float | None = None  # coefficient of variation of the estimate, when known
 
     @property
     def rel_halfwidth(self) -> float:
@@ -82,6 +85,7 @@ class PRegion:
     def from_dict(cls, d: dict[str, Any]) -> PRegion:
         d = dict(d)
         d["p_bounds_ci"] = tuple(d["p_bounds_ci"])
+        d.setdefault("cov", None)
         return cls(**d)
 
     def __str__(self) -> str:
@@ -174,10 +178,10 @@ class PRegionEstimator:
                 progress("pilot", n_draws, self.pilot_max)
         pilot = Pilot(n_draws=n_draws, hits=np.concatenate(hits, axis=0))
         if pilot.n_hits < need:
-            self._search(problem, rng, pilot, need)
+            self.search(problem, rng, pilot, need)
         return pilot
 
-    def _search(self, problem: Problem, rng: np.random.Generator, pilot: Pilot,
+    def search(self, problem: Problem, rng: np.random.Generator, pilot: Pilot,
                 need: int) -> None:
         found: list[FloatArray] = []
         total = 0
@@ -219,9 +223,33 @@ class PRegionEstimator:
                           ci_high=min(1.0, mass * hi / lo_b), confidence=self.confidence,
                           method="mc" if problem.envelope is None else "envelope",
                           n_draws=mc_draws, n_hits=mc_hits, p_bounds=p_b,
-                          p_bounds_ci=(lo_b, hi_b), p_joint=joint)
+                          p_bounds_ci=(lo_b, hi_b), p_joint=joint,
+                          cov=math.sqrt((1 - mc_hits / mc_draws) / mc_hits))
         else:
             out = self._importance(problem, rng, region_z, bounds)
+        if out.ci_high < self.min_p:
+            raise EmptyRegionError(
+                f"the region {problem.region.describe()} is practically empty: {out}; "
+                f"below min_p={self.min_p:g}", n_draws=out.n_draws, n_hits=out.n_hits,
+                p_upper=out.ci_high)
+        return out
+
+    def from_subset(self, problem: Problem, result: Any,
+                    bounds: tuple[float, float, float]) -> PRegion:
+        """P(A) from a subset simulation (``sampler.subset.SubsetResult``).
+
+        Interval: log-normal with the conservative ``cov_upper`` (levels fully correlated),
+        ``p exp(+-z sqrt(log(1 + cov_upper^2)))``, combined with P(B)'s interval."""
+        p_b, lo_b, hi_b = bounds
+        joint = float(result.probability)
+        zc = float(stats.norm.ppf(0.5 + self.confidence / 2))
+        s = math.sqrt(math.log1p(float(result.cov_upper) ** 2))
+        out = PRegion(estimate=min(1.0, joint / p_b), ci_low=joint * math.exp(-zc * s) / hi_b,
+                      ci_high=min(1.0, joint * math.exp(zc * s) / lo_b),
+                      confidence=self.confidence, method="subset",
+                      n_draws=int(result.n_evaluations), n_hits=int(result.z.shape[0]),
+                      p_bounds=p_b, p_bounds_ci=(lo_b, hi_b), p_joint=joint,
+                      cov=float(result.cov))
         if out.ci_high < self.min_p:
             raise EmptyRegionError(
                 f"the region {problem.region.describe()} is practically empty: {out}; "
@@ -254,4 +282,5 @@ class PRegionEstimator:
         return PRegion(estimate=min(1.0, joint / p_b), ci_low=lo_j / hi_b,
                        ci_high=min(1.0, hi_j / lo_b), confidence=self.confidence, method="is",
                        n_draws=n, n_hits=int(inside.sum()), p_bounds=p_b,
-                       p_bounds_ci=(lo_b, hi_b), p_joint=joint)
+                       p_bounds_ci=(lo_b, hi_b), p_joint=joint,
+                       cov=se / joint if joint > 0 else None)

@@ -99,6 +99,8 @@ class Draw:
         JSON-able; always has ``ess`` (effective sample size of ``z``) and ``n_evaluations``.
     mc_draws, mc_hits : int
         Plain model draws made and how many fell inside (usable for P(A)).
+    subset : SubsetResult, optional
+        Subset simulation's result (``sampler.subset``), which then gives P(A).
     """
 
     z: FloatArray
@@ -106,6 +108,7 @@ class Draw:
     diagnostics: dict[str, Any] = field(default_factory=dict)
     mc_draws: int = 0
     mc_hits: int = 0
+    subset: Any = None
 
 
 @dataclass

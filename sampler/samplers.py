@@ -9,9 +9,12 @@ and draws from the *proposal*: the model restricted to the region's half-space e
   advanced, labels then Gaussians), keep the draws inside A. Every kept draw is an
   independent sample (effective sample size = n).
 * ``MCMCSampler`` — emcee's ensemble sampler in the model's z-space (``sampler.mcmc``).
-* ``AutoSampler`` — rejection when its expected cost ``n / p_pilot`` draws is below the
-  MCMC cost model ``cost_ratio * (n * tau_guess + n_walkers * burn_guess)`` (a fixed,
-  documented rule, so the choice is deterministic), MCMC otherwise.
+* ``SubsetSampler`` — subset simulation (``sampler.subset``) for rare regions.
+* ``AutoSampler`` — subset simulation when the pilot found fewer than ``subset_below``
+  draws inside A (too few to start MCMC walkers from or to estimate P(A) by plain MC);
+  otherwise rejection when its expected cost ``n / p_pilot`` draws is below the MCMC cost
+  model ``cost_ratio * (n * tau_guess + n_walkers * burn_guess)`` (a fixed, documented
+  rule, so the choice is deterministic), MCMC otherwise.
 """
 from __future__ import annotations
 
@@ -23,6 +26,7 @@ from sampler._exceptions import EmptyRegionError, SamplerError
 from sampler.intervals import upper95
 from sampler.mcmc import MCMCSampler, _tau
 from sampler.problem import Draw, Pilot, Problem, ProgressFn, Sampler
+from sampler.subset import SubsetSampler
 
 __all__ = [
     "SAMPLERS",
@@ -34,6 +38,7 @@ __all__ = [
     "ProgressFn",
     "RejectionSampler",
     "Sampler",
+    "SubsetSampler",
     "_tau",
     "make_sampler",
 ]
@@ -108,22 +113,27 @@ class AutoSampler(Sampler):
         kinematics for every walker, rejection draws mostly fail the cheap tests).
     tau_guess, burn_guess : float
         Assumed autocorrelation time and burn-in, in steps.
+    subset_below : int
+        Fewer pilot hits than this choose subset simulation (default: the MCMC walkers).
     """
 
     name = "auto"
 
     def __init__(self, rejection: RejectionSampler | None = None,
                  mcmc: MCMCSampler | None = None, cost_ratio: float = 50.0,
-                 tau_guess: float = 30.0, burn_guess: float = 600.0) -> None:
+                 tau_guess: float = 30.0, burn_guess: float = 600.0,
+                 subset: SubsetSampler | None = None, subset_below: int | None = None) -> None:
         self.rejection = rejection or RejectionSampler()
         self.mcmc = mcmc or MCMCSampler()
+        self.subset = subset or SubsetSampler()
+        self.subset_below = int(self.mcmc.n_walkers if subset_below is None else subset_below)
         self.cost_ratio = float(cost_ratio)
         self.tau_guess = float(tau_guess)
         self.burn_guess = float(burn_guess)
 
     def choose(self, n: int, pilot: Pilot) -> Sampler:
-        if pilot.n_hits == 0:
-            return self.mcmc
+        if pilot.n_hits < self.subset_below:
+            return self.subset
         rej_cost = n / pilot.p_hat
         mcmc_cost = self.cost_ratio * (n * self.tau_guess
                                        + self.mcmc.n_walkers * self.burn_guess)
@@ -143,15 +153,17 @@ class AutoSampler(Sampler):
     def settings(self) -> dict[str, Any]:
         return {"name": self.name, "cost_ratio": self.cost_ratio, "tau_guess": self.tau_guess,
                 "burn_guess": self.burn_guess, "rejection": self.rejection.settings(),
-                "mcmc": self.mcmc.settings()}
+                "mcmc": self.mcmc.settings(), "subset": self.subset.settings(),
+                "subset_below": self.subset_below}
 
 
 SAMPLERS: dict[str, type[Sampler]] = {"auto": AutoSampler, "rejection": RejectionSampler,
-                                      "mcmc": MCMCSampler}
+                                      "mcmc": MCMCSampler, "subset": SubsetSampler}
 
 
 def make_sampler(method: str | Sampler) -> Sampler:
-    """A Sampler from its name (``auto``, ``rejection``, ``mcmc``) or pass one through."""
+    """A Sampler from its name (``auto``, ``rejection``, ``mcmc``, ``subset``) or pass one
+    through."""
     if isinstance(method, Sampler):
         return method
     if method not in SAMPLERS:

@@ -7,9 +7,11 @@
 2. the pilot: plain Monte-Carlo draws until enough fall inside the region (its exact draws
    are reused as rejection samples and MCMC starting points), and, for rare regions, the
    broadened search (``sampler.probability``);
-3. the sampler (``rejection``, ``mcmc`` or ``auto``, see ``sampler.samplers``);
+3. the sampler (``rejection``, ``mcmc``, ``subset`` or ``auto``, see ``sampler.samplers``
+   and ``sampler.subset``);
 4. P(A) with its interval (plain MC over every model draw made, or importance sampling
-   with a defensive mixture when fewer than ``mc_min_hits`` draws hit the region).
+   with a defensive mixture when fewer than ``mc_min_hits`` draws hit the region, or the
+   subset simulation's estimate when it made the samples).
 
 The same model, constraints, n, seed and settings give the same SampleSet bit for bit.
 """
@@ -34,7 +36,8 @@ from sampler.constraints import DERIVED, Region, derive
 from sampler.model import CutInGMM
 from sampler.probability import PRegion, PRegionEstimator
 from sampler.problem import Problem, ProgressFn, Sampler
-from sampler.samplers import make_sampler
+from sampler.samplers import AutoSampler, make_sampler
+from sampler.subset import SubsetSampler
 
 __all__ = ["SampleSet", "estimate_p_region", "sample"]
 
@@ -260,10 +263,17 @@ def sample(
 
     bounds = est.p_bounds(problem, rng)
     need = getattr(getattr(strategy, "mcmc", strategy), "n_walkers", 0)
+    if isinstance(strategy, SubsetSampler | AutoSampler):
+        need = 0  # subset simulation finds its own way in; auto picks it when hits are few
     pilot = est.pilot(problem, rng, need=need, progress=progress)
+    if isinstance(strategy, AutoSampler) and strategy.choose(n, pilot).name == "mcmc":
+        est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
     drawn = strategy.draw(problem, n, rng, pilot, progress)
-    p_region = est.estimate(problem, rng, mc_draws=drawn.mc_draws, mc_hits=drawn.mc_hits,
-                            region_z=drawn.z, bounds=bounds)
+    if drawn.subset is not None:
+        p_region = est.from_subset(problem, drawn.subset, bounds)
+    else:
+        p_region = est.estimate(problem, rng, mc_draws=drawn.mc_draws, mc_hits=drawn.mc_hits,
+                                region_z=drawn.z, bounds=bounds)
     x = model.from_z(drawn.z)
     params = pd.DataFrame(model.params_matrix(x), columns=list(PARAM_NAMES))
     for j, f in enumerate(model.features_):
@@ -302,8 +312,9 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
                       estimator: PRegionEstimator | None = None) -> PRegion:
     """P(A) of a region under the model with its interval, without keeping samples.
 
-    Plain MC when the pilot finds enough hits; otherwise a short MCMC run supplies the
-    importance sampler's proposal (see ``sampler.probability``).
+    Plain MC when the pilot finds enough hits; subset simulation when it finds fewer than
+    the MCMC walkers; otherwise a short MCMC run supplies the importance sampler's proposal
+    (see ``sampler.probability``).
     """
     model._check_fitted()
     region = _region(model, constraints, lane_width, physical_bounds)
@@ -318,8 +329,9 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     if pilot.n_hits >= est.mc_min_hits:
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                             region_z=pilot.hits, bounds=bounds)
-    if pilot.n_hits < mcmc.n_walkers:
-        est._search(problem, rng, pilot, mcmc.n_walkers)
+    if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset simulation
+        result = SubsetSampler().run(problem, 1, rng)
+        return est.from_subset(problem, result, bounds)
     drawn = mcmc.draw(problem, 500, rng, pilot)
     return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                         region_z=drawn.z, bounds=bounds)

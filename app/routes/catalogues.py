@@ -35,7 +35,7 @@ class CatalogueRequest(BaseModel):
     constraints: list[str] = Field(default_factory=lambda: ["ttc<3"])
     n: int = Field(ge=1, description="number of scenarios (≤ SCENGEN_CATALOGUE_N_LIMIT)")
     seed: int = Field(default=0, ge=0, le=SEED_MAX)
-    sampler: Literal["auto", "rejection", "mcmc"] = "auto"
+    sampler: Literal["auto", "rejection", "mcmc", "subset"] = "auto"
     score: bool = True
     chunk_size: int | None = Field(default=None, ge=1, le=100_000,
                                    description="scenarios per stored chunk (default from "

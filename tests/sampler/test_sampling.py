@@ -221,10 +221,12 @@ def test_auto_cost_rule() -> None:
     auto = AutoSampler(cost_ratio=50.0, tau_guess=30.0, burn_guess=600.0)
     # rejection cost n / p; MCMC cost 50 * (n * 30 + 64 * 600)
     common = Pilot(n_draws=1000, hits=np.zeros((100, 8)))  # p = 0.1: 1e4 << 1.6e6
-    rare = Pilot(n_draws=10**7, hits=np.zeros((5, 8)))  # p = 5e-7: 2e9 >> 1.6e6
+    rare = Pilot(n_draws=10**7, hits=np.zeros((100, 8)))  # p = 1e-5: 1e8 >> 1.6e6
     assert auto.choose(1000, common).name == "rejection"
     assert auto.choose(1000, rare).name == "mcmc"
-    assert auto.choose(1000, Pilot(n_draws=10, hits=np.zeros((0, 8)))).name == "mcmc"
+    # fewer pilot hits than MCMC walkers (64): subset simulation (issue 12)
+    assert auto.choose(1000, Pilot(n_draws=10**7, hits=np.zeros((63, 8)))).name == "subset"
+    assert auto.choose(1000, Pilot(n_draws=10, hits=np.zeros((0, 8)))).name == "subset"
 
 
 def test_auto_picks_rejection_on_moderate_region(model: CutInGMM) -> None:
