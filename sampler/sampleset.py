@@ -263,8 +263,10 @@ def sample(
 
     bounds = est.p_bounds(problem, rng)
     need = getattr(getattr(strategy, "mcmc", strategy), "n_walkers", 0)
-    if isinstance(strategy, SubsetSampler | AutoSampler):
-        need = 0  # subset simulation finds its own way in; auto picks it when hits are few
+    if isinstance(strategy, SubsetSampler):
+        need = 0  # subset simulation finds its own way in
+    elif isinstance(strategy, AutoSampler):
+        need = 1  # no pilot hit: the broadened search (which ends empty regions); few: subset
     pilot = est.pilot(problem, rng, need=need, progress=progress)
     if isinstance(strategy, AutoSampler) and strategy.choose(n, pilot).name == "mcmc":
         est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
@@ -330,6 +332,8 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                             region_z=pilot.hits, bounds=bounds)
     if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset simulation
+        if pilot.n_hits == 0:
+            est.search(problem, rng, pilot, 1)  # ends an empty region with its upper bound
         result = SubsetSampler().run(problem, 1, rng)
         return est.from_subset(problem, result, bounds)
     drawn = mcmc.draw(problem, 500, rng, pilot)
