@@ -34,6 +34,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from riskcore import _kernels
+
 FloatArray = NDArray[np.float64]
 
 _BISECT = 48  # contact-time bisection steps: h / 2**48 < 1e-15 s for h = 0.01 s
@@ -328,3 +330,37 @@ def required_decel(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: Fl
         if a > need:
             need = a
     return need
+
+
+@njit(cache=True)
+def ego_track(tq: FloatArray, t0: float, h: float, es: FloatArray, ev: FloatArray,
+              t_b: float, jerk: float, a_max: float) -> tuple[FloatArray, FloatArray]:  # pragma: no cover
+    """:func:`ego_at` at every time of ``tq``: arc lengths and speeds."""
+    s = np.empty(tq.shape[0])
+    v = np.empty(tq.shape[0])
+    for i in range(tq.shape[0]):
+        s[i], v[i] = ego_at(tq[i], t0, h, es, ev, t_b, jerk, a_max)
+    return s, v
+
+
+@njit(cache=True)
+def scene_risk(ox: float, oy: float, opsi: float, ov: float, mean_a: float, std_a: float,
+               mean_w: float, std_w: float, za: FloatArray, zw: FloatArray,
+               weight: FloatArray, ohl: float, ohw: float, ex: FloatArray, ey: FloatArray,
+               epsi: FloatArray, ev: FloatArray, ehl: float, ehw: float, man_a: FloatArray,
+               man_w: FloatArray, dt: float, t_pnr: float, t_max: float,
+               m: float) -> float:  # pragma: no cover - jit
+    """r_k of one object in one scene: riskcore's engine (``scene._Engine.object``) in one
+    compiled call, for the scenes of a one-object scenario (there r_dep = r_ind = r_k)."""
+    n = ex.shape[0] - 1
+    a = mean_a + std_a * za
+    w = mean_w + std_w * zw
+    traj = _kernels.predict(ox, oy, opsi, ov, a, w, n, dt)
+    poses = _kernels.ego_poses(ex, ey, epsi)
+    n_man = man_a.shape[1]
+    eva = np.empty((n, n_man, n + 1, 4))
+    done = np.zeros((n, n_man), dtype=np.bool_)
+    first, react, _ = _kernels.ttr_scan(traj, ohl, ohw, poses, ev, ehl, ehw, man_a, man_w,
+                                        dt, eva, done)
+    _, _, _, risk = _kernels.finish(first, react, dt, t_pnr, t_max, m, weight)
+    return risk

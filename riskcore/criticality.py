@@ -437,7 +437,12 @@ def _ttr_true(f: _Frames, t_p: float, contact: float, rs: RiskSettings,
 
 # --------------------------------------------------------------------------- Wagner
 class _Wagner:
-    """Scenes of the scenario at arbitrary times, with the scripted or a reacted ego."""
+    """Scenes of the scenario at arbitrary times, with the scripted or a reacted ego.
+
+    A one-object scenario (every cut-in) goes through one compiled call per scene
+    (:func:`riskcore._criticality_kernels.scene_risk`, the engine's own kernels); more
+    objects through riskcore's scene engine. Both give riskcore's r_dep and r_ind.
+    """
 
     def __init__(self, scenario: ConcreteScenario, f: _Frames, rs: RiskSettings,
                  surfaces: InputSurfaces, s: CriticalitySettings) -> None:
@@ -445,6 +450,7 @@ class _Wagner:
         self.f = f
         self.rs = rs
         self.s = s
+        self.surfaces = surfaces
         self.engine = _Engine(rs, surfaces, MANOEUVRES)
         t = np.asarray(scenario.t, dtype=np.float64)
         self.t = t
@@ -453,29 +459,61 @@ class _Wagner:
             a0, w0 = object_inputs(t, track)
             self.objects.append((track, np.unwrap(track.psi), a0, w0))
         self._tg = f.times()
+        self._offsets = np.arange(rs.n_steps + 1) * rs.dt
+        if len(self.objects) == 1:
+            track, psi_u, a0, w0 = self.objects[0]
+            mean_a, std_a = surfaces.accel(track.v, a0)
+            mean_w, std_w = surfaces.turn(track.v, w0)
+            self._dist = np.column_stack([mean_a, std_a, mean_w, std_w])
 
     def ego_track(self, tq: FloatArray, t_b: float) -> tuple[FloatArray, ...]:
         """Road-frame (x, y, psi, v) of the ego braking from t_b (NaN: scripted)."""
         f = self.f
-        s_r = np.empty(tq.shape[0])
-        v_r = np.empty(tq.shape[0])
-        for i, tt in enumerate(tq):
-            s_r[i], v_r[i] = _ck.ego_at(float(tt), f.t0, f.h, f.es, f.ev, t_b, self.s.jerk,
-                                        self.s.decel_max)
-        back = np.interp(tq, self._tg, f.es) - s_r
+        tq = np.ascontiguousarray(tq, dtype=np.float64)
+        s_scr = np.interp(tq, self._tg, f.es)
+        if math.isnan(t_b):
+            return (np.interp(tq, self._tg, f.ex), np.interp(tq, self._tg, f.ey),
+                    np.interp(tq, self._tg, f.epsi), np.interp(tq, self._tg, f.ev))
+        s_r, v_r = _ck.ego_track(tq, f.t0, f.h, f.es, f.ev, t_b, self.s.jerk,
+                                 self.s.decel_max)
+        back = s_scr - s_r
         psi = np.interp(tq, self._tg, f.epsi)
         x = np.interp(tq, self._tg, f.ex) - back * np.cos(psi)
         y = np.interp(tq, self._tg, f.ey) - back * np.sin(psi)
         return x, y, psi, v_r
 
-    def scene(self, t_now: float, t_b: float = math.nan) -> SceneResult:
+    def scene(self, t_now: float, t_b: float = math.nan) -> tuple[float, float]:
+        """(r_dep, r_ind) of the scene at t_now with the ego braking from t_b (NaN: never)."""
         rs = self.rs
-        tq = np.asarray(t_now + np.arange(rs.n_steps + 1) * rs.dt, dtype=np.float64)
-        x, y, psi, v = self.ego_track(tq, t_b)
+        x, y, psi, v = self.ego_track(np.asarray(t_now + self._offsets, dtype=np.float64), t_b)
+        t = self.t
+        if len(self.objects) == 1:
+            track, psi_u, a0, w0 = self.objects[0]
+            k = int(np.searchsorted(t, t_now))
+            if k < t.shape[0] and t[k] == t_now:
+                ox, oy, op, ov = track.x[k], track.y[k], psi_u[k], track.v[k]
+                ma, sa, mw, sw = self._dist[k]
+            else:
+                ox, oy, op, ov = (float(np.interp(t_now, t, arr)) for arr in
+                                  (track.x, track.y, psi_u, track.v))
+                ma, sa = self.surfaces.accel.at(ov, float(np.interp(t_now, t, a0)))
+                mw, sw = self.surfaces.turn.at(ov, float(np.interp(t_now, t, w0)))
+            n = rs.n_steps
+            man_a = np.empty((n, len(MANOEUVRES)))
+            man_w = np.empty((n, len(MANOEUVRES)))
+            for j, man in enumerate(MANOEUVRES):
+                man_a[:, j], man_w[:, j] = man.inputs(v[:n], rs)
+            eng = self.engine
+            r = float(_ck.scene_risk(
+                float(ox), float(oy), float(op), float(ov), float(ma), float(sa), float(mw),
+                float(sw), eng._za, eng._zw, eng._weight, 0.5 * track.length,
+                0.5 * track.width, x, y, psi, np.ascontiguousarray(v),
+                0.5 * self.scenario.ego.length, 0.5 * self.scenario.ego.width, man_a, man_w,
+                rs.dt, rs.t_pnr, rs.t_max, rs.m))
+            return r, r
         ego = EgoFuture(x=x, y=y, psi=psi, v=v, length=self.scenario.ego.length,
                         width=self.scenario.ego.width)
         arrays = self.engine.ego_arrays(ego)
-        t = self.t
         results = []
         for track, psi_u, a0, w0 in self.objects:
             state = ObjectState(
@@ -485,7 +523,8 @@ class _Wagner:
                 a0=float(np.interp(t_now, t, a0)), omega0=float(np.interp(t_now, t, w0)),
                 length=track.length, width=track.width)
             results.append(self.engine.object(ego, arrays, state))
-        return self.engine.consolidate(tuple(results))
+        res: SceneResult = self.engine.consolidate(tuple(results))
+        return res.r_dep, res.r_ind
 
 
 def _lane_width(scenario: ConcreteScenario, lane_width: float | None) -> float:
@@ -634,17 +673,15 @@ def _wagner_fields(scenario: ConcreteScenario, f: _Frames, t_p: float | None,
                 out[f"r_ind_{label}{suffix}"] = None
             continue
         sc = w.scene(when)
-        out[f"r_dep_{label}"] = sc.r_dep
-        out[f"r_ind_{label}"] = sc.r_ind
+        out[f"r_dep_{label}"], out[f"r_ind_{label}"] = sc
         sr = sc if math.isnan(t_b) else w.scene(when, t_b)
-        out[f"r_dep_{label}_r157"] = sr.r_dep
-        out[f"r_ind_{label}_r157"] = sr.r_ind
+        out[f"r_dep_{label}_r157"], out[f"r_ind_{label}_r157"] = sr
     t = w.t
     cache: dict[int, float] = {}
 
     def r_at(k: int) -> float:
         if k not in cache:
-            cache[k] = w.scene(float(t[k])).r_dep
+            cache[k] = w.scene(float(t[k]))[0]
         return cache[k]
 
     # alarm: from t_p on (t_p itself, then the samples) until r_dep >= alarm_level
@@ -707,8 +744,8 @@ def criticality_profiles(scenario: ConcreteScenario, *, settings: CriticalitySet
                else crossing_time(scenario, cutter, _lane_width(scenario, None)))
     return {
         "t": t.tolist(),
-        "r_dep": [r.r_dep for r in plain], "r_ind": [r.r_ind for r in plain],
-        "r_dep_r157": [r.r_dep for r in reacted], "r_ind_r157": [r.r_ind for r in reacted],
+        "r_dep": [r[0] for r in plain], "r_ind": [r[1] for r in plain],
+        "r_dep_r157": [r[0] for r in reacted], "r_ind_r157": [r[1] for r in reacted],
         "r157_ego": {"x": x.tolist(), "y": y.tolist(), "psi": psi.tolist(),
                      "v": v.tolist()},
         "t_p": t_p, "t_cross": t_cross, "r157_t_brake": _braked(t_b, d.r157[0]),

@@ -177,6 +177,21 @@ def test_profiles_mark_the_reaction() -> None:
     assert all(0.0 <= r <= 1.0 for r in prof["r_dep_r157"])
 
 
+def test_profiles_equal_riskcore_scenario_risk() -> None:
+    # the compiled one-object scene path gives riskcore's engine results at every step
+    from riskcore import evaluate_scenario
+
+    s = build_scenario({"p_y1": 0.05, "p_t": 2.0, "p_a1": -0.8, "p_a2": 0.5, "p_a3": 1.5,
+                        "p_v0": 25.0, "dv": 3.0, "gap": 9.0})
+    prof = criticality_profiles(s)
+    ref = evaluate_scenario(s)
+    np.testing.assert_allclose(prof["r_dep"], ref.series("r_dep"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(prof["r_ind"], ref.series("r_ind"), rtol=0, atol=1e-12)
+    assert max(prof["r_dep"]) > 0.5  # the comparison covers colliding predictions
+    c = evaluate_criticality(s)
+    assert c["risk_peak"] == pytest.approx(ref.risk, abs=1e-12)
+
+
 # --------------------------------------------------------------------------- reference
 def _reference(scen: ConcreteScenario, driver: str, s: CriticalitySettings,
                h: float = 1e-3) -> tuple[bool, float]:
