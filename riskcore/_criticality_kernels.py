@@ -121,14 +121,23 @@ def _interp(arr: FloatArray, t0: float, h: float, t: float) -> float:  # pragma:
 
 
 @njit(cache=True)
+def _ego_scripted(es: FloatArray, ev: FloatArray, t0: float, h: float,
+                  t: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """Scripted ego: interpolated on the grid, at its last speed after the grid's end."""
+    t_last = t0 + (es.shape[0] - 1) * h
+    if t > t_last:
+        return es[es.shape[0] - 1] + ev[ev.shape[0] - 1] * (t - t_last), ev[ev.shape[0] - 1]
+    return _interp(es, t0, h, t), _interp(ev, t0, h, t)
+
+
+@njit(cache=True)
 def ego_at(t: float, t0: float, h: float, es: FloatArray, ev: FloatArray, t_b: float,
            jerk: float, a_max: float) -> tuple[float, float]:  # pragma: no cover - jit
     """Ego arc length and speed at time t: scripted before ``t_b`` (NaN: never), braking
     from the scripted state at ``t_b`` afterwards."""
     if not (t > t_b):  # also when t_b is NaN
-        return _interp(es, t0, h, t), _interp(ev, t0, h, t)
-    s_b = _interp(es, t0, h, t_b)
-    v_b = _interp(ev, t0, h, t_b)
+        return _ego_scripted(es, ev, t0, h, t)
+    s_b, v_b = _ego_scripted(es, ev, t0, h, t_b)
     ds, v = brake_state(v_b, jerk, a_max, t - t_b)
     return s_b + ds, v
 
@@ -153,54 +162,155 @@ def _overlap_at(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
 
 
 @njit(cache=True)
+def _lateral_clear(cd: float, c: float, s: float, chl: float, chw: float,
+                   ehw: float) -> bool:  # pragma: no cover - jit
+    """Cheap test: the cutter's box lies entirely outside the ego's band |y| <= ehw."""
+    return abs(cd) - (chl * abs(s) + chw * abs(c)) > ehw
+
+
+@njit(cache=True)
+def _contact(t_lo: float, t_hi: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
+             cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray, t_b: float,
+             jerk: float, a_max: float, ehl: float, ehw: float, chl: float,
+             chw: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """Bisection of the first overlap in (t_lo, t_hi]; (contact time, impact speed)."""
+    a = t_lo
+    b = t_hi
+    for _ in range(_BISECT):
+        m = 0.5 * (a + b)
+        if _overlap_at(m, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max, ehl, ehw, chl,
+                       chw):
+            b = m
+        else:
+            a = m
+    _, ve = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
+    _, _, pc, vc = _cutter_at(b, t0, h, cs, cd, cpsi, cv)
+    return b, math.hypot(ve - vc * math.cos(pc), vc * math.sin(pc))
+
+
+@njit(cache=True)
+def _tail_gap(t: float, t_k: float, gap_k: float, vx: float, s_k: float, t0: float,
+              h: float, es: FloatArray, ev: FloatArray, t_b: float, jerk: float,
+              a_max: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """Clearance and ego speed at t >= t_k in the analytic tail (cutter axis-parallel at
+    constant speed vx, ego scripted at constant speed or braking from t_b)."""
+    s, v = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
+    return gap_k + vx * (t - t_k) - (s - s_k), v
+
+
+@njit(cache=True)
 def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
           cv: FloatArray, es: FloatArray, ev: FloatArray, ehl: float, ehw: float,
           chl: float, chw: float, t_b: float, jerk: float, a_max: float,
-          t_from: float) -> tuple[float, float, float]:  # pragma: no cover - jit
+          t_from: float, k_const: int = -1,
+          t_stop: float = np.inf) -> tuple[float, float, float]:  # pragma: no cover
     """One ego response against the cutter's actual motion on the grid.
 
     Returns (contact time or NaN, relative impact speed in m/s (0 without contact),
-    minimum clearance in m over grid times >= ``t_from`` until contact (+inf: the cutter
-    never is in the ego's band ahead; 0 with contact)). The contact time is refined by
-    bisection between the grid steps (ego states in closed form, cutter interpolated).
+    minimum clearance in m over times >= ``t_from`` until contact (+inf: the cutter never
+    is in the ego's band ahead; 0 with contact)). The contact time is refined by bisection
+    between the grid steps (ego states in closed form, cutter interpolated).
+
+    ``k_const`` (>= 0): from grid step ``k_const`` on the cutter drives straight along the
+    ego's heading (no lateral speed) at constant speed and the scripted ego at constant
+    speed; the rest is then solved in closed form instead of stepping through the grid
+    (the gap is linear, or convex once the ego brakes). -1: step through the whole grid.
+    A contact after ``t_stop`` (s) does not count (the simulated time ends there).
     """
     n = cs.shape[0]
+    last = n - 1 if k_const < 0 else min(k_const, n - 1)
     min_gap = np.inf
-    for k in range(n):
+    for k in range(last + 1):
         t = t0 + k * h
-        s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
         p = cpsi[k]
-        meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+        c = math.cos(p)
+        sn = math.sin(p)
+        if _lateral_clear(cd[k], c, sn, chl, chw, ehw):
+            continue
+        if t > t_b:
+            s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
+        else:
+            s = es[k]
+        meets, lo, hi = band_range(cs[k], cd[k], c, sn, chl, chw, ehw)
         if not (meets and hi > s - ehl):
             continue
         gap = lo - (s + ehl)
         if gap < 0.0:
             if k == 0:
-                tc = t0
-            else:
-                a = t - h
-                b = t
-                for _ in range(_BISECT):
-                    m = 0.5 * (a + b)
-                    if _overlap_at(m, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max,
-                                   ehl, ehw, chl, chw):
-                        b = m
-                    else:
-                        a = m
-                tc = b
-            _, ve = ego_at(tc, t0, h, es, ev, t_b, jerk, a_max)
-            _, _, pc, vc = _cutter_at(tc, t0, h, cs, cd, cpsi, cv)
-            rel = math.hypot(ve - vc * math.cos(pc), vc * math.sin(pc))
+                _, ve = ego_at(t0, t0, h, es, ev, t_b, jerk, a_max)
+                return t0, math.hypot(ve - cv[0] * c, cv[0] * sn), 0.0
+            tc, rel = _contact(t - h, t, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max,
+                               ehl, ehw, chl, chw)
             return tc, rel, 0.0
         if t >= t_from and gap < min_gap:
             min_gap = gap
-    return np.nan, 0.0, min_gap
+    if k_const < 0:
+        return np.nan, 0.0, min_gap
+    # closed-form tail from t_k: the cutter's band range moves at vx, the ego per ego_at
+    k = last
+    t_k = t0 + k * h
+    p = cpsi[k]
+    meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+    s_k, _ = ego_at(t_k, t0, h, es, ev, t_b, jerk, a_max)
+    if not (meets and hi > s_k - ehl):
+        return np.nan, 0.0, min_gap
+    vx = cv[k] * math.cos(p)
+    gap_k = lo - (s_k + ehl)
+    # the gap is linear until braking starts, convex after: its minimum comes where the
+    # ego's speed has fallen to vx (or never, when it does not brake)
+    t_lin_end = t_b if t_b > t_k else t_k
+    if math.isnan(t_b):
+        if ev[k] <= vx:
+            return np.nan, 0.0, min(min_gap, gap_k) if t_k >= t_from else min_gap
+        tc = t_k + gap_k / (ev[k] - vx)
+        if tc > t_stop:
+            return np.nan, 0.0, min(min_gap, gap_k) if t_k >= t_from else min_gap
+        return tc, ev[k] - vx, 0.0
+    if t_lin_end > t_k:
+        g_end, _ = _tail_gap(t_lin_end, t_k, gap_k, vx, s_k, t0, h, es, ev, t_b, jerk, a_max)
+        if g_end < 0.0:
+            tc = t_k + gap_k / (ev[k] - vx)
+            if tc > t_stop:
+                return np.nan, 0.0, min(min_gap, gap_k) if t_k >= t_from else min_gap
+            return tc, ev[k] - vx, 0.0
+    # time the braking ego's speed reaches vx (or it stops): bisection on the speed
+    a = t_lin_end
+    b = t_lin_end + 1.0
+    _, vb = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
+    while vb > vx and vb > 0.0:
+        b += 10.0
+        _, vb = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
+    for _ in range(_BISECT):
+        m = 0.5 * (a + b)
+        _, vm = ego_at(m, t0, h, es, ev, t_b, jerk, a_max)
+        if vm > vx and vm > 0.0:
+            a = m
+        else:
+            b = m
+    t_min = b
+    g_min, _ = _tail_gap(t_min, t_k, gap_k, vx, s_k, t0, h, es, ev, t_b, jerk, a_max)
+    if g_min >= 0.0:
+        return np.nan, 0.0, min(min_gap, g_min) if t_min >= t_from else min_gap
+    a = t_lin_end
+    b = t_min
+    for _ in range(_BISECT):
+        m = 0.5 * (a + b)
+        gm, _ = _tail_gap(m, t_k, gap_k, vx, s_k, t0, h, es, ev, t_b, jerk, a_max)
+        if gm < 0.0:
+            b = m
+        else:
+            a = m
+    if b > t_stop:
+        return np.nan, 0.0, min_gap
+    _, vc_e = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
+    return b, vc_e - vx, 0.0
 
 
 @njit(cache=True)
 def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
                         cv: FloatArray, es: FloatArray, ev: FloatArray, half_lengths: float,
-                        t_p: float, ttc_crit: float) -> float:  # pragma: no cover - jit
+                        t_p: float, ttc_crit: float, k_const: int = -1,
+                        t_stop: float = np.inf) -> float:  # pragma: no cover - jit
     """First time >= t_p at which the cut-in is critical for the scripted ego, NaN: never.
 
     Critical: the cutter's centre is ahead of the ego's and the longitudinal gap
@@ -234,6 +344,15 @@ def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
             return t
         prev_t = t
         prev_f = f
+    if k_const >= 0:
+        k = n - 1
+        t_k = t0 + k * h
+        clos = ev[k] - cv[k] * math.cos(cpsi[k])
+        g = cs[k] - es[k] - half_lengths
+        if cs[k] > es[k] and clos > 0.0:
+            t_r = max(t_k + (g - ttc_crit * clos) / clos, t_p, t_k)
+            if t_r <= t_stop:
+                return t_r
     return np.nan
 
 
@@ -297,26 +416,33 @@ def rss_trigger(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: Float
 
 @njit(cache=True)
 def required_decel(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
-                   es: FloatArray, ev: FloatArray, ehl: float, ehw: float, chl: float,
-                   chw: float, t_b: float) -> float:  # pragma: no cover - jit
+                   cv: FloatArray, es: FloatArray, ev: FloatArray, ehl: float, ehw: float,
+                   chl: float, chw: float, t_b: float,
+                   k_const: int = -1) -> float:  # pragma: no cover - jit
     """Smallest constant deceleration from ``t_b`` on (after the scripted motion until
     ``t_b``) that keeps the ego's front behind the cutter inside its band at every grid
     time after ``t_b``; +inf when the clearance is already gone.
 
     For a clearance D available at tau = t - t_b from the ego's front at t_b, speed v_b:
     0 if v_b tau <= D; 2 (v_b tau - D) / tau^2 if the ego is still moving at tau
-    (v_b tau <= 2 D); else v_b^2 / (2 D) (it stops before tau).
+    (v_b tau <= 2 D); else v_b^2 / (2 D) (it stops before tau). With ``k_const`` (see
+    :func:`drive`) the tail has D = D0 + vx tau and its supremum in closed form:
+    (v_b - vx)^2 / (2 D0) at tau* = 2 D0 / (v_b - vx) when that lies in the tail.
     """
     n = cs.shape[0]
-    s_b = _interp(es, t0, h, t_b)
-    v_b = _interp(ev, t0, h, t_b)
+    last = n - 1 if k_const < 0 else min(k_const, n - 1)
+    s_b, v_b = _ego_scripted(es, ev, t0, h, t_b)
     need = 0.0
-    for k in range(n):
+    for k in range(last + 1):
         t = t0 + k * h
         if t <= t_b:
             continue
         p = cpsi[k]
-        meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+        c = math.cos(p)
+        sn = math.sin(p)
+        if _lateral_clear(cd[k], c, sn, chl, chw, ehw):
+            continue
+        meets, lo, hi = band_range(cs[k], cd[k], c, sn, chl, chw, ehw)
         if not (meets and hi > s_b - ehl):
             continue
         d = lo - (s_b + ehl)
@@ -329,12 +455,26 @@ def required_decel(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: Fl
         a = 2.0 * (run - d) / (tau * tau) if run <= 2.0 * d else v_b * v_b / (2.0 * d)
         if a > need:
             need = a
+    if k_const >= 0:
+        k = last
+        p = cpsi[k]
+        meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+        t_k = t0 + k * h
+        if meets and hi > s_b - ehl:
+            vx = cv[k] * math.cos(p)
+            tau_k = max(t_k - t_b, 0.0)
+            d0 = lo - (s_b + ehl) - vx * (t_k - t_b)
+            if v_b > vx and d0 > 0.0:
+                tau_star = 2.0 * d0 / (v_b - vx)
+                if tau_star >= tau_k:
+                    need = max(need, (v_b - vx) ** 2 / (2.0 * d0))
     return need
 
 
 @njit(cache=True)
 def ego_track(tq: FloatArray, t0: float, h: float, es: FloatArray, ev: FloatArray,
-              t_b: float, jerk: float, a_max: float) -> tuple[FloatArray, FloatArray]:  # pragma: no cover
+              t_b: float, jerk: float,
+              a_max: float) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - jit
     """:func:`ego_at` at every time of ``tq``: arc lengths and speeds."""
     s = np.empty(tq.shape[0])
     v = np.empty(tq.shape[0])

@@ -284,6 +284,8 @@ class _Frames:
     chl: float
     chw: float
     t_end: float
+    k_const: int  # from this grid step on: straight, constant speeds (-1: never)
+    t_stop: float  # the simulated time ends here (the grid's last time)
 
     def times(self) -> FloatArray:
         return np.asarray(self.t0 + np.arange(self.cs.shape[0]) * self.h, dtype=np.float64)
@@ -337,7 +339,10 @@ def _frames(t: FloatArray, ego: Track, cutter: Track, s: CriticalitySettings) ->
         es=np.ascontiguousarray(es), ev=np.ascontiguousarray(ext(ego.v, 0.0)),
         ex=ext(ego.x, ve_end * math.cos(pe[-1])), ey=ext(ego.y, ve_end * math.sin(pe[-1])),
         epsi=ext(pe, 0.0), ehl=ehl, ehw=0.5 * ego.width, chl=chl, chw=0.5 * cutter.width,
-        t_end=float(t[-1]))
+        t_end=float(t[-1]),
+        k_const=int(np.searchsorted(tg, t[-1], side="right")) - 1
+        if math.sin(rel[-1]) == 0.0 else -1,
+        t_stop=float(tg[-1]))
 
 
 def _first_reach(t: FloatArray, m: FloatArray, level: float) -> float | None:
@@ -379,19 +384,20 @@ class _Drivers(NamedTuple):
 def _run_drivers(f: _Frames, t_p: float | None, s: CriticalitySettings) -> _Drivers:
     common = (f.t0, f.h, f.cs, f.cd, f.cpsi, f.cv, f.es, f.ev, f.ehl, f.ehw, f.chl, f.chw)
     t_from = f.t0 if t_p is None else t_p
-    none = _ck.drive(*common, math.nan, s.jerk, s.decel_max, t_from)
+    none = _ck.drive(*common, math.nan, s.jerk, s.decel_max, t_from, f.k_const, f.t_stop)
     if t_p is None:
         t_b = math.nan
     else:
         t_r = _ck.r157_reaction_start(f.t0, f.h, f.cs, f.cpsi, f.cv, f.es, f.ev,
-                                      f.ehl + f.chl, t_p, s.critical_ttc)
+                                      f.ehl + f.chl, t_p, s.critical_ttc, f.k_const,
+                                      f.t_stop)
         t_b = t_r + s.reaction_time
-    r157 = _ck.drive(*common, t_b, s.jerk, s.decel_max, t_from)
+    r157 = _ck.drive(*common, t_b, s.jerk, s.decel_max, t_from, f.k_const, f.t_stop)
     t_trig = _ck.rss_trigger(*common, s.rss_response_time, s.rss_accel_max,
                              s.rss_brake_min, s.rss_brake_max, s.rss_lat_margin,
                              s.rss_lat_accel_max)
     t_rb = t_trig + s.rss_response_time
-    rss = _ck.drive(*common, t_rb, s.jerk, s.decel_max, t_from)
+    rss = _ck.drive(*common, t_rb, s.jerk, s.decel_max, t_from, f.k_const, f.t_stop)
     return _Drivers(none, r157, t_b, rss, t_rb)
 
 
@@ -461,7 +467,7 @@ class _Wagner:
         self._tg = f.times()
         self._offsets = np.arange(rs.n_steps + 1) * rs.dt
         if len(self.objects) == 1:
-            track, psi_u, a0, w0 = self.objects[0]
+            track, _, a0, w0 = self.objects[0]
             mean_a, std_a = surfaces.accel(track.v, a0)
             mean_w, std_w = surfaces.turn(track.v, w0)
             self._dist = np.column_stack([mean_a, std_a, mean_w, std_w])
@@ -558,7 +564,8 @@ def conflict_resolution(t: FloatArray, ego: Track, cutter: Track,
     s = settings or CriticalitySettings()
     f = _frames(t, ego, cutter, s)
     contact, _, _ = _ck.drive(f.t0, f.h, f.cs, f.cd, f.cpsi, f.cv, f.es, f.ev, f.ehl, f.ehw,
-                              f.chl, f.chw, math.nan, s.jerk, s.decel_max, f.t0)
+                              f.chl, f.chw, math.nan, s.jerk, s.decel_max, f.t0, f.k_const,
+                              f.t_stop)
     if not math.isnan(contact):
         return float(contact), "contact"
     t_end = float(np.asarray(t)[-1])
@@ -633,7 +640,8 @@ def evaluate_criticality(scenario: ConcreteScenario, *, lane_width: float | None
     else:
         t_b0 = t_p + s.reaction_time
         a_req = math.inf if c_none <= t_b0 else float(_ck.required_decel(
-            f.t0, f.h, f.cs, f.cd, f.cpsi, f.es, f.ev, f.ehl, f.ehw, f.chl, f.chw, t_b0))
+            f.t0, f.h, f.cs, f.cd, f.cpsi, f.cv, f.es, f.ev, f.ehl, f.ehw, f.chl, f.chw, t_b0,
+            f.k_const))
         ttr, man = _ttr_true(f, t_p, c_none, rs, s)
     rec["ttr_true"] = ttr
     rec["ttr_manoeuvre"] = man

@@ -25,6 +25,17 @@ Derived quantities (road frame, SI units; ``t = 0`` is the start of the lateral 
     v_cut_min     m/s  the cutter's lowest speed at any time (before or after the pulse)
     max_lat_speed m/s  the largest lateral speed |v sin psi| during the lane change
 
+Criticality quantities (``sampler.criticality``; the values ``evaluate_criticality`` gives
+the built scenario; evaluated last, on the rows that pass every other constraint)::
+
+    t_p               s     perception moment, *scenario* time (lead-in 2.5 s included)
+    a_req             m/s2  deceleration needed from t_p + 0.75 s (0: none; inf: too late)
+    btn               -     a_req / (0.774 g)
+    ttr_true          s     TTR at t_p on the cutter's actual path (inf: no collision)
+    r157_collision    -     1 if the UN R157 careful driver hits the cutter, else 0
+    r157_impact_speed m/s   its relative impact speed (0 without contact)
+    none_collision    -     1 if the ego at constant speed hits the cutter, else 0
+
 Short form (CLI): ``ttc<3``, ``v_ego>=20``, ``lat_offset > -0.5`` — a name, one of the
 operators ``< <= > >=`` and a finite number, parsed by a regular expression (never eval).
 """
@@ -43,6 +54,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
 from sampler._exceptions import ConstraintError
+from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from sampler.kinematics import crossing_kinematics, plateau_speeds
 
 __all__ = [
@@ -71,7 +83,8 @@ OPERATORS: dict[str, Callable[[FloatArray, float], BoolArray]] = {
 class _Quantity:
     unit: str
     doc: str
-    kinematic: bool  # needs the crossing kinematics (costly: evaluated last, on survivors)
+    kinematic: bool  # needs the crossing kinematics (costly: evaluated late, on survivors)
+    criticality: bool = False  # a closed-loop simulation (costliest: evaluated last)
 
 
 #: Derived quantities: name -> unit, meaning, whether the kinematics are needed.
@@ -90,6 +103,8 @@ DERIVED: dict[str, _Quantity] = {
     "end_margin": _Quantity("m", "lane_width / 2 - |lat_offset| (> 0: ends in the ego lane)",
                             True),
     "max_lat_speed": _Quantity("m/s", "largest lateral speed during the lane change", True),
+    **{name: _Quantity(unit, doc, True, True)
+       for name, (unit, doc) in CRITICALITY_QUANTITIES.items()},
 }
 
 #: Every name a constraint may use.
@@ -132,6 +147,14 @@ class Constraint(BaseModel):
     def is_kinematic(self) -> bool:
         """True when evaluating this constraint needs the crossing kinematics."""
         return self.name in DERIVED and DERIVED[self.name].kinematic
+
+    @property
+    def tier(self) -> int:
+        """Evaluation order: 0 cheap, 1 kinematic, 2 criticality (closed-loop runs)."""
+        q = DERIVED.get(self.name)
+        if q is None or not q.kinematic:
+            return 0
+        return 2 if q.criticality else 1
 
     def __str__(self) -> str:
         return f"{self.name}{self.op}{self.value:g}"
@@ -266,6 +289,8 @@ class _Quantities:
             elif name == "v_cut_min":
                 before, after = plateau_speeds(col["p_a1"], col["p_a2"], col["p_a3"], col["p_v0"])
                 c[name] = np.minimum(before, after)
+            elif name in CRITICALITY_QUANTITIES:
+                c.update(criticality_quantities(self.p, self.lane_width))
             elif name in DERIVED:
                 kin = crossing_kinematics(self.p, self.lane_width / 2.0)
                 c["t_cross"] = kin.t_cross
@@ -350,19 +375,21 @@ class Region(BaseModel):
 
     def _mask(self, arr: FloatArray, constraints: Sequence[Constraint]) -> BoolArray:
         mask: BoolArray = np.asarray(np.isfinite(arr).all(axis=1), dtype=bool)
-        cheap = [c for c in constraints if not c.is_kinematic]
-        costly = [c for c in constraints if c.is_kinematic]
         q = _Quantities(arr, self.lane_width)
-        for c in cheap:
-            mask &= c.mask(q[c.name])
-        if costly:
+        for c in constraints:
+            if c.tier == 0:
+                mask &= c.mask(q[c.name])
+        # the costly tiers only on the rows that are still in: kinematics, then criticality
+        for tier in (1, 2):
+            costly = [c for c in constraints if c.tier == tier]
             idx = np.flatnonzero(mask)
-            if idx.size:
-                q2 = _Quantities(arr[idx], self.lane_width)
-                sub = np.ones(idx.size, dtype=bool)
-                for c in costly:
-                    sub &= c.mask(q2[c.name])
-                mask[idx] = sub
+            if not costly or not idx.size:
+                continue
+            q2 = _Quantities(arr[idx], self.lane_width)
+            sub = np.ones(idx.size, dtype=bool)
+            for c in costly:
+                sub &= c.mask(q2[c.name])
+            mask[idx] = sub
         return mask
 
     def contains(self, params: ArrayLike | Mapping[str, ArrayLike]) -> BoolArray:
