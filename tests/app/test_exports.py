@@ -841,3 +841,27 @@ def test_xosc_header_date_comes_from_created_at(tmp_path: Path) -> None:
     with zipfile.ZipFile(path) as zf:
         doc = etree.fromstring(zf.read("scenario_0000000.xosc"))
     assert doc.find("FileHeader").get("date") == "2026-03-04T05:06:07"  # type: ignore[union-attr]
+
+
+def test_xosc_declares_the_criticality_fields_present_in_the_row(tmp_path: Path) -> None:
+    summary = {**SUMMARY_A, "t_p": 1.5, "class": "preventable", "none_collision": True,
+               "r157_cc_t_brake": None, "ttr_true": math.inf}
+    path = _export(tmp_path, "xosc", data=[(scenario_a(), summary)])
+    with zipfile.ZipFile(path) as zf:
+        doc = etree.fromstring(zf.read("scenario_0000000.xosc"))
+        logical = etree.fromstring(zf.read("cutin_logical.xosc"))
+    decls = {d.get("name"): (d.get("parameterType"), d.get("value"))
+             for d in doc.iterfind("ParameterDeclarations/ParameterDeclaration")}
+    assert decls["t_p"] == ("double", "1.5")
+    assert decls["class"] == ("string", "preventable")
+    assert decls["none_collision"] == ("boolean", "true")
+    assert decls["ttr_true"] == ("double", "INF")
+    assert "r157_cc_t_brake" not in decls  # null: skipped
+    comments = [c.text for c in doc.find("ParameterDeclarations")
+                if isinstance(c, etree._Comment)]
+    assert any(c.startswith(" t_p [s]: perception moment") for c in comments)
+    # the logical scenario declares what the row holds; a null number is NaN there
+    ldecls = {d.get("name"): (d.get("parameterType"), d.get("value"))
+              for d in logical.iterfind("ParameterDeclarations/ParameterDeclaration")}
+    assert ldecls["r157_cc_t_brake"] == ("double", "NaN")
+    assert ldecls["none_collision"] == ("string", "true")

@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from app.exports import build_manifest, export_catalogue
+from riskcore.criticality import evaluate_criticality
 from sampler.builder import build_scenario
 
 REPO = Path(__file__).resolve().parents[2]
@@ -44,7 +45,10 @@ def report(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     tmp = tmp_path_factory.mktemp("qc")
     manifest = build_manifest(seed=1, model_hash=None, sampler_settings={}, constraints=[],
                               p_region=None)
-    items = [(build_scenario(p, seed=i), {"exposure_weight": 0.5}) for i, p in enumerate(PARAMS)]
+    scenarios = [build_scenario(p, seed=i) for i, p in enumerate(PARAMS)]
+    # the criticality fields go into the files as parameter declarations
+    items = [(s, {"exposure_weight": 0.5, **evaluate_criticality(s).to_record()})
+             for s in scenarios]
     files: list[Path] = []
     for mode in ("test", "replay"):
         folder = tmp / mode
