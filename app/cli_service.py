@@ -61,7 +61,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     export = sub.add_parser("export", help="export a finished catalogue")
     export.add_argument("id")
     export.add_argument("--format", default="jsonl",
-                        choices=["jsonl", "csv", "parquet", "xosc"])
+                        choices=["jsonl", "csv", "parquet", "xosc", "commonroad"])
     export.add_argument("--out", type=Path, required=True, help="output file")
     export.add_argument("--mode", default=None, choices=["test", "replay"],
                         help="xosc only: test (default; the ego is the system under test) "

@@ -20,7 +20,7 @@ from datasets.cutin_model import PARAM_NAMES, ttc_from_gap_dv
 from riskcore.scenario import ConcreteScenario
 
 #: The formats ``export_catalogue`` writes.
-EXPORT_FORMATS: tuple[str, ...] = ("jsonl", "csv", "parquet", "xosc")
+EXPORT_FORMATS: tuple[str, ...] = ("jsonl", "csv", "parquet", "xosc", "commonroad")
 
 #: Identifier columns, first in every row (``export_catalogue`` puts ``index`` before them).
 ID_COLUMNS: tuple[str, ...] = ("scenario_id", "seed")
@@ -275,7 +275,7 @@ def export_catalogue(
 
     Parameters
     ----------
-    fmt : {"jsonl", "csv", "parquet", "xosc"}
+    fmt : {"jsonl", "csv", "parquet", "xosc", "commonroad"}
     items : iterable of (ConcreteScenario, mapping)
         Consumed once, one item at a time (a generator is fine). Each scenario needs at
         least one object besides the ego.
@@ -324,6 +324,10 @@ def export_catalogue(
             from app.exports._tabular import write_parquet
 
             write_parquet(checked, manifest_clean, tmp)
+        elif fmt == "commonroad":
+            from app.exports._commonroad import write_commonroad_zip
+
+            write_commonroad_zip(checked, manifest_clean, tmp)
         else:
             from app.exports._xosc import check_mode, write_xosc_zip
 

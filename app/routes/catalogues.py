@@ -23,8 +23,10 @@ MEDIA_TYPES = {
     "csv": "text/csv",
     "parquet": "application/vnd.apache.parquet",
     "xosc": "application/zip",
+    "commonroad": "application/zip",
 }
-SUFFIXES = {"jsonl": "jsonl", "csv": "csv", "parquet": "parquet", "xosc": "zip"}
+SUFFIXES = {"jsonl": "jsonl", "csv": "csv", "parquet": "parquet", "xosc": "zip",
+            "commonroad": "commonroad.zip"}
 
 
 class CatalogueRequest(BaseModel):
@@ -99,7 +101,8 @@ def export_catalogue(
     catalogue_id: str,
     ctx: ContextDep,
     background: BackgroundTasks,
-    format: Annotated[Literal["jsonl", "csv", "parquet", "xosc"], Query()] = "jsonl",
+    format: Annotated[Literal["jsonl", "csv", "parquet", "xosc", "commonroad"],
+                      Query()] = "jsonl",
     mode: Annotated[Literal["test", "replay"] | None, Query(
         description="xosc only: test (default; the ego is the system under test) or "
                     "replay (both vehicles scripted)")] = None,

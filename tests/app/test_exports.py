@@ -110,7 +110,7 @@ ROW_B = {"scenario_id": "b", "seed": 8, **PARAMS_B, "ttc": math.inf, "duration":
 
 def _export(tmp_path: Path, fmt: str, name: str | None = None,
             data: list[tuple[ConcreteScenario, dict[str, Any]]] | None = None) -> Path:
-    out = tmp_path / (name or f"catalogue.{'zip' if fmt == 'xosc' else fmt}")
+    out = tmp_path / (name or f"catalogue.{'zip' if fmt in ('xosc', 'commonroad') else fmt}")
     return export_catalogue(fmt, data if data is not None else items(), manifest(), out)
 
 
@@ -126,8 +126,8 @@ def _assert_close_row(actual: dict[str, Any], expected: dict[str, Any]) -> None:
 # --------------------------------------------------------------------------- scenario_row
 
 
-def test_formats_are_the_four_documented_ones() -> None:
-    assert EXPORT_FORMATS == ("jsonl", "csv", "parquet", "xosc")
+def test_formats_are_the_five_documented_ones() -> None:
+    assert EXPORT_FORMATS == ("jsonl", "csv", "parquet", "xosc", "commonroad")
 
 
 def test_row_has_parameters_then_derived_then_scores_in_fixed_order() -> None:

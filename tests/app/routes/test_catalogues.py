@@ -104,6 +104,10 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     assert r.status_code == 422 and r.json()["error"]["field"] == "query.mode"
     r = client.get(f"/catalogues/{cid}/export", params={"format": "xosc", "mode": "live"})
     assert r.status_code == 422
+    r = client.get(f"/catalogues/{cid}/export", params={"format": "commonroad"})
+    assert r.status_code == 200
+    names = zipfile.ZipFile(io.BytesIO(r.content)).namelist()
+    assert sum(name.endswith(".xml") for name in names) == N
 
 
 def test_list_and_delete(client: Any) -> None:
