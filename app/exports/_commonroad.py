@@ -180,8 +180,8 @@ def scenario_xml(scenario: ConcreteScenario, *, index: int, lane_width: float,
                                   affiliation="scengen", source="scengen cut-in catalogue",
                                   tags={Tag.HIGHWAY, Tag.MULTI_LANE, Tag.CUT_IN},
                                   decimal_precision=DECIMALS, file_format=FileFormat.XML)
-    fd, name = tempfile.mkstemp(suffix=".xml", dir=scratch_dir)
-    os.close(fd)
+    # a name that does not exist yet (commonroad-io prints a line when it replaces a file)
+    name = str(scratch_dir / f"{index}.xml")
     try:
         with warnings.catch_warnings():
             # commonroad-io warns about the placeholder location (no geo reference)
