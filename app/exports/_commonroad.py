@@ -30,7 +30,6 @@ validated against its XSD):
 from __future__ import annotations
 
 import datetime as dt
-import os
 import tempfile
 import warnings
 import zipfile
@@ -50,7 +49,8 @@ from app.exports._xosc import (
     RoadExtent,
     _creation_date,
     _lane_width,
-    _zinfo,
+    assemble_zip,
+    check_index,
 )
 from riskcore.scenario import ConcreteScenario, Track
 
@@ -219,9 +219,7 @@ def write_commonroad_zip(items: Iterator[Item], manifest: Mapping[str, Any],
                 scratch_csv.open("w", encoding="utf-8", newline="") as fh:
             index_writer = CsvRowWriter(fh, lead=("file",))
             for index, scenario, _summary, row in items:
-                if index >= 10**INDEX_DIGITS:
-                    raise ExportError(f"item {index}: the commonroad export holds at most "
-                                      f"{10**INDEX_DIGITS} scenarios; split the catalogue")
+                check_index(index, "commonroad")
                 name = scenario_file_name(index)
                 width = _lane_width(scenario, index)
                 zs.writestr(name, scenario_xml(scenario, index=index, lane_width=width,
@@ -243,16 +241,9 @@ def write_commonroad_zip(items: Iterator[Item], manifest: Mapping[str, Any],
             "time": "CommonRoad time step i = scenario time t[0] + i * dt",
             "decimals": DECIMALS,
         }
-        with zipfile.ZipFile(path, "w") as zf:
-            info = _zinfo(INDEX_FILE)
-            info.file_size = os.path.getsize(scratch_csv)
-            with scratch_csv.open("rb") as src, zf.open(info, "w") as dst:
-                while chunk := src.read(1 << 20):
-                    dst.write(chunk)
-            zf.writestr(_zinfo(MANIFEST_FILE), dumps(full_manifest, indent=2) + "\n")
-            with zipfile.ZipFile(scratch_zip) as zs:
-                for entry in zs.infolist():
-                    zf.writestr(_zinfo(entry.filename), zs.read(entry))
+        manifest_bytes = (dumps(full_manifest, indent=2) + "\n").encode("utf-8")
+        assemble_zip(path, {INDEX_FILE: scratch_csv, MANIFEST_FILE: manifest_bytes},
+                     scratch_zip)
     finally:
         for scratch in (scratch_zip, scratch_csv):
             if scratch.exists():

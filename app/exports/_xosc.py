@@ -467,6 +467,27 @@ def _copy_into(zf: zipfile.ZipFile, name: str, path: Path) -> None:
             dst.write(chunk)
 
 
+def check_index(index: int, fmt: str) -> None:
+    if index >= 10**INDEX_DIGITS:
+        raise ExportError(f"item {index}: the {fmt} export holds at most {10**INDEX_DIGITS} "
+                          "scenarios; split the catalogue")
+
+
+def assemble_zip(path: Path, entries: Mapping[str, bytes | Path], scratch_zip: Path) -> None:
+    """The final zip: ``entries`` (content or a file holding it) sorted by name, then the
+    scenario files of ``scratch_zip`` in their order (their names sort after the others)."""
+    with zipfile.ZipFile(path, "w") as zf:
+        for name in sorted(entries):
+            source = entries[name]
+            if isinstance(source, Path):
+                _copy_into(zf, name, source)
+            else:
+                zf.writestr(_zinfo(name), source)
+        with zipfile.ZipFile(scratch_zip) as zs:
+            for entry in zs.infolist():  # written in index order = name order
+                zf.writestr(_zinfo(entry.filename), zs.read(entry))
+
+
 def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Path,
                    mode: str = osc.DEFAULT_MODE) -> None:
     """Stream the scenarios into a scratch zip, then assemble the final sorted zip."""
@@ -484,11 +505,7 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
                 scratch_csv.open("w", encoding="utf-8", newline="") as fh:
             index_writer = CsvRowWriter(fh, lead=("file",))
             for index, scenario, _summary, row in items:
-                if index >= 10**INDEX_DIGITS:
-                    raise ExportError(
-                        f"item {index}: the xosc export holds at most {10**INDEX_DIGITS} "
-                        "scenarios; split the catalogue"
-                    )
+                check_index(index, "xosc")
                 width = _lane_width(scenario, index)
                 if extent is None:
                     extent = RoadExtent(lane_width=width)
@@ -541,16 +558,7 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
             ROAD_FILE: road,
             **logical.entries(),
         }
-        with zipfile.ZipFile(path, "w") as zf:
-            for name in sorted(entries):  # all sort before the scenario files
-                source = entries[name]
-                if isinstance(source, Path):
-                    _copy_into(zf, name, source)
-                else:
-                    zf.writestr(_zinfo(name), source)
-            with zipfile.ZipFile(scratch_zip) as zs:
-                for entry in zs.infolist():  # written in index order = name order
-                    zf.writestr(_zinfo(entry.filename), zs.read(entry))
+        assemble_zip(path, entries, scratch_zip)
     finally:
         logical.close()
         logical.remove()
