@@ -51,9 +51,15 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     """Status, progress, counts, P(A) and summary statistics of a catalogue."""
     with ctx.db.session() as s:
         row = repo.get_catalogue(s, catalogue_id)
-        chunks = repo.stored_chunk_indices(s, catalogue_id)
-        stored = repo.count_scenarios(s, catalogue_id)
-        stats = repo.summary_statistics(s, catalogue_id)
+        n_done, stored = repo.chunk_counts(s, catalogue_id)
+    # the statistics change only when a chunk is stored: computed once per stored state
+    key = (catalogue_id, n_done, stored, row.updated_at.isoformat())
+
+    def compute() -> dict[str, Any]:
+        with ctx.db.session() as s:
+            return repo.summary_statistics(s, catalogue_id)
+
+    stats: dict[str, Any] = ctx.cache("catalogue.statistics", 256).get(key, compute)
     return {
         "id": row.id,
         "status": row.status,
@@ -64,9 +70,9 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "sampler": row.spec.get("method", "auto"),
         "score": row.spec.get("score", True),
         "chunk_size": row.chunk_size,
-        "chunks": {"total": row.n_chunks, "done": len(chunks)},
+        "chunks": {"total": row.n_chunks, "done": n_done},
         "scenarios_stored": stored,
-        "progress": len(chunks) / row.n_chunks if row.n_chunks else 1.0,
+        "progress": n_done / row.n_chunks if row.n_chunks else 1.0,
         "p_region": row.p_region,
         "summary": stats,
         "error": row.error,

@@ -16,6 +16,7 @@ from typing import Any
 import pandas as pd
 
 from app import domain, jsonconv
+from app.cache import ViewCache
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import DatasetRow, ModelRow
@@ -40,6 +41,8 @@ class ServiceContext:
     startup_error: str | None = None
     _executor: ChunkExecutor | None = None
     _models: dict[str, Any] = field(default_factory=dict)
+    #: named caches of this context's users (dashboard views, status statistics)
+    _caches: dict[str, ViewCache] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     @classmethod
@@ -147,6 +150,11 @@ class ServiceContext:
 
     def dataset_table(self, row: DatasetRow) -> pd.DataFrame:
         return pd.read_parquet(self.data_dir / row.table_path)
+
+    def cache(self, name: str, size: int) -> ViewCache:
+        """The named cache of this context (made at first use; it goes with the app)."""
+        with self._lock:
+            return self._caches.setdefault(name, ViewCache(size=size))
 
     # ----------------------------------------------------------------- jobs
     @property

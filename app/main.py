@@ -36,6 +36,11 @@ ROUTERS = (
 
 
 def _settings_of(app: FastAPI) -> Settings:
+    """The app's settings: those given to ``create_app``, else ``get_settings()`` (which a
+    test may override with ``app.dependency_overrides``)."""
+    given = getattr(app.state, "settings", None)
+    if isinstance(given, Settings):
+        return given
     factory = app.dependency_overrides.get(get_settings, get_settings)
     settings: Settings = factory()
     return settings
@@ -58,7 +63,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         ctx.close()
 
 
-def create_app() -> FastAPI:
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The service. ``settings`` (default: ``get_settings()``, i.e. the ``SCENGEN_``
+    environment) are read when the app starts; routes that depend on ``get_settings`` get
+    the same object."""
     application = FastAPI(
         title="scengen",
         version=__version__,
@@ -68,6 +76,9 @@ def create_app() -> FastAPI:
         lifespan=lifespan,
     )
     install_error_handlers(application)
+    if settings is not None:
+        application.state.settings = settings
+        application.dependency_overrides[get_settings] = lambda: settings
 
     @application.middleware("http")
     async def upload_limit(request: Request,

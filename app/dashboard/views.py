@@ -19,9 +19,7 @@ Views of immutable things (models, finished catalogues, scenarios) are cached in
 from __future__ import annotations
 
 import math
-import threading
-from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -29,6 +27,7 @@ import pandas as pd
 
 from app import catalogues as catalogue_service
 from app import domain, jsonconv
+from app.cache import ViewCache
 from app.context import ServiceContext
 from app.dashboard.aggregate import (
     MAX_BINS,
@@ -84,62 +83,18 @@ PREVIEW_N_LIMIT = 5000
 REFERENCE_SEED = 0
 
 
-# --------------------------------------------------------------------------- cache
-class ViewCache:
-    """A small thread-safe LRU of computed views (they are pure functions of their key)."""
-
-    def __init__(self, size: int = 64) -> None:
-        self.size = size
-        self._data: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
-        self._lock = threading.Lock()
-        self._pending: dict[tuple[Any, ...], threading.Lock] = {}
-
-    def _lookup(self, key: tuple[Any, ...]) -> tuple[bool, Any]:
-        with self._lock:
-            if key in self._data:
-                self._data.move_to_end(key)
-                return True, self._data[key]
-        return False, None
-
-    def get(self, key: tuple[Any, ...], compute: Callable[[], Any]) -> Any:
-        """The cached value of ``key``, computed once even when asked for concurrently
-        (the second caller waits for the first one's result)."""
-        found, value = self._lookup(key)
-        if found:
-            return value
-        with self._lock:
-            pending = self._pending.setdefault(key, threading.Lock())
-        with pending:
-            found, value = self._lookup(key)
-            if found:
-                return value
-            try:
-                value = compute()
-            except BaseException:
-                with self._lock:
-                    self._pending.pop(key, None)
-                raise
-            with self._lock:
-                self._data[key] = value
-                self._data.move_to_end(key)
-                while len(self._data) > self.size:
-                    self._data.popitem(last=False)
-                self._pending.pop(key, None)
-        return value
-
-    def clear(self) -> None:
-        with self._lock:
-            self._data.clear()
+def _views(ctx: ServiceContext) -> ViewCache:
+    """The views: small, bounded JSON-able results."""
+    return ctx.cache("dashboard.views", 64)
 
 
-#: the views: small, bounded JSON-able results
-_CACHE = ViewCache(size=64)
-#: the catalogues' columns (n rows each): only the few most recent catalogues
-_COLUMNS = ViewCache(size=4)
+def _column_cache(ctx: ServiceContext) -> ViewCache:
+    """The catalogues' columns (n rows each): only the few most recent catalogues."""
+    return ctx.cache("dashboard.columns", 4)
 
 
 def _key(ctx: ServiceContext, *parts: Any) -> tuple[Any, ...]:
-    return (str(ctx.data_dir), ctx.settings.resolved_database_url, *parts)
+    return parts
 
 
 # --------------------------------------------------------------------------- helpers
@@ -187,7 +142,7 @@ def _reference_draws(ctx: ServiceContext, model_id: str, model: Any) -> pd.DataF
         drawn = domain.sample(model, [], MODEL_DRAWS, REFERENCE_SEED, method="rejection")
         return drawn.params
 
-    frame: pd.DataFrame = _CACHE.get(_key(ctx, "reference", model_id), compute)
+    frame: pd.DataFrame = _views(ctx).get(_key(ctx, "reference", model_id), compute)
     return frame
 
 
@@ -246,7 +201,7 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
             "density_method": "exact marginal of the mixture (see app.domain.marginal_density)",
         }
 
-    result: dict[str, Any] = _CACHE.get(_key(ctx, "fit", mid, ds_id, drow.data_hash), compute)
+    result: dict[str, Any] = _views(ctx).get(_key(ctx, "fit", mid, ds_id, drow.data_hash), compute)
     return result
 
 
@@ -292,7 +247,7 @@ def shift_preview(ctx: ServiceContext, model_id: str, constraint_text: str, n: i
             "parameters": _shift(reference, drawn.params),
         }
 
-    result: dict[str, Any] = _CACHE.get(_key(ctx, "preview", mid, tuple(texts), n, seed),
+    result: dict[str, Any] = _views(ctx).get(_key(ctx, "preview", mid, tuple(texts), n, seed),
                                         compute)
     return result
 
@@ -346,7 +301,7 @@ def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
             "evasion": evasion,
         }
 
-    cols: dict[str, Any] = _COLUMNS.get(_key(ctx, "columns", *_version(crow)), compute)
+    cols: dict[str, Any] = _column_cache(ctx).get(_key(ctx, "columns", *_version(crow)), compute)
     return cols
 
 
@@ -378,7 +333,7 @@ def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
             "parameters": _shift(reference, constrained),
         }
 
-    result: dict[str, Any] = _CACHE.get(_key(ctx, "cshift", *_version(crow)), compute)
+    result: dict[str, Any] = _views(ctx).get(_key(ctx, "cshift", *_version(crow)), compute)
     return result
 
 
@@ -474,7 +429,7 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
             },
         }
 
-    result: dict[str, Any] = _CACHE.get(_key(ctx, "risk", *_version(crow)), compute)
+    result: dict[str, Any] = _views(ctx).get(_key(ctx, "risk", *_version(crow)), compute)
     return result
 
 
@@ -520,6 +475,6 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
             "series": risk["series"],
         }
 
-    result: dict[str, Any] = _CACHE.get(_key(ctx, "scenario", crow.id, index),
+    result: dict[str, Any] = _views(ctx).get(_key(ctx, "scenario", crow.id, index),
                                         compute)
     return result

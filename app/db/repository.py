@@ -122,6 +122,14 @@ def store_chunk(session: Session, data_dir: Path, catalogue_id: str, index: int,
     return True
 
 
+def chunk_counts(session: Session, catalogue_id: str) -> tuple[int, int]:
+    """(chunks stored, scenarios stored) of a catalogue, from its chunk rows."""
+    n, total = session.execute(
+        select(func.count(ChunkRow.id), func.coalesce(func.sum(ChunkRow.n_scenarios), 0))
+        .where(ChunkRow.catalogue_id == catalogue_id)).one()
+    return int(n), int(total)
+
+
 def count_scenarios(session: Session, catalogue_id: str) -> int:
     stmt = select(func.count()).select_from(ScenarioRow).where(
         ScenarioRow.catalogue_id == catalogue_id)

@@ -8,12 +8,13 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Query
 from fastapi.responses import FileResponse, Response
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import ConfigDict, Field
 
 from app import catalogues as service
+from app import jsonconv
 from app.db import repository as repo
 from app.deps import ContextDep, JobsDep, SessionDep
-from app.schemas import SEED_MAX, ApiModel
+from app.schemas import ApiModel, SamplingRequest
 from sampler.record import ScenarioRecord
 
 router = APIRouter(prefix="/catalogues", tags=["catalogues"])
@@ -29,41 +30,86 @@ SUFFIXES = {"jsonl": "jsonl", "csv": "csv", "parquet": "parquet", "xosc": "zip",
             "commonroad": "commonroad.zip"}
 
 
-class CatalogueRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-    model: str = Field(default="default", description="model id ('default': the embedded "
-                       "data's model)")
-    constraints: list[str] = Field(default_factory=lambda: ["ttc<3"])
+class CatalogueRequest(SamplingRequest):
     n: int = Field(ge=1, description="number of scenarios (≤ SCENGEN_CATALOGUE_N_LIMIT)")
-    seed: int = Field(default=0, ge=0, le=SEED_MAX)
-    sampler: Literal["auto", "rejection", "mcmc", "subset"] = "auto"
     score: bool = True
     chunk_size: int | None = Field(default=None, ge=1, le=100_000,
                                    description="scenarios per stored chunk (default from "
                                    "the settings)")
 
 
-@router.post("", status_code=202, summary="Start a catalogue job; answers with its id")
-def create_catalogue(body: CatalogueRequest, ctx: ContextDep, jobs: JobsDep) -> dict[str, Any]:
+class CatalogueCreated(ApiModel):
+    id: str
+    status: str = Field(description="queued | running | done | failed | cancelled")
+    href: str = Field(description="where to poll its status")
+
+
+class CatalogueItem(ApiModel):
+    id: str
+    status: str
+    n: int
+    seed: int
+    model: str
+    created_at: str
+
+
+class CatalogueList(ApiModel):
+    catalogues: list[CatalogueItem]
+
+
+class ChunkProgress(ApiModel):
+    total: int
+    done: int
+
+
+class CatalogueStatus(ApiModel):
+    """A catalogue's status; ``summary`` has count, min, max, mean, p50 and p95 of each
+    scored column's finite values (computed in SQL)."""
+
+    model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
+
+    id: str
+    status: str = Field(description="queued | running | done | failed | cancelled")
+    model: str
+    n: int
+    seed: int
+    constraints: list[str]
+    sampler: str
+    score: bool
+    chunk_size: int
+    chunks: ChunkProgress
+    scenarios_stored: int
+    progress: float = Field(description="chunks stored / chunks, 0 … 1")
+    p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate")
+    summary: dict[str, dict[str, float]]
+    error: str | None
+    created_at: str
+    updated_at: str
+    finished_at: str | None
+
+
+@router.post("", status_code=202, response_model=CatalogueCreated,
+             summary="Start a catalogue job; answers with its id")
+def create_catalogue(body: CatalogueRequest, ctx: ContextDep, jobs: JobsDep) -> CatalogueCreated:
     row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
                          model=body.model, method=body.sampler, score=body.score,
                          chunk_size=body.chunk_size)
     jobs.submit(row.id)
-    return {"id": row.id, "status": row.status, "href": f"/catalogues/{row.id}"}
+    return CatalogueCreated(id=row.id, status=row.status, href=f"/catalogues/{row.id}")
 
 
-@router.get("", summary="List catalogues")
-def list_catalogues(session: SessionDep) -> dict[str, Any]:
-    return {"catalogues": [
-        {"id": r.id, "status": r.status, "n": r.n, "seed": r.seed, "model": r.model_id,
-         "created_at": r.created_at.isoformat()}
-        for r in repo.list_catalogues(session)]}
+@router.get("", response_model=CatalogueList, summary="List catalogues")
+def list_catalogues(session: SessionDep) -> CatalogueList:
+    return CatalogueList(catalogues=[
+        CatalogueItem(id=r.id, status=r.status, n=r.n, seed=r.seed, model=r.model_id,
+                      created_at=r.created_at.isoformat())
+        for r in repo.list_catalogues(session)])
 
 
-@router.get("/{catalogue_id}", summary="Status, progress, counts, P(A), summary statistics")
-def show_catalogue(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
-    return service.describe(ctx, catalogue_id)
+@router.get("/{catalogue_id}", response_model=CatalogueStatus,
+            summary="Status, progress, counts, P(A), summary statistics")
+def show_catalogue(catalogue_id: str, ctx: ContextDep) -> CatalogueStatus:
+    return CatalogueStatus.model_validate(jsonconv.encode(service.describe(ctx, catalogue_id)))
 
 
 class ScenarioPage(ApiModel):
@@ -96,7 +142,7 @@ def list_scenarios(
 
 
 @router.get("/{catalogue_id}/export", summary="Export a finished catalogue",
-            response_class=FileResponse)
+            response_class=FileResponse, response_model=None)
 def export_catalogue(
     catalogue_id: str,
     ctx: ContextDep,
@@ -118,8 +164,8 @@ def export_catalogue(
     return FileResponse(out, media_type=MEDIA_TYPES[format], filename=out.name)
 
 
-@router.delete("/{catalogue_id}", status_code=204, summary="Delete a catalogue (stops its "
-               "job) and its files")
+@router.delete("/{catalogue_id}", status_code=204, response_model=None,
+               summary="Delete a catalogue (stops its job) and its files")
 def delete_catalogue(catalogue_id: str, ctx: ContextDep, jobs: JobsDep) -> Response:
     with ctx.db.session() as s:
         repo.get_catalogue(s, catalogue_id)

@@ -10,12 +10,14 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, File, Form, Query, UploadFile
 from fastapi.responses import Response
+from pydantic import Field
 
 from app import domain, jsonconv
 from app.db import repository as repo
 from app.db.models import DatasetRow
 from app.deps import ContextDep, SessionDep
 from app.errors import InvalidInput, PayloadTooLarge
+from app.schemas import ApiModel
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 
@@ -23,31 +25,52 @@ _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,200}$")
 _COPY_BLOCK = 1024 * 1024
 
 
-def dataset_view(row: DatasetRow) -> dict[str, Any]:
-    return {
-        "id": row.id,
-        "name": row.name,
-        "kind": row.kind,
-        "embedded": row.embedded,
-        "n_cutins": row.n_cutins,
-        "data_hash": row.data_hash,
-        "report": row.report,
-        "created_at": row.created_at.isoformat(),
-    }
+class DatasetInfo(ApiModel):
+    id: str
+    name: str
+    kind: str = Field(description="embedded | highd | egocentric")
+    embedded: bool
+    n_cutins: int
+    data_hash: str = Field(description="sha256 of the parameter table")
+    report: dict[str, Any] = Field(description="counts, events left out and why, source")
+    created_at: str
 
 
-@router.get("", summary="List datasets (the embedded real data first)")
-def list_datasets(session: SessionDep) -> dict[str, Any]:
-    return {"datasets": [dataset_view(r) for r in repo.list_datasets(session)]}
+class DatasetList(ApiModel):
+    datasets: list[DatasetInfo]
 
 
-@router.get("/{dataset_id}", summary="One dataset")
-def show_dataset(dataset_id: str, session: SessionDep) -> dict[str, Any]:
+class ParameterPage(ApiModel):
+    dataset: str
+    total: int
+    offset: int
+    limit: int
+    columns: list[str]
+    rows: list[dict[str, Any]] = Field(description="one object per cut-in")
+
+
+def dataset_view(row: DatasetRow) -> DatasetInfo:
+    return DatasetInfo(id=row.id, name=row.name, kind=row.kind, embedded=row.embedded,
+                       n_cutins=row.n_cutins, data_hash=row.data_hash,
+                       report=jsonconv.encode(row.report),
+                       created_at=row.created_at.isoformat())
+
+
+@router.get("", response_model=DatasetList,
+            summary="List datasets (the embedded real data first)")
+def list_datasets(session: SessionDep) -> DatasetList:
+    return DatasetList(datasets=[dataset_view(r) for r in repo.list_datasets(session)])
+
+
+@router.get("/{dataset_id}", response_model=DatasetInfo, summary="One dataset")
+def show_dataset(dataset_id: str, session: SessionDep) -> DatasetInfo:
     return dataset_view(repo.get_dataset(session, dataset_id))
 
 
-@router.get("/{dataset_id}/parameters", summary="The cut-in parameter table, paged",
-            response_model=None)
+@router.get("/{dataset_id}/parameters", summary="The cut-in parameter table, paged (JSON: "
+            "ParameterPage; CSV: the page, total in X-Total-Count)", response_model=None,
+            responses={200: {"model": ParameterPage,
+                             "content": {"text/csv": {"schema": {"type": "string"}}}}})
 def parameter_table(
     dataset_id: str,
     ctx: ContextDep,
@@ -55,31 +78,27 @@ def parameter_table(
     offset: Annotated[int, Query(ge=0)] = 0,
     limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
     format: Annotated[Literal["json", "csv"], Query()] = "json",
-) -> dict[str, Any] | Response:
+) -> ParameterPage | Response:
     row = repo.get_dataset(session, dataset_id)
     table = ctx.dataset_table(row)
     page = table.iloc[offset:offset + limit]
     if format == "csv":
         return Response(page.to_csv(index=False), media_type="text/csv",
                         headers={"X-Total-Count": str(len(table))})
-    return {
-        "dataset": dataset_id,
-        "total": len(table),
-        "offset": offset,
-        "limit": limit,
-        "columns": [str(c) for c in table.columns],
-        "rows": jsonconv.encode(page.to_dict(orient="records")),
-    }
+    return ParameterPage(dataset=dataset_id, total=len(table), offset=offset, limit=limit,
+                         columns=[str(c) for c in table.columns],
+                         rows=jsonconv.encode(page.to_dict(orient="records")))
 
 
-@router.post("", status_code=201, summary="Upload a dataset (highD recording files or "
-             "one ego-centric CSV/Parquet file)")
+@router.post("", status_code=201, response_model=DatasetInfo,
+             summary="Upload a dataset (highD recording files or one ego-centric CSV/Parquet "
+             "file)")
 def upload_dataset(
     ctx: ContextDep,
     kind: Annotated[Literal["highd", "egocentric"], Form()],
     files: Annotated[list[UploadFile], File()],
     name: Annotated[str | None, Form(max_length=200)] = None,
-) -> dict[str, Any]:
+) -> DatasetInfo:
     limit = ctx.settings.upload_limit_bytes
     dataset_id = repo.new_id("ds")
     staging = ctx.data_dir / "tmp" / f"upload-{uuid.uuid4().hex}"

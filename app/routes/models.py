@@ -7,12 +7,13 @@ from typing import Any
 from fastapi import APIRouter
 from pydantic import BaseModel, ConfigDict, Field
 
-from app import domain
+from app import domain, jsonconv
 from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.models import ModelRow
 from app.deps import ContextDep, SessionDep
 from app.errors import InvalidInput
+from app.schemas import ApiModel
 
 router = APIRouter(prefix="/models", tags=["models"])
 
@@ -27,39 +28,58 @@ class FitRequest(BaseModel):
     )
 
 
-def model_view(row: ModelRow, detail: bool = False, components: Any = None) -> dict[str, Any]:
-    out: dict[str, Any] = {
-        "id": row.id,
-        "dataset": row.dataset_id,
-        "default": row.is_default,
-        "n_components": row.n_components,
-        "model_hash": row.model_hash,
-        "options": row.options,
-        "created_at": row.created_at.isoformat(),
-    }
-    if detail:
-        out["bic_curve"] = row.bic_curve
-        out["fit_report"] = row.fit_report
-        out["components"] = components
-    return out
+class ModelInfo(ApiModel):
+    id: str
+    dataset: str = Field(description="id of the dataset it was fitted on")
+    default: bool
+    n_components: int
+    model_hash: str = Field(description="sha256 of the model's JSON")
+    options: dict[str, Any]
+    created_at: str
 
 
-@router.get("", summary="List fitted models (the default model first)")
-def list_models(session: SessionDep) -> dict[str, Any]:
-    return {"models": [model_view(r) for r in repo.list_models(session)]}
+class ModelDetail(ModelInfo):
+    bic_curve: list[dict[str, Any]] = Field(
+        description="per K: k, bic, log_likelihood, n_parameters, converged, error")
+    fit_report: dict[str, Any]
+    components: list[dict[str, Any]] = Field(
+        description="weight, mean_z, covariance_z of each component (z-space)")
 
 
-@router.get("/{model_id}", summary="A model: components, BIC curve, fit report")
-def show_model(model_id: str, ctx: ContextDep) -> dict[str, Any]:
+class ModelList(ApiModel):
+    models: list[ModelInfo]
+
+
+def _info(row: ModelRow) -> dict[str, Any]:
+    return {"id": row.id, "dataset": row.dataset_id, "default": row.is_default,
+            "n_components": row.n_components, "model_hash": row.model_hash,
+            "options": row.options, "created_at": row.created_at.isoformat()}
+
+
+def model_view(row: ModelRow, components: list[dict[str, Any]]) -> ModelDetail:
+    return ModelDetail.model_validate(jsonconv.encode({
+        **_info(row), "bic_curve": row.bic_curve, "fit_report": row.fit_report,
+        "components": components}))
+
+
+@router.get("", response_model=ModelList,
+            summary="List fitted models (the default model first)")
+def list_models(session: SessionDep) -> ModelList:
+    return ModelList.model_validate({"models": [_info(r) for r in repo.list_models(session)]})
+
+
+@router.get("/{model_id}", response_model=ModelDetail,
+            summary="A model: components, BIC curve, fit report")
+def show_model(model_id: str, ctx: ContextDep) -> ModelDetail:
     mid = ctx.resolve_model_id(model_id)
     model = ctx.model(mid, field="path.model_id")
     with ctx.db.session() as s:
         row = repo.get_model(s, mid)
-    return model_view(row, detail=True, components=domain.model_components(model))
+    return model_view(row, domain.model_components(model))
 
 
-@router.post("", status_code=201, summary="Fit a GMM on a dataset")
-def fit(body: FitRequest, ctx: ContextDep) -> dict[str, Any]:
+@router.post("", status_code=201, response_model=ModelDetail, summary="Fit a GMM on a dataset")
+def fit(body: FitRequest, ctx: ContextDep) -> ModelDetail:
     with ctx.db.session() as s:
         dataset = repo.get_dataset(s, body.dataset, field="body.dataset")
     try:
@@ -71,4 +91,4 @@ def fit(body: FitRequest, ctx: ContextDep) -> dict[str, Any]:
     row = ServiceContext.model_row(repo.new_id("mdl"), dataset.id, fitted, body.options)
     with ctx.db.session() as s:
         s.add(row)
-    return model_view(row, detail=True, components=domain.model_components(fitted.model))
+    return model_view(row, domain.model_components(fitted.model))

@@ -18,7 +18,7 @@ from fastapi import FastAPI
 from sqlalchemy.engine import make_url
 
 from app.main import create_app
-from app.settings import Settings, get_settings
+from app.settings import Settings
 
 PG_ADMIN_URL = os.environ.get("SCENGEN_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 
@@ -37,10 +37,8 @@ def make_settings(data_dir: Path, **overrides: Any) -> Settings:
 
 
 def make_app(settings: Settings) -> FastAPI:
-    """The service app with its settings overridden (the lifespan reads the override)."""
-    app = create_app()
-    app.dependency_overrides[get_settings] = lambda: settings
-    return app
+    """The service app with these settings."""
+    return create_app(settings)
 
 
 def wait_for(predicate: Callable[[], bool], what: str, attempts: int = 600,

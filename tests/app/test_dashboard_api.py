@@ -17,7 +17,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from app.settings import Settings, get_settings
+from app.settings import Settings
 from tests.browser.factories import prepare_data_dir, store_synthetic_catalogue
 
 #: the payload bounds the dashboard promises (docs/dashboard.md)
@@ -29,8 +29,7 @@ MAX_BARS = 60
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     data_dir = prepare_data_dir(tmp_path_factory.mktemp("dashboard"))
     settings = Settings(data_dir=data_dir, local_workers=0, chunk_size=2)
-    app = create_app()
-    app.dependency_overrides[get_settings] = lambda: settings
+    app = create_app(settings)
     with TestClient(app) as c:
         yield c
 
