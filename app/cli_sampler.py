@@ -52,6 +52,14 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                    help="comma-separated table columns (default: the parameter vector)")
     f.add_argument("--lane-width", type=float, default=None,
                    help="lane width in m (default: the table's lane_width column, else 3.75)")
+    f.add_argument("--bootstrap", type=int, default=100, metavar="B",
+                   help="bootstrap refits stored for the model interval (100; 0: none)")
+    f.add_argument("--bootstrap-jobs", type=int, default=1,
+                   help="processes for the refits (1; 0: one per core)")
+    f.add_argument("--exposure-hours", type=float, default=None,
+                   help="hours of driving the table's cut-ins come from (embedded: 63 h)")
+    f.add_argument("--exposure-km", type=float, default=None,
+                   help="km of driving the table's cut-ins come from")
     f.set_defaults(func=_fit)
 
     s = subparsers.add_parser(
@@ -108,10 +116,34 @@ def _fit(args: argparse.Namespace) -> int:
         features = [f.strip() for f in args.features.split(",") if f.strip()]
     model = CutInGMM(features=features, k_range=(args.k_min, args.k_max), n_init=args.n_init,
                      random_state=args.seed, lane_width=args.lane_width)
+    if args.bootstrap < 0 or args.bootstrap == 1:
+        raise ValueError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
+    from sampler.exposure import Exposure, cutin_rate, tno_exposure
+
+    exposure = None
+    if args.exposure_hours is not None or args.exposure_km is not None:
+        exposure = Exposure(n_events=len(table), hours=args.exposure_hours,
+                            km=args.exposure_km, source="given on the command line")
+    elif args.dataset is None:
+        exposure = tno_exposure(len(table))
     model.fit(table, source=source)
+    if exposure is not None:
+        model.exposure_ = exposure.to_dict()
+    if args.bootstrap:
+        from sampler.bootstrap import bootstrap_fit
+
+        bootstrap_fit(model, table, args.bootstrap, seed=args.seed, n_jobs=args.bootstrap_jobs)
     model.save(args.output)
     print(f"fitted {source}: {len(table)} rows")
     print(model.report_text())
+    if args.bootstrap:
+        print(f"bootstrap: {args.bootstrap} refits stored (model interval of P(A))")
+    if exposure is not None:
+        rates = cutin_rate(exposure)
+        print("exposure: " + "; ".join(
+            f"{v['estimate']:.3g} cut-ins {k.replace('_', ' ').replace('1e6', '10^6')} "
+            f"(95% {v['ci'][0]:.3g}-{v['ci'][1]:.3g})" for k, v in rates.items())
+            + f" [{exposure.source}]")
     print(f"wrote {args.output}")
     return 0
 
@@ -186,10 +218,20 @@ def _sample(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
     else:
         Path(args.output).write_text(text, encoding="utf-8")
+    summary: dict[str, Any] = {}
     if args.summary_json:
         summary = {k: v for k, v in d.items()
                    if k not in ("params", "derived", "log_density", "exposure_weights")}
         Path(args.summary_json).write_text(json.dumps(_clean(summary), indent=1) + "\n",
                                            encoding="utf-8")
     print(f"scengen sample: seed {ss.seed}: {ss.summary()}", file=sys.stderr)
+    if getattr(model, "bootstrap_", None) or getattr(model, "exposure_", None):
+        from sampler.exposure import region_report, report_text
+
+        report = region_report(model, ss, seed=ss.seed)
+        print(report_text(report), file=sys.stderr)
+        if args.summary_json:
+            summary["uncertainty"] = report
+            Path(args.summary_json).write_text(json.dumps(_clean(summary), indent=1) + "\n",
+                                               encoding="utf-8")
     return 0

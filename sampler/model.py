@@ -117,6 +117,12 @@ class CutInGMM:
     sklearn_version_ : str
     """
 
+    #: data exposure (``sampler.exposure.Exposure.to_dict``), bootstrap replicates
+    #: (``sampler.bootstrap``) and the tail calibration report; None until set
+    exposure_: dict[str, Any] | None = None
+    bootstrap_: dict[str, Any] | None = None
+    tail_calibration_: dict[str, Any] | None = None
+
     def __init__(
         self,
         features: Sequence[str] | None = None,

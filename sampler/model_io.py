@@ -44,6 +44,11 @@ def model_to_dict(model: CutInGMM) -> dict[str, Any]:
         "fit_report": getattr(model, "fit_report_", None),
         "training": dict(getattr(model, "training_", {})),
         "sklearn_version": getattr(model, "sklearn_version_", sklearn.__version__),
+        # issue 12: the data's exposure (sampler.exposure) and the bootstrap replicates
+        # (sampler.bootstrap); absent in older files
+        "exposure": getattr(model, "exposure_", None),
+        "bootstrap": getattr(model, "bootstrap_", None),
+        "tail_calibration": getattr(model, "tail_calibration_", None),
         "settings": {"k_range": list(model.k_range), "n_init": model.n_init,
                      "reg_covar": model.reg_covar, "max_iter": model.max_iter,
                      "random_state": model.random_state, "cv_folds": model.cv_folds,
@@ -118,4 +123,28 @@ def model_from_dict(cls: type[CutInGMM], data: Any) -> CutInGMM:
         model.fit_report_ = dict(data["fit_report"])
     model.training_ = dict(data.get("training") or {})
     model.sklearn_version_ = str(data.get("sklearn_version", "unknown"))
+    for key in ("exposure", "bootstrap", "tail_calibration"):
+        value = data.get(key)
+        if value is not None and not isinstance(value, Mapping):
+            raise ModelError(f"{key}: expected an object or null")
+        if value is not None:
+            setattr(model, f"{key}_", dict(value))
+    boot = getattr(model, "bootstrap_", None)
+    if boot is not None:
+        _check_bootstrap(boot, len(features), int(model.n_components_))
     return model
+
+
+def _check_bootstrap(boot: Mapping[str, Any], d: int, k: int) -> None:
+    try:
+        w = np.asarray(boot["weights"], dtype=np.float64)
+        m = np.asarray(boot["means"], dtype=np.float64)
+        c = np.asarray(boot["covariances"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"bootstrap: expected weights, means, covariances ({exc})") from None
+    b = w.shape[0] if w.ndim == 2 else -1
+    if b < 1 or w.shape != (b, k) or m.shape != (b, k, d) or c.shape != (b, k, d, d):
+        raise ModelError(f"bootstrap: shapes {w.shape}, {m.shape}, {c.shape} do not match "
+                         f"K={k}, d={d}")
+    if not (np.isfinite(w).all() and np.isfinite(m).all() and np.isfinite(c).all()):
+        raise ModelError("bootstrap: replicates must be finite")

@@ -67,7 +67,8 @@ class SampleSet:
         ``P(A) / n`` each (see ``sampler.probability``): sums to P(A).
     p_region : PRegion
     method : str
-        The sampler that ran (``rejection`` or ``mcmc``); ``requested`` is what was asked.
+        The sampler that ran (``rejection``, ``mcmc`` or ``subset``); ``requested`` is what
+        was asked.
     diagnostics : dict
         The sampler's (acceptance, tau, ESS, ...), JSON-able.
     seed : int
@@ -126,6 +127,11 @@ class SampleSet:
                          f", tau {d['tau_max']:.1f}, ESS {d['ess']:.0f} "
                          f"(chain {d['ess_chain_min']:.0f}), {d['n_steps']} steps")
             parts.extend(d.get("warnings", []))
+        elif self.method == "subset":
+            sub = d["subset"]
+            parts.append(f"subset simulation: {sub['levels']} levels of {sub['n_per_level']}, "
+                         f"{sub['n_evaluations']} evaluations, CoV {sub['cov']:.2f} "
+                         f"(independent levels) ... {sub['cov_upper']:.2f} (bound)")
         else:
             parts.append(f"acceptance {d['acceptance_rate']:.3g} of {d['n_draws']} draws")
         return "; ".join(parts)
