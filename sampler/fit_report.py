@@ -28,12 +28,14 @@ def fit_report(model: CutInGMM, x: FloatArray, z: FloatArray, logj: FloatArray,
     folds = min(int(model.cv_folds), n // 2)
     per_fold = []
     kf = KFold(n_splits=folds, shuffle=True, random_state=int(model.random_state))
-    for train, test in kf.split(z):
+    tails = _TailCalibration(model, x)
+    for fold, (train, test) in enumerate(kf.split(z)):
         gm, _, _err = model._fit_gm(model.n_components_, z[train])
         if gm is None:
             per_fold.append(float("nan"))
             continue
         per_fold.append(float(np.mean(gm.score_samples(z[test]) + logj[test])))
+        tails.add_fold(gm, test, np.random.default_rng([int(model.random_state), fold]))
     rng = np.random.default_rng(int(model.random_state))
     m = int(model.n_report_samples)
     draws = model.sample(m, rng)
@@ -68,6 +70,7 @@ def fit_report(model: CutInGMM, x: FloatArray, z: FloatArray, logj: FloatArray,
             "per_fold": [None if not math.isfinite(v) else v for v in per_fold],
         },
         "ks": ks,
+        "tail_calibration": tails.result(),
         "outside_bounds": {"fraction": k_out / m, "ci95": [lo, hi],
                            "per_bound": per_bound, "lane_width": model.lane_width_,
                            "n_samples": m},
@@ -102,4 +105,83 @@ def report_text(model: CutInGMM) -> str:
         for name, frac in ob["per_bound"].items():
             if frac > 0:
                 lines.append(f"  first violated bound {name}: {frac:.4f}")
+        lines.extend(tail_text(r.get("tail_calibration")))
     return "\n".join(lines)
+
+
+#: quantities and data quantiles of the tail calibration (lower tails: the critical side)
+TAIL_QUANTITIES = ("ttc", "thw", "gap")
+TAIL_QUANTILES = (0.02, 0.05, 0.1, 0.25)
+
+
+class _TailCalibration:
+    """K-fold held-out exceedance probabilities: for thresholds at data quantiles of TTC,
+    THW and gap, the fold model's P(q < t | physical bounds) (from its own draws) against
+    the share of the fold's held-out rows with q < t; pooled over the folds."""
+
+    def __init__(self, model: CutInGMM, x: FloatArray) -> None:
+        from sampler.constraints import derive
+
+        self.model = model
+        self.m = max(1000, int(model.n_report_samples))
+        q = derive(model.params_matrix(x), TAIL_QUANTITIES, lane_width=model.lane_width_)
+        self.data = q
+        self.thresholds: dict[str, list[tuple[float, float]]] = {}
+        for name in TAIL_QUANTITIES:
+            v = q[name][np.isfinite(q[name])]
+            if v.size < 20:
+                continue
+            ts = sorted({float(np.quantile(v, a)) for a in TAIL_QUANTILES})
+            self.thresholds[name] = [(t, float(np.mean(q[name] < t))) for t in ts]
+        self.rows: dict[tuple[str, float], dict[str, Any]] = {}
+
+    def add_fold(self, gm: Any, test: Any, rng: np.random.Generator) -> None:
+        from sampler.constraints import derive
+
+        model = self.model
+        k = gm.n_components
+        labels = np.minimum(np.searchsorted(np.cumsum(gm.weights_), rng.random(self.m),
+                                            side="right"), k - 1)
+        e = rng.standard_normal((self.m, model.n_features))
+        z = np.empty_like(e)
+        chol = np.linalg.cholesky(np.asarray(gm.covariances_))
+        for j in range(k):
+            idx = labels == j
+            z[idx] = gm.means_[j] + e[idx] @ chol[j].T
+        params = model.params_matrix(model.from_z(z))
+        in_b = Region(lane_width=model.lane_width_).in_bounds(params)
+        q = derive(params, list(self.thresholds), lane_width=model.lane_width_)
+        n_b = max(1, int(in_b.sum()))
+        for name, ts in self.thresholds.items():
+            for t, _share in ts:
+                row = self.rows.setdefault((name, t), {"model": [], "k": 0, "n": 0})
+                row["model"].append(float(np.sum((q[name] < t) & in_b) / n_b))
+                row["k"] += int(np.sum(self.data[name][test] < t))
+                row["n"] += len(test)
+
+    def result(self) -> dict[str, Any]:
+        out = []
+        for name, ts in self.thresholds.items():
+            for t, share in ts:
+                row = self.rows.get((name, t))
+                if not row or not row["n"]:
+                    continue
+                p_model = float(np.mean(row["model"]))
+                lo, hi = clopper_pearson(row["k"], row["n"])
+                out.append({"quantity": name, "threshold": t, "data_share": share,
+                            "model_p": p_model, "heldout_share": row["k"] / row["n"],
+                            "heldout_ci95": [lo, hi], "inside_ci": bool(lo <= p_model <= hi)})
+        return {"draws_per_fold": self.m, "quantiles": list(TAIL_QUANTILES), "rows": out}
+
+
+def tail_text(tc: Any) -> list[str]:
+    """Lines of the tail calibration table (empty when there is none)."""
+    if not tc or not tc.get("rows"):
+        return []
+    lines = ["tail calibration (k-fold held out; P(q < t): model vs held-out share, 95% CI):"]
+    for r in tc["rows"]:
+        mark = "" if r["inside_ci"] else "  <- outside"
+        lines.append(f"  {r['quantity']:4s} < {r['threshold']:8.3f}  model {r['model_p']:.4f}"
+                     f"  held out {r['heldout_share']:.4f} [{r['heldout_ci95'][0]:.4f}, "
+                     f"{r['heldout_ci95'][1]:.4f}]{mark}")
+    return lines

@@ -170,3 +170,20 @@ def test_cli_fit_stores_bootstrap_and_tno_exposure(tmp_path: Path,
     assert "rate per hour" in err and "model [" in err
     assert main(["fit", "-o", str(out), "--bootstrap", "1"]) == 2
     assert math.isfinite(Region().lane_width)
+
+
+def test_tail_calibration_in_the_fit_report() -> None:
+    table = synthetic_parameter_table(400, seed=2)
+    model = CutInGMM(k_range=(2, 2), n_init=1, n_report_samples=4000).fit(table)
+    tc = model.fit_report_["tail_calibration"]
+    names = {r["quantity"] for r in tc["rows"]}
+    assert {"ttc", "thw", "gap"} <= names
+    for r in tc["rows"]:
+        # the folds partition the rows: the pooled held-out share is the data's share
+        assert r["heldout_share"] == pytest.approx(r["data_share"], abs=1e-12)
+        assert 0.0 <= r["model_p"] <= 1.0
+        assert r["heldout_ci95"][0] <= r["heldout_share"] <= r["heldout_ci95"][1]
+    # gap is modelled directly (log-normal data, log transform): calibrated in its tail
+    gap_rows = [r for r in tc["rows"] if r["quantity"] == "gap"]
+    assert sum(r["inside_ci"] for r in gap_rows) >= len(gap_rows) - 1
+    assert "tail calibration" in model.report_text()
