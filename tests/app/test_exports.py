@@ -865,3 +865,36 @@ def test_xosc_declares_the_criticality_fields_present_in_the_row(tmp_path: Path)
               for d in logical.iterfind("ParameterDeclarations/ParameterDeclaration")}
     assert ldecls["r157_cc_t_brake"] == ("double", "NaN")
     assert ldecls["none_collision"] == ("string", "true")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(min_value=0.0, max_value=0.5), min_size=2, max_size=60))
+def test_thinned_vertices_are_spaced_for_esmini_and_keep_both_ends(steps: list[float]) -> None:
+    from app.exports._osc import MIN_VERTEX_SPACING, thinned
+
+    x = np.concatenate([[0.0], np.cumsum(steps)])
+    y = 0.5 * x
+    keep = thinned(x, y)
+    assert keep[0] == 0 and keep[-1] == x.shape[0] - 1
+    assert np.all(np.diff(keep) > 0)
+    gaps = np.hypot(np.diff(x[keep]), np.diff(y[keep]))
+    assert np.all(gaps >= MIN_VERTEX_SPACING) or keep.tolist() == [0, x.shape[0] - 1]
+    if np.all(np.hypot(np.diff(x), np.diff(y)) >= MIN_VERTEX_SPACING):
+        assert keep.tolist() == list(range(x.shape[0]))  # nothing to thin: all kept
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(min_value=2, max_value=30), st.integers(min_value=0, max_value=29),
+       st.floats(min_value=1.0, max_value=40.0))
+def test_manoeuvre_step_is_the_last_straight_constant_speed_step(n: int, m: int,
+                                                                 v: float) -> None:
+    from app.exports._osc import manoeuvre_step
+
+    m = min(m, n - 1)
+    t = np.arange(n + 1) * 0.1
+    x = 10.0 + v * t
+    psi = np.zeros_like(t)
+    psi[m + 1:] = -0.05  # turns right after step m
+    y = np.where(t > t[m], -0.1 * (t - t[m]), 0.0)
+    track = Track("c", 4.0, 1.8, x=x, y=y, psi=psi, v=np.full_like(t, v))
+    assert manoeuvre_step(track, t) == min(m, n - 1)
