@@ -30,7 +30,7 @@ from sampler._threads import single_threaded
 from sampler.record import ScenarioRecord, score_rows
 from sampler.sampleset import SampleSet
 
-__all__ = ["score_samples"]
+__all__ = ["score_part", "score_samples"]
 
 
 def _provenance(index: int) -> dict[str, Any]:
@@ -38,8 +38,10 @@ def _provenance(index: int) -> dict[str, Any]:
 
 
 @single_threaded
-def _score_chunk(table: pd.DataFrame, start: int, weights: list[float] | None,
-                 kwargs: dict[str, Any]) -> list[ScenarioRecord]:
+def score_part(table: pd.DataFrame, start: int, weights: list[float] | None,
+               kwargs: dict[str, Any]) -> list[ScenarioRecord]:
+    """Records of the rows of ``table`` with indices ``start, start + 1, ...`` (a pool
+    task: module-level, picklable; the scenarios' provenance is their sample index)."""
     return [record for record, _ in score_rows(table, start=start, exposure_weights=weights,
                                                 provenance=_provenance, **kwargs)]
 
@@ -128,13 +130,13 @@ def score_samples(
     out: list[ScenarioRecord] = []
     if n_workers == 1 or len(parts) <= 1:
         for part, start, w in parts:
-            out.extend(_score_chunk(part, start, w, kw))
+            out.extend(score_part(part, start, w, kw))
             if progress is not None:
                 progress(len(out), total)
         return out
     ctx = multiprocessing.get_context(mp_context)
     with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
-        futures = [pool.submit(_score_chunk, part, start, w, kw) for part, start, w in parts]
+        futures = [pool.submit(score_part, part, start, w, kw) for part, start, w in parts]
         for fut in futures:
             out.extend(fut.result())
             if progress is not None:

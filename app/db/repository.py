@@ -208,9 +208,10 @@ def column_statistics(session: Session, catalogue_id: str, column: Any) -> dict[
         .where(*finite)).one()
     if not k:
         return {"count": 0}
+    count = int(k)
 
     def q(p: float) -> float:
-        pos = p * (k - 1)
+        pos = p * (count - 1)
         below = math.floor(pos)
         pair = [float(v) for v in session.scalars(
             select(column).where(*finite).order_by(column).offset(below).limit(2))]
@@ -218,7 +219,7 @@ def column_statistics(session: Session, catalogue_id: str, column: Any) -> dict[
             return pair[0]
         return pair[0] + (pair[1] - pair[0]) * (pos - below)
 
-    return {"count": int(k), "min": float(lo), "max": float(hi), "mean": float(mean),
+    return {"count": count, "min": float(lo), "max": float(hi), "mean": float(mean),
             "p50": q(0.5), "p95": q(0.95)}
 
 

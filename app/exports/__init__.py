@@ -52,13 +52,13 @@ from app.exports._api import (
     MANIFEST_FORMAT,
     RESERVED_COLUMNS,
     SUMMARY_COLUMNS,
-    ExportError,
     build_manifest,
     export_catalogue,
     read_jsonl,
     read_jsonl_manifest,
     scenario_row,
 )
+from app.exports._common import ExportError
 
 __all__ = [
     "DERIVED_COLUMNS",

@@ -98,7 +98,7 @@ def manoeuvre_step(track: Track, t: np.ndarray) -> int:
     along +x); at most ``len(t) - 2`` so that a trajectory of at least two vertices
     follows.
     """
-    n = t.shape[0]
+    n = int(t.shape[0])
     if n < 2 or abs(float(track.psi[0])) > _STRAIGHT_PSI:
         return 0
     v0 = float(track.v[0])

@@ -13,15 +13,16 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk
 
 log = logging.getLogger("scengen.jobs")
 
 ChunkFn = Callable[[CatalogueSpec, int], ChunkResult]
+T = TypeVar("T")
 
 
 class Flag(Protocol):
@@ -35,6 +36,8 @@ class ChunkExecutor(Protocol):
 
     def run(self, spec: CatalogueSpec, indices: Iterable[int],
             cancel: Flag | None = None) -> Iterator[ChunkResult]: ...
+
+    def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]: ...
 
     def close(self) -> None: ...
 
@@ -53,6 +56,10 @@ class InlineExecutor:
             if cancel is not None and cancel.is_set():
                 return
             yield self.fn(spec, i)
+
+    def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]:
+        """``fn`` over zipped ``args`` in this thread, results in order."""
+        return [fn(*a) for a in zip(*args, strict=True)]
 
     def close(self) -> None:
         return None
@@ -121,6 +128,13 @@ class FuturesExecutor:
             for fut in pending:
                 fut.cancel()
 
+    def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]:
+        """``fn`` over zipped ``args`` on the executor's workers, results in order (what
+        ``POST /scenarios`` uses to score its vectors on every core)."""
+        executor = self._get()
+        futures = [executor.submit(fn, *a) for a in zip(*args, strict=True)]
+        return [f.result() for f in futures]
+
     def close(self) -> None:
         with self._lock:
             executor, self._executor = self._executor, None
@@ -162,7 +176,8 @@ class DaskExecutor(FuturesExecutor):
             raise ValueError("dask_scheduler: need a scheduler address")
         super().__init__(fn)
         self._own = client is None
-        self.client = client if client is not None else Client(address, timeout="30s")
+        make_client: Any = Client  # distributed ships no type hints
+        self.client = client if client is not None else make_client(address, timeout="30s")
 
     def _make(self) -> Executor:
         executor: Executor = self.client.get_executor(pure=False)

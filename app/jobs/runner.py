@@ -57,8 +57,9 @@ def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
     """P(A) of the catalogue's region: one estimate from the catalogue's seed."""
     model = domain.load_model(spec.model_json)
     constraints = domain.parse_constraints(spec.constraints)
-    return jsonconv.encode(domain.estimate_region(model, constraints,
-                                                       region_seed(spec.seed)))
+    encoded: dict[str, Any] = jsonconv.encode(
+        domain.estimate_region(model, constraints, region_seed(spec.seed)))
+    return encoded
 
 
 class CatalogueRunner:

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 from fastapi import APIRouter
 from pydantic import Field
 
 from app import domain
+from app.context import ServiceContext
 from app.deps import ContextDep
 from app.errors import InvalidInput
 from app.schemas import ApiModel, PRegion, SamplingRequest
-from sampler.record import ScenarioRecord, score_rows
+from sampler.record import ScenarioRecord
+from sampler.scoring import score_part
 
 router = APIRouter(prefix="/scenarios", tags=["scenarios"])
 
@@ -35,6 +38,28 @@ class ScenariosResponse(ApiModel):
     scenarios: list[ScenarioRecord]
 
 
+#: below this many vectors the request scores them itself (a pool round trip costs more)
+POOL_MIN_N = 8
+
+
+def _score(ctx: ServiceContext, drawn: domain.SampleResult,
+           body: ScenarioRequest) -> list[ScenarioRecord]:
+    """Score the drawn vectors (``score_vector`` each): on the service's executor, split
+    in one part per worker slot, or here for a few vectors or nothing to score."""
+    kwargs: dict[str, Any] = {"lane_width": drawn.lane_width, "seed": body.seed,
+                              "score": body.score, "include_scenario": body.include_trajectories}
+    table, weights = drawn.params, [float(w) for w in drawn.weights]
+    n = len(table)
+    if not body.score or n < POOL_MIN_N:
+        return score_part(table, 0, weights, kwargs)
+    parts = min(n, 4)
+    starts = [n * k // parts for k in range(parts + 1)]
+    results = ctx.executor.map(
+        score_part, [table.iloc[a:b].reset_index(drop=True) for a, b in itertools.pairwise(starts)],
+        starts[:-1], [weights[a:b] for a, b in itertools.pairwise(starts)], [kwargs] * parts)
+    return [record for part in results for record in part]
+
+
 @router.post("", response_model=ScenariosResponse,
              summary="Sample n cut-ins in the risk region, build and score them")
 def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosResponse:
@@ -46,11 +71,7 @@ def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosRespons
     model = ctx.model(model_id, field="body.model")
     constraints = domain.parse_constraints(body.constraints)
     drawn = domain.sample(model, constraints, body.n, body.seed, method=body.sampler)
-    records = [record for record, _ in score_rows(
-        drawn.params, exposure_weights=drawn.weights, lane_width=drawn.lane_width,
-        seed=body.seed, score=body.score, include_scenario=body.include_trajectories,
-        provenance=lambda i: {"sample_index": i, "sampler": body.sampler,
-                              "constraints": list(body.constraints)})]
+    records = _score(ctx, drawn, body)
     return ScenariosResponse(
         model=model_id, n=len(records), seed=body.seed, sampler=body.sampler,
         constraints=body.constraints, p_region=PRegion.model_validate(drawn.p_region),

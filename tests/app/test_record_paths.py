@@ -106,3 +106,24 @@ def test_record_row_and_migration_carry_every_criticality_field() -> None:
     for name, spec in CRITICALITY_FIELDS.items():
         assert str(columns[name].type) == kinds[spec.kind] and columns[name].nullable
     assert [n for n, _ in migration.COLUMNS] == names
+
+
+def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
+    # POST /scenarios splits its vectors over the executor (LocalPoolExecutor.map)
+    import pandas as pd
+
+    from app.jobs.executors import InlineExecutor, LocalPoolExecutor
+    from sampler.scoring import score_part
+    from tests.sampler.factories import base_params
+
+    table = pd.DataFrame([base_params(gap=6.0 + i, dv=2.0) for i in range(4)])
+    parts = [table.iloc[:2].reset_index(drop=True), table.iloc[2:].reset_index(drop=True)]
+    args = (parts, [0, 2], [[0.1, 0.1], [0.1, 0.1]], [{"lane_width": 3.5}] * 2)
+    pool = LocalPoolExecutor(1)
+    try:
+        pooled = pool.map(score_part, *args)
+    finally:
+        pool.close()
+    inline = InlineExecutor().map(score_part, *args)
+    assert pooled == inline and [r.index for p in pooled for r in p] == [0, 1, 2, 3]
+    assert all(r.class_ is not None for p in pooled for r in p)
