@@ -15,7 +15,10 @@ from numpy.typing import ArrayLike, NDArray
 from app import jsonconv
 from app.errors import InvalidInput
 from datasets.cutin_model import PARAM_NAMES
+from datasets.embedded import SOURCE as EMBEDDED_SOURCE
 from sampler import CutInGMM, SamplerError
+from sampler.bootstrap import bootstrap_fit
+from sampler.exposure import tno_exposure
 
 __all__ = ["FittedModel", "describe_model", "fit_model", "load_model", "marginal_density",
            "model_components", "model_draws", "model_features", "model_lane_width"]
@@ -35,6 +38,10 @@ def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
               source: str | None = None) -> FittedModel:
     """Fit the cut-in GMM on a parameter table with the sampler's options."""
     kwargs = dict(options)
+    n_boot = kwargs.pop("n_bootstrap", 100)  # issue 12: the model interval's refits
+    if isinstance(n_boot, bool) or not isinstance(n_boot, int) or n_boot == 1 or n_boot < 0:
+        raise InvalidInput(f"n_bootstrap: expected 0 or 2 ... 10000 refits, got {n_boot!r}",
+                           field="body.options.n_bootstrap")
     if isinstance(kwargs.get("k_range"), list):
         kwargs["k_range"] = tuple(kwargs["k_range"])
     try:
@@ -43,8 +50,12 @@ def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
         raise InvalidInput(f"model options: {exc}", field="body.options") from None
     try:
         model.fit(table, source=source)
+        if n_boot:
+            bootstrap_fit(model, table, n_boot, seed=int(model.random_state))
     except ValueError as exc:
         raise InvalidInput(f"fitting the model failed: {exc}", field="body.options") from None
+    if "source" in table.columns and (table["source"] == EMBEDDED_SOURCE).all():
+        model.exposure_ = tno_exposure(len(table)).to_dict()  # 63 h (de Gelder et al. 2021)
     return describe(model)
 
 

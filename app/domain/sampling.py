@@ -23,6 +23,7 @@ from sampler import (
     parse_constraint,
 )
 from sampler import sample as sampler_sample
+from sampler.exposure import region_report
 from sampler.problem import Problem
 
 __all__ = ["SampleResult", "estimate_region", "parse_constraints", "sample"]
@@ -105,10 +106,19 @@ def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int
     diagnostics = jsonconv.encode(dict(ss.diagnostics))
     diagnostics["method"] = ss.method
     diagnostics["requested_method"] = ss.requested
+    p_region = region_dict(ss.p_region)
+    if known_region is None and (model.bootstrap_ or model.exposure_):
+        # issue 12: the "model" interval beside the Monte Carlo one, and rates per hour /
+        # 10^6 km with both (sampler.exposure.region_report)
+        report = region_report(model, ss, seed=seed)
+        p_region["model_ci"] = report["p_region"]["model_ci"]
+        p_region["mc_ci"] = report["p_region"]["mc_ci"]
+        if "rates" in report:
+            p_region["rates"] = jsonconv.encode(report["rates"])
     return SampleResult(
         params=ss.params,
         weights=np.asarray(ss.exposure_weights, dtype=np.float64),
-        p_region=region_dict(ss.p_region),
+        p_region=p_region,
         diagnostics=diagnostics,
         lane_width=float(ss.region.lane_width),
     )

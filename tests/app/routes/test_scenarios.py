@@ -90,3 +90,20 @@ def test_empty_region_is_a_422_that_says_so(client: Any) -> None:
 def test_unknown_model_is_404(client: Any) -> None:
     r = client.post("/scenarios", json={"n": 1, "model": "nope"})
     assert r.status_code == 404 and r.json()["error"]["field"] == "body.model"
+
+
+def test_p_region_has_the_model_interval_and_rates(client: Any) -> None:
+    """Issue 12: the default (TNO) model carries bootstrap refits and 63 h of exposure."""
+    r = client.post("/scenarios", json={"n": 20, "seed": 5, "constraints": ["ttc<3"],
+                                        "score": False})
+    assert r.status_code == 200, r.text
+    p = r.json()["p_region"]
+    lo, hi = p["model_ci"]
+    assert 0 < lo < hi < 1 and hi / lo > 2  # no real event has ttc < 3 s: wide
+    assert p["mc_ci"] == p["ci"]
+    rates = p["rates"]
+    assert rates["exposure"]["hours"] == 63.0
+    lam = rates["exposure"]["n_events"] / 63.0
+    assert rates["per_hour"]["estimate"] == pytest.approx(lam * p["estimate"], rel=1e-9)
+    assert rates["per_hour"]["model_ci"][0] < rates["per_hour"]["estimate"]
+    assert "per_1e6_km" not in rates  # the TNO source gives no distance
