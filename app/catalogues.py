@@ -4,7 +4,7 @@ export and delete. Routes and CLI commands stay thin wrappers around these."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -57,9 +57,11 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
 
     def compute() -> dict[str, Any]:
         with ctx.db.session() as s:
-            return repo.summary_statistics(s, catalogue_id)
+            return {"summary": repo.summary_statistics(s, catalogue_id),
+                    "classes": repo.class_counts(s, catalogue_id)}
 
-    stats: dict[str, Any] = ctx.cache("catalogue.statistics", 256).get(key, compute)
+    cached: dict[str, Any] = ctx.cache("catalogue.statistics", 256).get(key, compute)
+    stats, classes = cached["summary"], cached["classes"]
     return {
         "id": row.id,
         "status": row.status,
@@ -75,11 +77,59 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "progress": n_done / row.n_chunks if row.n_chunks else 1.0,
         "p_region": row.p_region,
         "summary": stats,
+        "classes": classes,
         "error": row.error,
         "created_at": row.created_at.isoformat(),
         "updated_at": row.updated_at.isoformat(),
         "finished_at": row.finished_at.isoformat() if row.finished_at else None,
     }
+
+
+def page_filter(items: Sequence[tuple[str, str]], classes: Sequence[str] = (),
+                where: str = "query") -> repo.ScenarioFilter:
+    """A scenario page's filters from ``name=value`` pairs (API query, CLI ``--filter``):
+    ``<field>_min`` / ``<field>_max`` for the numeric fields (``repo.RANGE_FIELDS``),
+    ``<field>=true|false`` for the yes/no fields, and the classes. Anything else is an
+    ``InvalidInput`` naming it (``where.name``)."""
+    from riskcore.criticality import CLASSES
+
+    ranges: dict[str, list[float | None]] = {}
+    flags: list[tuple[str, bool]] = []
+    for key, raw in items:
+        name, _, bound = key.rpartition("_")
+        if bound in ("min", "max") and name in repo.RANGE_FIELDS:
+            try:
+                value = float(raw)
+            except ValueError:
+                value = math.nan
+            if math.isnan(value):
+                raise InvalidInput(f"{key}: expected a number, got {raw!r}",
+                                   field=f"{where}.{key}")
+            ranges.setdefault(name, [None, None])[0 if bound == "min" else 1] = value
+        elif key in repo.FLAG_FIELDS:
+            if raw.lower() not in ("true", "false", "1", "0"):
+                raise InvalidInput(f"{key}: expected true or false, got {raw!r}",
+                                   field=f"{where}.{key}")
+            flags.append((key, raw.lower() in ("true", "1")))
+        else:
+            raise InvalidInput(
+                f"{key}: unknown filter; filters are <field>_min / <field>_max for "
+                f"{', '.join(repo.RANGE_FIELDS)}, <field>=true|false for "
+                f"{', '.join(repo.FLAG_FIELDS)}, and class", field=f"{where}.{key}")
+    bad = [c for c in classes if c not in CLASSES]
+    if bad:
+        raise InvalidInput(f"class: unknown class {bad[0]!r}; valid: {', '.join(CLASSES)}",
+                           field=f"{where}.class")
+    return repo.ScenarioFilter(ranges=tuple((k, v[0], v[1]) for k, v in ranges.items()),
+                               flags=tuple(flags), classes=tuple(classes))
+
+
+def check_order(order_by: str, desc: bool | None, where: str = "query") -> bool:
+    """Validate ``order_by``; the direction (default: descending except for ``index``)."""
+    if order_by not in repo.ORDER_FIELDS:
+        raise InvalidInput(f"order_by: unknown field {order_by!r}; valid: "
+                           f"{', '.join(repo.ORDER_FIELDS)}", field=f"{where}.order_by")
+    return (order_by != "index") if desc is None else bool(desc)
 
 
 def record_of(row: ScenarioRow) -> ScenarioRecord:

@@ -1,4 +1,4 @@
-"""``scengen serve`` and ``scengen catalogue create|resume|status|list|export``.
+"""``scengen serve`` and ``scengen catalogue create|resume|status|scenarios|list|export``.
 
 The catalogue commands work on the local store (``SCENGEN_DATA_DIR``,
 ``SCENGEN_DATABASE_URL``) — the same one the service uses — and run jobs in the
@@ -54,6 +54,24 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     status = sub.add_parser("status", help="print a catalogue's status as JSON")
     status.add_argument("id")
     status.set_defaults(func=_status)
+
+    scen = sub.add_parser("scenarios", help="a catalogue's scenarios, ranked and filtered "
+                          "(JSON lines, one record each)")
+    scen.add_argument("id")
+    scen.add_argument("--order-by", default="btn",
+                      help="index or a numeric field (btn, a_req, ttr_true, ttc, risk, ...); "
+                           "default btn")
+    scen.add_argument("--asc", action="store_true",
+                      help="ascending (default: descending, except for index)")
+    scen.add_argument("--class", dest="classes", action="append", default=[],
+                      help="keep this class (repeatable): no_conflict, preventable, "
+                           "unpreventable, unavoidable")
+    scen.add_argument("--filter", dest="filters", action="append", default=[],
+                      metavar="NAME=VALUE",
+                      help="as the API: btn_min=0.7, ttr_true_max=1, r157_cc_collision=false")
+    scen.add_argument("--limit", type=int, default=20)
+    scen.add_argument("--offset", type=int, default=0)
+    scen.set_defaults(func=_scenarios)
 
     listing = sub.add_parser("list", help="list the catalogues")
     listing.set_defaults(func=_list)
@@ -149,6 +167,36 @@ def _status(args: argparse.Namespace) -> int:
     ctx = _context(load_defaults=False)
     try:
         print(json.dumps(catalogues.describe(ctx, args.id), indent=2))
+    finally:
+        ctx.close()
+    return 0
+
+
+def _scenarios(args: argparse.Namespace) -> int:
+    from app import catalogues
+    from app.db import repository as repo
+
+    items = []
+    for text in args.filters:
+        name, sep, value = text.partition("=")
+        if not sep:
+            raise CliError(f"--filter {text!r}: expected NAME=VALUE, e.g. btn_min=0.7")
+        items.append((name.strip(), value.strip()))
+    flt = catalogues.page_filter(items, args.classes, where="--filter")
+    desc = catalogues.check_order(args.order_by, False if args.asc else None,
+                                  where="--order-by")
+    if args.limit < 1 or args.offset < 0:
+        raise CliError("--limit must be >= 1 and --offset >= 0")
+    ctx = _context(load_defaults=False)
+    try:
+        with ctx.db.session() as s:
+            repo.get_catalogue(s, args.id)
+            total, rows = repo.page_scenarios(s, args.id, flt, args.offset, args.limit,
+                                              order_by=args.order_by, desc=desc)
+            for row in rows:
+                print(catalogues.record_of(row).model_dump_json())
+        print(json.dumps({"total": total, "offset": args.offset, "limit": args.limit}),
+              file=sys.stderr)
     finally:
         ctx.close()
     return 0

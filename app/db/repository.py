@@ -136,31 +136,77 @@ def count_scenarios(session: Session, catalogue_id: str) -> int:
     return int(session.scalar(stmt) or 0)
 
 
+def _criticality_kinds() -> dict[str, str]:
+    """Criticality field name -> kind (float|bool|str), from riskcore's CRITICALITY_FIELDS."""
+    from riskcore.criticality import CRITICALITY_FIELDS
+
+    return {name: spec.kind for name, spec in CRITICALITY_FIELDS.items()}
+
+
+def _column(name: str) -> Any:
+    return ScenarioRow.class_ if name == "class" else getattr(ScenarioRow, name)
+
+
+#: the numeric columns a scenario page may be sorted by and filtered on (ranges)
+RANGE_FIELDS: tuple[str, ...] = ("ttc", "risk", "exposure_weight", *(
+    name for name, kind in _criticality_kinds().items() if kind == "float"))
+#: the yes/no columns a page may be filtered on
+FLAG_FIELDS: tuple[str, ...] = tuple(
+    name for name, kind in _criticality_kinds().items() if kind == "bool")
+#: what ``order_by`` accepts
+ORDER_FIELDS: tuple[str, ...] = ("index", *RANGE_FIELDS)
+
+
 @dataclass(frozen=True)
 class ScenarioFilter:
+    """Filters of a scenario page: inclusive ranges of numeric columns, yes/no columns,
+    the classes. ``risk_min`` ... ``ttc_max`` are kept as shorthands."""
+
     risk_min: float | None = None
     risk_max: float | None = None
     ttc_min: float | None = None
     ttc_max: float | None = None
+    ranges: tuple[tuple[str, float | None, float | None], ...] = ()
+    flags: tuple[tuple[str, bool], ...] = ()
+    classes: tuple[str, ...] = ()
 
     def apply(self, stmt: Any) -> Any:
-        if self.risk_min is not None:
-            stmt = stmt.where(ScenarioRow.risk >= self.risk_min)
-        if self.risk_max is not None:
-            stmt = stmt.where(ScenarioRow.risk <= self.risk_max)
-        if self.ttc_min is not None:
-            stmt = stmt.where(ScenarioRow.ttc >= self.ttc_min)
-        if self.ttc_max is not None:
-            stmt = stmt.where(ScenarioRow.ttc <= self.ttc_max)
+        ranges = [("risk", self.risk_min, self.risk_max), ("ttc", self.ttc_min, self.ttc_max),
+                  *self.ranges]
+        for name, lo, hi in ranges:
+            col = _column(name)
+            if lo is not None:
+                stmt = stmt.where(col >= lo)
+            if hi is not None:
+                stmt = stmt.where(col <= hi)
+        for name, value in self.flags:
+            stmt = stmt.where(_column(name).is_(value))
+        if self.classes:
+            stmt = stmt.where(ScenarioRow.class_.in_(self.classes))
         return stmt
 
 
 def page_scenarios(session: Session, catalogue_id: str, flt: ScenarioFilter, offset: int,
-                   limit: int) -> tuple[int, list[ScenarioRow]]:
+                   limit: int, order_by: str = "index",
+                   desc: bool = False) -> tuple[int, list[ScenarioRow]]:
+    """One page of a catalogue's scenarios, filtered and sorted (nulls last, then by
+    index; +inf sorts above every finite value)."""
     base = flt.apply(select(ScenarioRow).where(ScenarioRow.catalogue_id == catalogue_id))
     total = int(session.scalar(select(func.count()).select_from(base.subquery())) or 0)
-    rows = list(session.scalars(base.order_by(ScenarioRow.idx).offset(offset).limit(limit)))
+    if order_by == "index":
+        order: list[Any] = [ScenarioRow.idx.desc() if desc else ScenarioRow.idx]
+    else:
+        col = _column(order_by)
+        order = [col.is_(None), col.desc() if desc else col.asc(), ScenarioRow.idx]
+    rows = list(session.scalars(base.order_by(*order).offset(offset).limit(limit)))
     return total, rows
+
+
+def class_counts(session: Session, catalogue_id: str) -> dict[str, int]:
+    """How many scenarios of each criticality class (null: not scored) a catalogue has."""
+    stmt = (select(ScenarioRow.class_, func.count()).where(
+        ScenarioRow.catalogue_id == catalogue_id).group_by(ScenarioRow.class_))
+    return {("unscored" if k is None else str(k)): int(v) for k, v in session.execute(stmt)}
 
 
 def iter_scenarios(session: Session, catalogue_id: str,
@@ -191,11 +237,13 @@ def chunk_rows(session: Session, catalogue_id: str) -> list[ChunkRow]:
 
 
 #: the scenario columns whose distribution a catalogue's status reports
-STAT_COLUMNS = ("risk", "ttc", "exposure_weight")
+STAT_COLUMNS = ("risk", "ttc", "exposure_weight", "btn", "a_req", "ttr_true",
+                "r157_cc_impact_speed", "none_impact_speed", "r_dep_tp", "alarm_time")
 
 
 def column_statistics(session: Session, catalogue_id: str, column: Any) -> dict[str, Any]:
-    """Count, min, max, mean, p50 and p95 of a column's finite values, computed in SQL.
+    """Count, min, max, mean, p05 … p95 of a column's finite values (and how many are +inf),
+    computed in SQL.
 
     The quantiles are exact (linear interpolation between order statistics, as
     ``numpy.quantile``'s default): two index-ordered rows at the right offset each, so a
@@ -206,8 +254,10 @@ def column_statistics(session: Session, catalogue_id: str, column: Any) -> dict[
     k, lo, hi, mean = session.execute(
         select(func.count(column), func.min(column), func.max(column), func.avg(column))
         .where(*finite)).one()
+    n_inf = int(session.scalar(select(func.count()).select_from(ScenarioRow).where(
+        ScenarioRow.catalogue_id == catalogue_id, column == math.inf)) or 0)
     if not k:
-        return {"count": 0}
+        return {"count": 0, "count_inf": n_inf}
     count = int(k)
 
     def q(p: float) -> float:
@@ -219,12 +269,14 @@ def column_statistics(session: Session, catalogue_id: str, column: Any) -> dict[
             return pair[0]
         return pair[0] + (pair[1] - pair[0]) * (pos - below)
 
-    return {"count": count, "min": float(lo), "max": float(hi), "mean": float(mean),
-            "p50": q(0.5), "p95": q(0.95)}
+    return {"count": count, "count_inf": n_inf, "min": float(lo), "max": float(hi),
+            "mean": float(mean), "p05": q(0.05), "p25": q(0.25), "p50": q(0.5),
+            "p75": q(0.75), "p95": q(0.95)}
 
 
 def summary_statistics(session: Session, catalogue_id: str) -> dict[str, Any]:
-    """Counts and distribution summaries of risk, TTC and exposure weight (finite values)."""
+    """Distribution summaries (finite values; ``count_inf``: how many are +inf) of the
+    ``STAT_COLUMNS``: risk, TTC, exposure weight and the criticality margins."""
     return {name: column_statistics(session, catalogue_id, getattr(ScenarioRow, name))
             for name in STAT_COLUMNS}
 

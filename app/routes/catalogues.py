@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, BackgroundTasks, Query
+from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import FileResponse, Response
 from pydantic import ConfigDict, Field
 
@@ -120,23 +121,40 @@ class ScenarioPage(ApiModel):
     scenarios: list[ScenarioRecord]
 
 
+_PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc", "class", "risk_min",
+                          "risk_max", "ttc_min", "ttc_max"})
+
+
 @router.get("/{catalogue_id}/scenarios", response_model=ScenarioPage,
-            summary="Page through the stored scenarios, "
-            "filtered by risk and TTC")
+            summary="Page through the stored scenarios, ranked and filtered by criticality")
 def list_scenarios(
     catalogue_id: str,
     session: SessionDep,
+    request: Request,
     offset: Annotated[int, Query(ge=0)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    order_by: Annotated[str, Query(description="sort key: index or a numeric field (ttc, "
+                                   "risk, btn, a_req, ttr_true, ...); default btn")] = "btn",
+    desc: Annotated[bool | None, Query(description="descending (default: true, except for "
+                                       "index)")] = None,
+    classes: Annotated[list[str] | None, Query(alias="class", description="keep these "
+                                               "classes (repeatable)")] = None,
     risk_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     risk_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     ttc_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     ttc_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
 ) -> ScenarioPage:
+    """Scenarios of a catalogue, sorted by ``order_by`` (default ``btn``, highest first;
+    nulls last, ties by index) and filtered by ``<field>_min``/``<field>_max``
+    (inclusive), ``<field>=true|false`` and ``class``."""
     repo.get_catalogue(session, catalogue_id)
-    flt = repo.ScenarioFilter(risk_min=risk_min, risk_max=risk_max, ttc_min=ttc_min,
+    items = [(k, v) for k, v in request.query_params.multi_items() if k not in _PAGE_PARAMS]
+    flt = dataclasses.replace(service.page_filter(items, classes or (), where="query"),
+                              risk_min=risk_min, risk_max=risk_max, ttc_min=ttc_min,
                               ttc_max=ttc_max)
-    total, rows = repo.page_scenarios(session, catalogue_id, flt, offset, limit)
+    descending = service.check_order(order_by, desc, where="query")
+    total, rows = repo.page_scenarios(session, catalogue_id, flt, offset, limit,
+                                      order_by=order_by, desc=descending)
     return ScenarioPage(catalogue=catalogue_id, total=total, offset=offset, limit=limit,
                         scenarios=[service.record_of(r) for r in rows])
 

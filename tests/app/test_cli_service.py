@@ -56,3 +56,25 @@ def test_user_errors_are_one_line_and_exit_2(store: Path,
     assert err.startswith("scengen: error: constraint") and "\n" not in err
     assert main(["catalogue", "create", "--n", "0"]) == 2
     assert "n must be between 1" in capsys.readouterr().err
+
+
+def test_scenarios_ranked_and_filtered(store: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["catalogue", "create", "--n", "5", "--seed", "4", "--chunk-size", "5",
+                 "--constraint", "ttc<3", "--no-progress"]) == 0
+    cid = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["id"]
+    assert main(["catalogue", "scenarios", cid, "--limit", "10"]) == 0
+    captured = capsys.readouterr()
+    rows = [json.loads(line) for line in captured.out.splitlines()]
+    assert json.loads(captured.err.strip().splitlines()[-1])["total"] == 5
+    btn = [float(r["btn"]) for r in rows]
+    assert btn == sorted(btn, reverse=True)  # the default ranking: btn, highest first
+    assert main(["catalogue", "scenarios", cid, "--order-by", "index", "--filter",
+                 f"btn_min={btn[1]}"]) == 0
+    kept = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert sorted(float(r["btn"]) for r in kept) == sorted(b for b in btn if b >= btn[1])
+    assert [r["index"] for r in kept] == sorted(r["index"] for r in kept)
+    for argv in (["--filter", "btn>1"], ["--filter", "colour=red"], ["--class", "bad"],
+                 ["--order-by", "nope"]):
+        assert main(["catalogue", "scenarios", cid, *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("scengen: error:") and "\n" not in err

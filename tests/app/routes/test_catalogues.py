@@ -52,10 +52,12 @@ def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> Non
 
 def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> None:
     cid = catalogue["id"]
-    all_rows = client.get(f"/catalogues/{cid}/scenarios", params={"limit": 100}).json()
+    all_rows = client.get(f"/catalogues/{cid}/scenarios",
+                          params={"limit": 100, "order_by": "index"}).json()
     assert all_rows["total"] == N
     assert [s["index"] for s in all_rows["scenarios"]] == list(range(N))
-    page = client.get(f"/catalogues/{cid}/scenarios", params={"offset": 10, "limit": 5}).json()
+    page = client.get(f"/catalogues/{cid}/scenarios",
+                      params={"offset": 10, "limit": 5, "order_by": "index"}).json()
     assert [s["index"] for s in page["scenarios"]] == [10, 11]
     ttcs = sorted(s["ttc"] for s in all_rows["scenarios"])
     cut = ttcs[N // 2]
@@ -70,6 +72,44 @@ def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> No
         assert set(s) >= {"risk_peak", "btn", "class", "t_p", "error"}  # the flat record
 
 
+def test_scenarios_ranked_by_criticality(client: Any, catalogue: dict[str, Any]) -> None:
+    cid = catalogue["id"]
+    url = f"/catalogues/{cid}/scenarios"
+    everything = client.get(url, params={"limit": 100, "order_by": "index"}).json()["scenarios"]
+    # default: btn, highest first (ties by index)
+    ranked = client.get(url, params={"limit": 100}).json()["scenarios"]
+    expect = sorted(everything, key=lambda s: (-float(s["btn"]), s["index"]))
+    assert [s["index"] for s in ranked] == [s["index"] for s in expect]
+    # any numeric field, ascending on request
+    up = client.get(url, params={"order_by": "ttr_true", "desc": "false"}).json()["scenarios"]
+    values = [float(s["ttr_true"]) for s in up]
+    assert values == sorted(values)
+    # ranges on any numeric field, yes/no fields, classes
+    cut = sorted(float(s["a_req"]) for s in everything)[N // 2]
+    r = client.get(url, params={"a_req_min": cut}).json()
+    assert r["total"] == sum(1 for s in everything if float(s["a_req"]) >= cut)
+    r = client.get(url, params={"r157_cc_collision": "false"}).json()
+    assert r["total"] == sum(1 for s in everything if s["r157_cc_collision"] is False)
+    cls = everything[0]["class"]
+    r = client.get(url, params={"class": cls}).json()
+    assert r["total"] == sum(1 for s in everything if s["class"] == cls)
+    # the status counts the classes and summarises the margins
+    status = client.get(f"/catalogues/{cid}").json()
+    assert sum(status["classes"].values()) == N
+    assert status["classes"][cls] == r["total"]
+    btn = status["summary"]["btn"]
+    assert btn["count"] + btn["count_inf"] == N
+    assert btn["p05"] <= btn["p25"] <= btn["p50"] <= btn["p75"] <= btn["p95"]
+    # bad input names the parameter
+    for params, field in (({"order_by": "nope"}, "query.order_by"),
+                          ({"class": "dangerous"}, "query.class"),
+                          ({"btn_min": "high"}, "query.btn_min"),
+                          ({"r157_cc_collision": "maybe"}, "query.r157_cc_collision"),
+                          ({"colour": "red"}, "query.colour")):
+        r = client.get(url, params=params)
+        assert r.status_code == 422 and r.json()["error"]["field"] == field, r.text
+
+
 def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     cid = catalogue["id"]
     r = client.get(f"/catalogues/{cid}/export", params={"format": "jsonl"})
@@ -79,7 +119,8 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     assert lines[0]["manifest"]["constraints"] == ["ttc<3"]
     scenarios = [x for x in lines if x["kind"] == "scenario"]
     assert len(scenarios) == N
-    rows = client.get(f"/catalogues/{cid}/scenarios", params={"limit": 100}).json()
+    rows = client.get(f"/catalogues/{cid}/scenarios",
+                      params={"limit": 100, "order_by": "index"}).json()
     for line, row in zip(scenarios, rows["scenarios"], strict=True):
         assert line["scenario"]["params"] == pytest.approx(row["params"])
         assert line["summary"]["risk_peak"] == row["risk_peak"]
