@@ -144,13 +144,16 @@ def test_sql_statistics_equal_numpy_on_the_finite_values(database_url: str, tmp_
                                                           if r["risk"] is not None]))):
         finite = values[np.isfinite(values)]
         got = stats[name]
+        assert got["count_inf"] == int(np.isposinf(values).sum())
         if finite.size == 0:
-            assert got == {"count": 0}
+            assert got == {"count": 0, "count_inf": int(np.isposinf(values).sum())}
             continue
         assert got["count"] == finite.size
         assert got["min"] == finite.min() and got["max"] == finite.max()
         assert got["mean"] == pytest.approx(finite.mean(), rel=1e-12)
         assert got["p50"] == pytest.approx(np.quantile(finite, 0.5), rel=1e-12)
         assert got["p95"] == pytest.approx(np.quantile(finite, 0.95), rel=1e-12)
+        for q in (5, 25, 75):
+            assert got[f"p{q:02d}"] == pytest.approx(np.quantile(finite, q / 100), rel=1e-12)
     assert stats["exposure_weight"]["p95"] == 0.5
     db.dispose()
