@@ -64,8 +64,9 @@ class ChunkProgress(ApiModel):
 
 
 class CatalogueStatus(ApiModel):
-    """A catalogue's status; ``summary`` has count, min, max, mean, p50 and p95 of each
-    scored column's finite values (computed in SQL)."""
+    """A catalogue's status; ``summary`` has count (and count_inf), min, max, mean and the
+    percentiles p05 … p95 of each scored column's finite values (computed in SQL);
+    ``classes`` the number of scenarios of each criticality class."""
 
     model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
 
@@ -83,6 +84,8 @@ class CatalogueStatus(ApiModel):
     progress: float = Field(description="chunks stored / chunks, 0 … 1")
     p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate")
     summary: dict[str, dict[str, float]]
+    classes: dict[str, int] = Field(default_factory=dict, description="scenarios per "
+                                    "criticality class (docs/criticality.md)")
     error: str | None
     created_at: str
     updated_at: str
