@@ -227,12 +227,7 @@ class PRegionEstimator:
                           cov=math.sqrt((1 - mc_hits / mc_draws) / mc_hits))
         else:
             out = self._importance(problem, rng, region_z, bounds)
-        if out.ci_high < self.min_p:
-            raise EmptyRegionError(
-                f"the region {problem.region.describe()} is practically empty: {out}; "
-                f"below min_p={self.min_p:g}", n_draws=out.n_draws, n_hits=out.n_hits,
-                p_upper=out.ci_high)
-        return out
+        return self._not_empty(problem, out)
 
     def from_subset(self, problem: Problem, result: Any,
                     bounds: tuple[float, float, float]) -> PRegion:
@@ -249,7 +244,11 @@ class PRegionEstimator:
                       confidence=self.confidence, method="subset",
                       n_draws=int(result.n_evaluations), n_hits=int(result.z.shape[0]),
                       p_bounds=p_b, p_bounds_ci=(lo_b, hi_b), p_joint=joint,
-                      cov=float(result.cov))
+                      cov=float(result.cov_upper))
+        return self._not_empty(problem, out)
+
+    def _not_empty(self, problem: Problem, out: PRegion) -> PRegion:
+        """``out``, unless its upper bound is below ``min_p`` (EmptyRegionError)."""
         if out.ci_high < self.min_p:
             raise EmptyRegionError(
                 f"the region {problem.region.describe()} is practically empty: {out}; "
