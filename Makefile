@@ -1,22 +1,37 @@
-# Two entry points: `make run` and `make test`. Both create .venv and install the project.
+# Two entry points: `make run` and `make test`. Both create .venv and install the project;
+# `make run` only what the service needs, `make test` the dev tools as well.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
+RUN_STAMP := $(VENV)/.installed-run-stamp
 STAMP  := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
+# setuptools' notice that an editable install is one (the only build-backend message left)
+PIP_ENV := PYTHONWARNINGS="ignore:Editable installation"
 
-.PHONY: install run test lint types pytest services bench clean qc-env
+.PHONY: install install-run run test lint types pytest services bench clean qc-env
 
-$(STAMP): pyproject.toml
-	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+$(VENV)/bin/python:
+	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	touch $(STAMP)
+
+# the service's dependencies only
+$(RUN_STAMP): pyproject.toml | $(VENV)/bin/python
+	$(PIP_ENV) $(BIN)/python -m pip install --quiet -e .
+	touch $(RUN_STAMP)
+
+# and the dev tools (pytest, ruff, mypy, playwright, ...)
+$(STAMP): pyproject.toml | $(VENV)/bin/python
+	$(PIP_ENV) $(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(RUN_STAMP) $(STAMP)
+
+install-run: $(RUN_STAMP)
 
 install: $(STAMP)
 
-run: install
-	$(BIN)/scengen serve --host $${SCENGEN_HOST:-127.0.0.1} --port $${SCENGEN_PORT:-8000}
+# host/port/store: SCENGEN_HOST, SCENGEN_PORT, SCENGEN_DATA_DIR (read by scengen serve)
+run: install-run
+	$(BIN)/scengen serve
 
 # System services the tests talk to (PostgreSQL, Chromium): installed/started when absent.
 services:

@@ -11,17 +11,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
-#: repository root (this file is app/cli_data.py)
-_REPO = Path(__file__).resolve().parent.parent
-#: default TNO input, relative to the repository: ../shared/data/tno-cutin/cut-in.json
-DEFAULT_TNO_INPUT = _REPO.parent / "shared" / "data" / "tno-cutin" / "cut-in.json"
+from app.cli import add_out, add_quiet
 
 
 def _convert_tno(args: argparse.Namespace) -> int:
     from datasets.embedded import DEFAULT_EVENTS_PATH
     from datasets.tno_package import write_tno_package
 
-    out = Path(args.output) if args.output else DEFAULT_EVENTS_PATH
+    out = Path(args.output)
+    if out.resolve() == DEFAULT_EVENTS_PATH.resolve() and not args.replace_embedded:
+        raise ValueError(f"{out} is the packaged embedded data; add --replace-embedded to "
+                         "overwrite it")
     conv = write_tno_package(Path(args.input), out, rate=args.rate)
     for event_id, reason in conv.rejected:
         print(f"left out {event_id}: {reason}", file=sys.stderr)
@@ -124,27 +124,31 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
     data.set_defaults(func=_help)
 
-    p = sub.add_parser("convert-tno", help="convert TNO's cut-in.json to the embedded data")
-    p.add_argument("--input", default=str(DEFAULT_TNO_INPUT),
-                   help="TNO cut-in.json (default: %(default)s)")
-    p.add_argument("-o", "--output", default=None,
-                   help="output .parquet or .csv[.gz] (default: the embedded data file); "
-                        "LICENSE and PROVENANCE.md are written next to it")
+    p = sub.add_parser("convert-tno", help="convert TNO's cut-in.json to the ego-centric "
+                       "format (how the embedded data were made)")
+    p.add_argument("--input", required=True, metavar="cut-in.json",
+                   help="TNO's cut-in.json (public repository "
+                   "ErwindeGelder/ScenarioRiskQuantification, MIT)")
+    add_out(p, required=True, help="output .parquet or .csv[.gz]; LICENSE and "
+            "PROVENANCE.md are written next to it")
+    p.add_argument("--replace-embedded", action="store_true",
+                   help="allow --out to be the packaged embedded data file")
     p.add_argument("--rate", type=float, default=10.0, help="sampling rate in Hz (default 10)")
     p.set_defaults(func=_convert_tno)
 
     p = sub.add_parser("extract", help="extract cut-ins into the parameter table")
-    p.add_argument("--format", required=True, choices=["highd", "egocentric"])
+    p.add_argument("--format", required=True, choices=["highd", "egocentric"],
+                   help="format of PATH")
     p.add_argument("path", help="highD folder or file, or ego-centric .csv/.parquet")
-    p.add_argument("-o", "--output", required=True, help="table file (.parquet or .csv)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    add_out(p, required=True, help="table file (.parquet or .csv)")
+    add_quiet(p)
     p.set_defaults(func=_extract)
 
     p = sub.add_parser("synth", help="write a SYNTHETIC highD-format recording")
-    p.add_argument("-o", "--output", required=True, help="output folder")
-    p.add_argument("--seed", type=int, required=True)
-    p.add_argument("--minutes", type=float, default=15.0)
-    p.add_argument("--vehicles", type=int, default=1000)
+    add_out(p, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--seed", type=int, required=True, help="seed of the synthetic traffic")
+    p.add_argument("--minutes", type=float, default=15.0, help="recording length (15)")
+    p.add_argument("--vehicles", type=int, default=1000, help="number of vehicles (1000)")
     p.add_argument("--lanes", type=int, default=3, help="lanes per direction (2-4)")
     p.add_argument("--name", default="01", help="recording prefix (digits, default 01)")
     p.set_defaults(func=_synth)
@@ -152,8 +156,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     p = sub.add_parser("fit-surfaces", help="fit riskcore's input-distribution surfaces")
     p.add_argument("input", nargs="?", default=None,
                    help="trajectories (default: the embedded TNO events)")
-    p.add_argument("--format", choices=["egocentric", "highd"], default="egocentric")
-    p.add_argument("-o", "--output", required=True, help="surfaces JSON file")
+    p.add_argument("--format", choices=["egocentric", "highd"], default="egocentric",
+                   help="format of INPUT (egocentric)")
+    add_out(p, required=True, help="surfaces JSON file")
     p.add_argument("--source", default="", help="text for the file's 'source' field")
     p.set_defaults(func=_fit_surfaces)
 

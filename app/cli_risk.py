@@ -17,6 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from app.cli import add_out
+
 #: command-line option → (RiskSettings field, type, help)
 _SETTING_OPTIONS: tuple[tuple[str, str, type, str], ...] = (
     ("--horizon", "horizon", float, "prediction horizon in s (3.0)"),
@@ -42,6 +44,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                     "JSON: series, per object and step the TTR, weight and evasion arrays.")
     p.add_argument("scenario", metavar="SCENARIO.json", help="concrete scenario (JSON form)")
     p.add_argument("--pretty", action="store_true", help="indent the JSON output")
+    add_out(p, required=False, default="-", help="output file ('-' = stdout, the default)")
     p.add_argument("--summary", action="store_true",
                    help="print only the flat summary (risk, min TTR, ...)")
     p.add_argument("--samples", action="store_true",
@@ -92,6 +95,8 @@ def _run(args: argparse.Namespace) -> int:
     text = jsonconv.dumps(out)
     if args.pretty:
         text = json.dumps(json.loads(text), indent=2)
-    sys.stdout.write(text)
-    sys.stdout.write("\n")
+    if args.output == "-":
+        sys.stdout.write(text + "\n")
+    else:
+        Path(args.output).write_text(text + "\n", encoding="utf-8")
     return 0

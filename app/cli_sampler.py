@@ -4,8 +4,10 @@
 parameter table (CSV or Parquet as written by ``scengen data extract``; default: the
 embedded real TNO table) and prints the BIC curve, the chosen K and the fit report.
 
-``scengen sample MODEL.json --constraint 'ttc<3' -n 100 --seed 1 -o OUT.jsonl`` draws
-samples inside the region and writes one JSON line per sample::
+``scengen sample [MODEL] -c 'ttc<3' -n 100 --seed 1 -o OUT.jsonl`` draws samples inside
+the region (MODEL: a model JSON file written by ``scengen fit``, or a model id of the store;
+default: the store's default model, fitted on the embedded data) and writes one JSON line
+per sample::
 
     {"index": 0, "params": {...}, "ttc": ..., "exposure_weight": ..., "derived": {...},
      "log_density": ..., "scenario": {...} (with --scenarios),
@@ -30,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from app import jsonconv
+from app.cli import add_constraints, add_data_dir, add_n, add_out, add_quiet
 
 _SUFFIXES = (".csv", ".parquet", ".pq")
 #: a command-line process is single-threaded: fork starts workers at once (spawn re-imports)
@@ -43,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         description="Fit the Gaussian-mixture scenario model (K by BIC) and write it as JSON.")
     f.add_argument("dataset", nargs="?", default=None, metavar="DATASET",
                    help="parameter table (.csv or .parquet); default: the embedded TNO data")
-    f.add_argument("-o", "--output", required=True, metavar="MODEL.json")
+    add_out(f, required=True, metavar="MODEL.json", help="where to write the fitted model")
     f.add_argument("--k-min", type=int, default=1, help="fewest components tried (1)")
     f.add_argument("--k-max", type=int, default=8, help="most components tried (8)")
     f.add_argument("--n-init", type=int, default=5, help="EM restarts per K (5)")
@@ -66,12 +69,16 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         "sample", help="sample cut-ins inside a region (rejection / MCMC)",
         description="Draw samples of the model restricted to the constraints and the "
                     "physical bounds; one JSON line per sample.")
-    s.add_argument("model", metavar="MODEL.json")
-    s.add_argument("-c", "--constraint", action="append", default=[], metavar="EXPR",
-                   help="e.g. 'ttc<3', 'v_ego>=20' (repeatable; all must hold)")
-    s.add_argument("-n", type=int, default=100, help="number of samples (100)")
+    s.add_argument("model", nargs="?", default=None, metavar="MODEL",
+                   help="model JSON file (scengen fit) or a model id of the store "
+                   "(default: the store's default model)")
+    s.add_argument("--model", dest="model_option", default=None, metavar="MODEL",
+                   help="the same as the positional MODEL (as in 'catalogue create')")
+    add_constraints(s, default_text="none: the whole model")
+    add_n(s, default=100, what="samples")
     s.add_argument("--seed", type=int, default=None, help="seed (default: fresh, reported)")
-    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc", "subset"), default="auto")
+    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc", "subset"),
+                   default="auto", help="sampling method (auto)")
     s.add_argument("--no-envelope", action="store_true",
                    help="draw from the whole model, not the region's half-space envelope")
     s.add_argument("--lane-width", type=float, default=None, help="lane width in m")
@@ -79,11 +86,12 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     s.add_argument("--scenarios", action="store_true",
                    help="include each concrete scenario (JSON form) in its line")
     s.add_argument("--workers", type=int, default=1, help="processes for scoring (1)")
-    s.add_argument("-o", "--output", default="-", metavar="OUT.jsonl",
-                   help="output file ('-' = stdout)")
+    add_out(s, required=False, default="-", metavar="OUT.jsonl",
+            help="output file ('-' = stdout, the default)")
     s.add_argument("--summary-json", default=None, metavar="FILE",
                    help="write P(A), diagnostics and settings as JSON")
-    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    add_quiet(s)
+    add_data_dir(s)
     s.set_defaults(func=_sample)
 
 
@@ -185,16 +193,41 @@ class _Progress:
         self.bars.clear()
 
 
+def _load_model(ref: str | None, gmm: Any) -> Any:
+    """A model file, a model id of the store, or (None / 'default') the default model."""
+    if ref is not None and (ref.lower().endswith(".json") or Path(ref).is_file()):
+        return gmm.load(ref)
+    from app.cli import store_label
+    from app.context import ServiceContext
+    from app.settings import get_settings
+
+    ctx = ServiceContext.open(get_settings(), load_defaults=ref in (None, "", "default"))
+    try:
+        if ctx.startup_error:
+            raise ValueError(f"no default model: {ctx.startup_error}")
+        model_id = ctx.resolve_model_id(ref)
+        try:
+            return ctx.model(model_id, field="--model")
+        except LookupError as exc:
+            raise LookupError(f"{exc.args[0] if exc.args else exc} in the store at "
+                              f"{store_label()}") from None
+    finally:
+        ctx.close()
+
+
 def _sample(args: argparse.Namespace) -> int:
     from sampler.model import CutInGMM
     from sampler.sampleset import sample
 
     if args.workers < 1:
         raise ValueError(f"--workers: must be >= 1, got {args.workers}")
-    model = CutInGMM.load(args.model)
+    if args.model is not None and args.model_option is not None:
+        raise ValueError("give the model once: as MODEL or as --model")
+    model = _load_model(args.model if args.model is not None else args.model_option,
+                        CutInGMM)
     progress = _Progress(args.quiet)
     try:
-        ss = sample(model, args.constraint, args.n, args.seed, args.sampler,
+        ss = sample(model, args.constraints or [], args.n, args.seed, args.sampler,
                     lane_width=args.lane_width, use_envelope=not args.no_envelope,
                     progress=progress)
     finally:

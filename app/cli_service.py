@@ -17,42 +17,57 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli import CliError
+from app.cli import CliError, add_constraints, add_data_dir, add_n, add_out, add_quiet, store_label
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
-    serve = subparsers.add_parser("serve", help="start the HTTP service")
-    serve.add_argument("--host", default="127.0.0.1")
-    serve.add_argument("--port", type=int, default=8000)
+    serve = subparsers.add_parser(
+        "serve", help="start the HTTP service",
+        description="Start the HTTP service on the store (--data-dir, else SCENGEN_DATA_DIR, "
+        "else ~/.local/share/scengen). Host and port default to SCENGEN_HOST and "
+        "SCENGEN_PORT (127.0.0.1:8000).")
+    serve.add_argument("--host", default=None,
+                       help="address to listen on (default: SCENGEN_HOST, else 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=None,
+                       help="port to listen on (default: SCENGEN_PORT, else 8000)")
     serve.add_argument("--log-level", default="info",
-                       choices=["critical", "error", "warning", "info", "debug"])
+                       choices=["critical", "error", "warning", "info", "debug"],
+                       help="uvicorn's log level (info)")
+    add_data_dir(serve)
     serve.set_defaults(func=_serve)
 
-    cat = subparsers.add_parser("catalogue", help="test catalogues in the local store")
+    cat = subparsers.add_parser(
+        "catalogue", help="test catalogues in the local store",
+        description="Catalogues in the store the service uses (--data-dir, else "
+        "SCENGEN_DATA_DIR, else ~/.local/share/scengen; SCENGEN_DATABASE_URL for another "
+        "database).")
     sub = cat.add_subparsers(dest="catalogue_command", metavar="ACTION", required=True)
 
     create = sub.add_parser("create", help="generate a catalogue (foreground, resumable)")
-    create.add_argument("--n", type=int, required=True, help="number of scenarios")
-    create.add_argument("--seed", type=int, default=0)
-    create.add_argument("--constraint", action="append", dest="constraints", default=None,
-                        metavar="EXPR", help="risk-region constraint, repeatable "
-                        "(default: ttc<3)")
+    add_n(create, default=None, what="scenarios")
+    create.add_argument("--seed", type=int, default=0, help="seed (0)")
+    add_constraints(create, default_text="ttc<3")
     create.add_argument("--model", default="default", help="model id (default: the "
                         "embedded data's model)")
     create.add_argument("--sampler", default="auto",
-                        choices=["auto", "rejection", "mcmc", "subset"])
+                        choices=["auto", "rejection", "mcmc", "subset"],
+                        help="sampling method (auto)")
     create.add_argument("--no-score", action="store_true", help="skip the TTR risk")
-    create.add_argument("--chunk-size", type=int, default=None)
-    create.add_argument("--no-progress", action="store_true")
+    create.add_argument("--chunk-size", type=int, default=None,
+                        help="scenarios per stored chunk (default: SCENGEN_CHUNK_SIZE)")
+    add_quiet(create)
+    add_data_dir(create)
     create.set_defaults(func=_create)
 
     resume = sub.add_parser("resume", help="finish an interrupted catalogue")
-    resume.add_argument("id")
-    resume.add_argument("--no-progress", action="store_true")
+    resume.add_argument("id", help="catalogue id")
+    add_quiet(resume)
+    add_data_dir(resume)
     resume.set_defaults(func=_resume)
 
     status = sub.add_parser("status", help="print a catalogue's status as JSON")
-    status.add_argument("id")
+    status.add_argument("id", help="catalogue id")
+    add_data_dir(status)
     status.set_defaults(func=_status)
 
     scen = sub.add_parser("scenarios", help="a catalogue's scenarios, ranked and filtered "
@@ -74,24 +89,34 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     scen.set_defaults(func=_scenarios)
 
     listing = sub.add_parser("list", help="list the catalogues")
+    add_data_dir(listing)
     listing.set_defaults(func=_list)
 
     export = sub.add_parser("export", help="export a finished catalogue")
-    export.add_argument("id")
+    export.add_argument("id", help="catalogue id")
     export.add_argument("--format", default="jsonl",
-                        choices=["jsonl", "csv", "parquet", "xosc", "commonroad"])
-    export.add_argument("--out", type=Path, required=True, help="output file")
+                        choices=["jsonl", "csv", "parquet", "xosc", "commonroad"],
+                        help="file format (jsonl; xosc, commonroad: zips of scenario files)")
+    add_out(export, required=True, help="output file")
     export.add_argument("--mode", default=None, choices=["test", "replay"],
                         help="xosc only: test (default; the ego is the system under test) "
                              "or replay (both vehicles scripted)")
+    add_data_dir(export)
     export.set_defaults(func=_export)
 
 
 def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from app.settings import get_settings
+
+    settings = get_settings()
+    host = args.host if args.host is not None else settings.host
+    port = args.port if args.port is not None else settings.port
+    if not 1 <= port <= 65535:
+        raise CliError(f"--port: must be between 1 and 65535, got {port}")
     _logging()
-    uvicorn.run("app.main:app", host=args.host, port=args.port, log_level=args.log_level)
+    uvicorn.run("app.main:app", host=host, port=port, log_level=args.log_level)
     return 0
 
 
@@ -102,10 +127,23 @@ def _logging() -> None:
 
 
 def _context(load_defaults: bool = True) -> Any:
+    """The store's context. Commands that only read (``load_defaults=False``) never create
+    a store: where there is none they say where they looked."""
     from app.context import ServiceContext
     from app.settings import get_settings
 
-    return ServiceContext.open(get_settings(), load_defaults=load_defaults)
+    settings = get_settings()
+    if not load_defaults and not settings.database_url:
+        db_file = Path(settings.data_dir).resolve() / "scengen.db"
+        if not db_file.is_file():
+            raise CliError(f"no store at {db_file.parent} (set --data-dir or "
+                           "SCENGEN_DATA_DIR; the service and 'catalogue create' make one)")
+    return ServiceContext.open(settings, load_defaults=load_defaults)
+
+
+def _in_store(exc: LookupError) -> CliError:
+    """A "not found" that names the store it searched."""
+    return CliError(f"{exc.args[0] if exc.args else exc} in the store at {store_label()}")
 
 
 def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
@@ -125,6 +163,8 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
 
     try:
         status = ctx.runner().run(catalogue_id, progress=progress)
+    except LookupError as exc:
+        raise _in_store(exc) from None
     finally:
         if bar is not None:
             bar.close()
@@ -148,7 +188,7 @@ def _create(args: argparse.Namespace) -> int:
                                 chunk_size=args.chunk_size)
         print(f"catalogue {row.id}: {row.n} scenarios in {row.n_chunks} chunks",
               file=sys.stderr)
-        return _run(ctx, row.id, not args.no_progress)
+        return _run(ctx, row.id, not args.quiet)
     finally:
         ctx.close()
 
@@ -156,7 +196,7 @@ def _create(args: argparse.Namespace) -> int:
 def _resume(args: argparse.Namespace) -> int:
     ctx = _context(load_defaults=False)
     try:
-        return _run(ctx, args.id, not args.no_progress)
+        return _run(ctx, args.id, not args.quiet)
     finally:
         ctx.close()
 
@@ -167,6 +207,8 @@ def _status(args: argparse.Namespace) -> int:
     ctx = _context(load_defaults=False)
     try:
         print(json.dumps(catalogues.describe(ctx, args.id), indent=2))
+    except LookupError as exc:
+        raise _in_store(exc) from None
     finally:
         ctx.close()
     return 0
@@ -218,9 +260,14 @@ def _list(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     from app import catalogues
 
+    out = Path(args.output)
+    if not out.parent.is_dir():
+        raise CliError(f"--out: directory {out.parent} does not exist")
     ctx = _context(load_defaults=False)
     try:
-        out = catalogues.export(ctx, args.id, args.format, args.out, mode=args.mode)
+        out = catalogues.export(ctx, args.id, args.format, out, mode=args.mode)
+    except LookupError as exc:
+        raise _in_store(exc) from None
     finally:
         ctx.close()
     print(str(out))

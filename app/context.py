@@ -28,7 +28,8 @@ from app.settings import Settings
 log = logging.getLogger("scengen.app")
 
 EMBEDDED_ID = "tno-cutin"
-EMBEDDED_NAME = "TNO real cut-ins (2017, 297 recorded cut-ins, MIT)"
+EMBEDDED_NAME = ("TNO real cut-ins (2017, MIT): 208 usable of 297 recorded (89 partial or "
+                 "implausible lane changes left out)")
 
 
 @dataclass
@@ -100,7 +101,7 @@ class ServiceContext:
             fitted = domain.describe_model(cache.read_text())
         else:
             log.info("first start for this data (hash %s): fitting the default model on "
-                     "%d cut-ins (takes a minute or two)", data_hash[:12], len(table))
+                     "%d cut-ins (a few seconds; cached afterwards)", data_hash[:12], len(table))
             fitted = domain.fit_model(table, options, source=EMBEDDED_ID)
             cache.parent.mkdir(parents=True, exist_ok=True)
             repo.write_file_atomic(cache, fitted.model_json.encode())

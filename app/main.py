@@ -16,6 +16,7 @@ from fastapi import FastAPI, Request, Response
 
 from app import __version__
 from app.context import ServiceContext
+from app.docs_offline import install_offline_docs
 from app.errors import error_body, install_error_handlers
 from app.jobs.manager import JobManager
 from app.routes import catalogues, dashboard, datasets, health, models, risk, scenarios
@@ -74,11 +75,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         "cut-ins, build concrete scenarios, score them with the Monte-Carlo TTR risk, and "
         "keep test catalogues. Errors: {\"error\": {\"status\", \"message\", \"field\"}}.",
         lifespan=lifespan,
+        docs_url=None,  # self-hosted below: they work without internet
+        redoc_url=None,
     )
     install_error_handlers(application)
     if settings is not None:
         application.state.settings = settings
         application.dependency_overrides[get_settings] = lambda: settings
+    install_offline_docs(application)
 
     @application.middleware("http")
     async def upload_limit(request: Request,

@@ -6,6 +6,7 @@ or build the app with ``create_app(settings)``.
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -14,16 +15,29 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
+def default_data_dir() -> Path:
+    """The store when SCENGEN_DATA_DIR is not set: the per-user data directory
+    (``$XDG_DATA_HOME/scengen``, else ``~/.local/share/scengen``), whatever the current
+    directory is, so the service and every CLI command find the same store."""
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base).expanduser() / "scengen"
+
+
 class Settings(BaseSettings):
     """Everything the service can be told from outside. Names map to ``SCENGEN_<NAME>``."""
 
     model_config = SettingsConfigDict(env_prefix="SCENGEN_", extra="ignore")
 
     data_dir: Path = Field(
-        default=Path("var"),
+        default_factory=default_data_dir,
         description="directory for the SQLite file, uploaded data, the cached fitted model "
-        "and catalogue trajectories (SCENGEN_DATA_DIR)",
+        "and catalogue trajectories (SCENGEN_DATA_DIR; default ~/.local/share/scengen, "
+        "independent of the current directory)",
     )
+    host: str = Field(default="127.0.0.1", min_length=1,
+                      description="address scengen serve listens on (SCENGEN_HOST)")
+    port: int = Field(default=8000, ge=1, le=65535,
+                      description="port scengen serve listens on (SCENGEN_PORT)")
     database_url: str | None = Field(
         default=None,
         description="SQLAlchemy URL; default a SQLite file <data_dir>/scengen.db, e.g. "
