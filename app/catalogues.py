@@ -49,7 +49,7 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
 
 def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     """Status, progress, counts, P(A) and summary statistics of a catalogue."""
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         row = repo.get_catalogue(s, catalogue_id)
         n_done, stored = repo.chunk_counts(s, catalogue_id)
     # the statistics change only when a chunk is stored: computed once per stored state
@@ -160,7 +160,7 @@ def stored_scenario(ctx: ServiceContext, cat: CatalogueRow,
                     row: ScenarioRow) -> tuple[ConcreteScenario | None, str]:
     """A catalogue scenario and where it came from: its chunk file when kept, else rebuilt
     exactly as the chunk built it (deterministic). None when the builder refused it."""
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         chunks = {c.chunk_index: c for c in repo.chunk_rows(s, cat.id)}
     chunk = chunks.get(row.chunk_index)
     if chunk is not None and chunk.file_path is not None:
@@ -178,7 +178,7 @@ def iter_items(ctx: ServiceContext,
                catalogue_id: str) -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
     """(scenario, summary) pairs of a finished catalogue in index order; scenarios the
     builder refused (rows with an error) have nothing to export and are left out."""
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         chunks = {c.chunk_index: c for c in repo.chunk_rows(s, catalogue_id)}
         cat = repo.get_catalogue(s, catalogue_id)
         spec = _spec_of(cat)
@@ -189,7 +189,7 @@ def iter_items(ctx: ServiceContext,
     last = -1
     while True:
         # one short transaction per batch: never hold the database during a long export
-        with ctx.db.session() as s:
+        with ctx.db.read_session() as s:
             rows = repo.scenario_batch(s, catalogue_id, last, 500)
         if not rows:
             return

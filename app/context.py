@@ -133,7 +133,7 @@ class ServiceContext:
         with self._lock:
             if model_id in self._models:
                 return self._models[model_id]
-        with self.db.session() as s:
+        with self.db.read_session() as s:
             text = repo.get_model(s, model_id, field=field).model_json
         model = domain.load_model(text)
         with self._lock:

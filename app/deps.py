@@ -29,7 +29,9 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 
 def get_session(ctx: ContextDep) -> Iterator[Session]:
-    with ctx.db.session() as session:
+    """A read-only session (every route that takes one only reads; writers open their own
+    ``ctx.db.session()``)."""
+    with ctx.db.read_session() as session:
         yield session
 
 

@@ -130,7 +130,7 @@ def _points(frame: pd.DataFrame, names: Sequence[str], limit: int) -> dict[str, 
 def _model_and_row(ctx: ServiceContext, model_id: str) -> tuple[str, Any, Any]:
     mid = ctx.resolve_model_id(model_id)
     model = ctx.model(mid, field="path.model_id")
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         row = repo.get_model(s, mid)
         s.expunge(row)
     return mid, model, row
@@ -152,7 +152,7 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
     and the corner points (data and plain model draws)."""
     mid, model, mrow = _model_and_row(ctx, model_id)
     ds_id = dataset_id or mrow.dataset_id
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         drow = repo.get_dataset(s, ds_id, field="query.dataset")
         s.expunge(drow)
 
@@ -253,7 +253,7 @@ def shift_preview(ctx: ServiceContext, model_id: str, constraint_text: str, n: i
 
 
 def _catalogue(ctx: ServiceContext, catalogue_id: str) -> CatalogueRow:
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         row = repo.get_catalogue(s, catalogue_id)
         s.expunge(row)
     return row
@@ -278,7 +278,7 @@ def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
         min_ttr: list[float] = []
         evasion: list[str | None] = []
         # streamed in batches: only the columns are kept, never the ORM rows
-        with ctx.db.session() as s:
+        with ctx.db.read_session() as s:
             for i, p, r, t, summary in repo.scenario_columns(s, crow.id):
                 idx.append(i)
                 p = p or {}
@@ -396,7 +396,7 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     def compute() -> dict[str, Any]:
         info = catalogue_service.describe(ctx, catalogue_id)
         cols = _columns(ctx, crow)
-        with ctx.db.session() as s:
+        with ctx.db.read_session() as s:
             chunks = repo.chunk_rows(s, catalogue_id)
             diag = _diagnostics(chunks)
         idx, risk, r_ind = cols["idx"], cols["risk"], cols["r_ind"]
@@ -442,7 +442,7 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
     """One scenario of a catalogue: trajectories (top-down view) and the risk, TTC, WTTC
     and THW series over time (computed with riskcore on request, then cached)."""
     crow = _catalogue(ctx, catalogue_id)
-    with ctx.db.session() as s:
+    with ctx.db.read_session() as s:
         found = repo.scenario_batch(s, catalogue_id, index - 1, 1)
         s.expunge_all()
     if not found or found[0].idx != index:

@@ -32,10 +32,19 @@ def _sqlite_pragmas(dbapi_connection: Any, connection_record: Any) -> None:
     cursor.close()
 
 
+#: execution option of the read-only engine (``Database.read_session``)
+READ_ONLY = "scengen_read_only"
+
+
 def _sqlite_begin(conn: Any) -> None:
-    # IMMEDIATE: take the write lock up front, so concurrent writers wait (busy timeout)
-    # instead of failing when a read transaction would have to be upgraded
-    conn.exec_driver_sql("BEGIN IMMEDIATE")
+    # Reads (``Database.read_session``): a deferred transaction, which under WAL reads a
+    # snapshot and never waits for a writer. Everything else: IMMEDIATE, i.e. take the
+    # write lock up front, so concurrent writers wait (busy timeout) instead of failing
+    # when a read transaction would have to be upgraded.
+    if conn.get_execution_options().get(READ_ONLY):
+        conn.exec_driver_sql("BEGIN")
+    else:
+        conn.exec_driver_sql("BEGIN IMMEDIATE")
 
 
 def make_engine(url: str) -> Engine:
@@ -77,6 +86,9 @@ class Database:
         self.url = url
         self.engine = make_engine(url)
         self.sessions = sessionmaker(self.engine, expire_on_commit=False)
+        #: the same pool; on SQLite its transactions are deferred (see _sqlite_begin)
+        self.read_engine = self.engine.execution_options(**{READ_ONLY: True})
+        self.read_sessions = sessionmaker(self.read_engine, expire_on_commit=False)
 
     def migrate(self) -> None:
         migrate(self.engine)
@@ -85,6 +97,13 @@ class Database:
     def session(self) -> Iterator[Session]:
         """A session whose work is committed on success and rolled back on any error."""
         with self.sessions() as session, session.begin():
+            yield session
+
+    @contextmanager
+    def read_session(self) -> Iterator[Session]:
+        """A session that only reads. On SQLite it never waits for a writer (WAL snapshot,
+        deferred transaction); a write in it may fail with "database is locked"."""
+        with self.read_sessions() as session, session.begin():
             yield session
 
     def dispose(self) -> None:

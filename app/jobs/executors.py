@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol, TypeVar
 
 from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk
+from app.jobs.lifeline import die_with_parent, pool_keeper_thread
 
 log = logging.getLogger("scengen.jobs")
 
@@ -143,7 +145,9 @@ class FuturesExecutor:
 
 
 class LocalPoolExecutor(FuturesExecutor):
-    """A process pool on this machine (``spawn`` start method: safe under threads)."""
+    """A process pool on this machine (``spawn`` start method: safe under threads). Its
+    workers die with this process however it ends (``app.jobs.lifeline``): they are
+    started all at once from a keeper thread that lives as long as the pool."""
 
     name = "local"
 
@@ -152,11 +156,28 @@ class LocalPoolExecutor(FuturesExecutor):
             raise ValueError(f"local_workers: need at least 1 process, got {workers}")
         super().__init__(fn)
         self.workers = workers
+        self._keeper_stop = threading.Event()
 
     def _make(self) -> Executor:
         log.info("starting a local process pool with %d workers", self.workers)
-        return ProcessPoolExecutor(max_workers=self.workers,
-                                   mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(max_workers=self.workers,
+                                   mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=die_with_parent, initargs=(os.getpid(),))
+
+        def spawn_all() -> None:
+            # one task per worker makes the pool start every worker now, from the keeper
+            for fut in [pool.submit(os.getpid) for _ in range(self.workers)]:
+                fut.exception()
+
+        started = threading.Event()
+        self._keeper_stop.clear()
+        pool_keeper_thread(started, self._keeper_stop, spawn_all)
+        started.wait()
+        return pool
+
+    def _shutdown(self, executor: Executor) -> None:
+        super()._shutdown(executor)
+        self._keeper_stop.set()
 
     def _window(self) -> int:
         return 2 * self.workers

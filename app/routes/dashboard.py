@@ -59,7 +59,7 @@ def dashboard_page() -> HTMLResponse:
 def catalogue_page(catalogue_id: str, ctx: ContextDep,
                    scenario: Annotated[str | None, Query(max_length=20)] = None) -> HTMLResponse:
     try:
-        with ctx.db.session() as s:
+        with ctx.db.read_session() as s:
             repo.get_catalogue(s, catalogue_id)
     except NotFound as exc:
         return _page({"catalogue": None, "error": exc.message}, status=404)

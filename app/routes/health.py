@@ -29,7 +29,7 @@ class Versions(ApiModel):
 @router.get("/health", response_model=Health,
             summary="Is the service up (and its database reachable)?")
 def health(ctx: ContextDep) -> Health:
-    with ctx.db.engine.connect() as conn:
+    with ctx.db.read_engine.connect() as conn:
         conn.execute(text("select 1"))
     return Health(status="ok", database=ctx.db.engine.dialect.name,
                   default_model=ctx.default_model_id, default_dataset=ctx.default_dataset_id,

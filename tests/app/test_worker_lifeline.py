@@ -1,0 +1,81 @@
+"""Issue 14 item 15: a SIGKILLed parent leaves no pool worker (nor resource tracker)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from tests.app.factories import wait_for
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def sleepy_chunk(spec: object, index: int) -> object:
+    """A chunk function that announces its worker and then blocks (for the test only)."""
+    folder = Path(os.environ["LIFELINE_DIR"])
+    (folder / f"worker-{os.getpid()}").write_text(str(index))
+    time.sleep(300)
+    return None
+
+
+PARENT = textwrap.dedent("""
+    import sys, time
+    from app.jobs.executors import LocalPoolExecutor
+    from tests.app.test_worker_lifeline import sleepy_chunk
+
+    ex = LocalPoolExecutor(2, fn=sleepy_chunk)
+    for _ in ex.run(None, range(4)):
+        pass
+""")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux process tree")
+def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) -> None:
+    env = {**os.environ, "LIFELINE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
+    parent = subprocess.Popen([sys.executable, "-c", PARENT], cwd=ROOT, env=env)
+    children: list[psutil.Process] = []
+    try:
+        wait_for(lambda: len(list(tmp_path.glob("worker-*"))) == 2, "two busy workers",
+                 attempts=1200)
+        children = psutil.Process(parent.pid).children(recursive=True)
+        workers = {int(p.name.split("-")[1]) for p in tmp_path.glob("worker-*")}
+        assert workers <= {c.pid for c in children}
+        assert len(children) >= 3  # two workers and the resource tracker
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(timeout=30)
+        wait_for(lambda: not any(_alive(c.pid) for c in children),
+                 "the pool to die with its parent", attempts=200)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+            parent.wait(timeout=30)
+        for child in children:  # only what this test started
+            if _alive(child.pid):
+                child.kill()
+
+
+def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
+    from app.jobs import lifeline
+
+    # the parent pid the worker was started by is not its parent: it ends at once
+    code = ("import os; from app.jobs.lifeline import die_with_parent; "
+            "die_with_parent(os.getppid() + 100000); print('survived')")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 1 and "survived" not in done.stdout
+    assert lifeline.PR_SET_PDEATHSIG == 1
