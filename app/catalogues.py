@@ -15,6 +15,7 @@ from app.db import repository as repo
 from app.db.models import CatalogueRow, ScenarioRow
 from app.errors import Conflict, InvalidInput, ServiceError
 from app.jobs.chunk import CatalogueSpec, rebuild_scenario
+from app.limits import check_constraints
 from riskcore.scenario import ConcreteScenario
 from sampler.record import SCORE_FIELDS, ScenarioRecord
 
@@ -35,8 +36,11 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     if size < 1:
         raise InvalidInput("chunk_size must be at least 1", field="body.chunk_size")
     model_id = ctx.resolve_model_id(model)
-    ctx.model(model_id)  # 404 for an unknown model, before anything is stored
-    domain.parse_constraints(constraints)
+    fitted = ctx.model(model_id)  # 404 for an unknown model, before anything is stored
+    check_constraints(constraints, ctx.settings)
+    parsed = domain.parse_constraints(constraints)
+    # 422 for an empty region now rather than a job that fails (a P(A) estimate: < 1 s)
+    domain.estimate_region(fitted, parsed, seed)
     spec = {"constraints": list(constraints), "method": method, "score": bool(score),
             "store_trajectories": bool(ctx.settings.store_trajectories)}
     with ctx.db.session() as s:

@@ -9,15 +9,16 @@ at shutdown.
 from __future__ import annotations
 
 import logging
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI, Request, Response
+from fastapi import FastAPI
 
 from app import __version__
 from app.context import ServiceContext
 from app.docs_offline import install_offline_docs
-from app.errors import error_body, install_error_handlers
+from app.errors import install_error_handlers
+from app.guards import RequestGuards
 from app.jobs.manager import JobManager
 from app.routes import catalogues, dashboard, datasets, health, models, risk, scenarios
 from app.settings import Settings, get_settings
@@ -84,20 +85,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         application.dependency_overrides[get_settings] = lambda: settings
     install_offline_docs(application)
 
-    @application.middleware("http")
-    async def upload_limit(request: Request,
-                           call_next: Callable[[Request], Awaitable[Response]]) -> Response:
-        # refuse an oversized upload before its body is read (the route counts too)
-        if request.method == "POST" and request.url.path.rstrip("/") == "/datasets":
-            limit = _settings_of(application).upload_limit_bytes
-            length = request.headers.get("content-length", "")
-            if length.isdigit() and int(length) > limit + 64 * 1024:
-                from fastapi.responses import JSONResponse
-
-                return JSONResponse(error_body(413, f"upload larger than the limit of "
-                                               f"{limit} bytes", "body.files"),
-                                    status_code=413)
-        return await call_next(request)
+    application.add_middleware(RequestGuards, settings=lambda: _settings_of(application))
 
     for router in ROUTERS:
         application.include_router(router)

@@ -11,7 +11,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -57,6 +57,10 @@ class Settings(BaseSettings):
     upload_limit_bytes: int = Field(
         default=50 * 1024 * 1024, ge=1, description="largest dataset upload (all files)"
     )
+    upload_expanded_limit_bytes: int = Field(
+        default=200 * 1024 * 1024, ge=1,
+        description="largest dataset upload once decompressed (.gz/.bz2/.xz streams, "
+        "Parquet row groups); 413 above")
     chunk_size: int = Field(default=250, ge=1, description="scenarios per catalogue chunk")
     store_trajectories: bool = Field(
         default=True,
@@ -69,6 +73,32 @@ class Settings(BaseSettings):
         "on the embedded data at first start (JSON in SCENGEN_DEFAULT_MODEL_OPTIONS); the "
         "cached model is keyed by the data hash and these options",
     )
+    api_key: SecretStr | None = Field(
+        default=None,
+        description="when set, POST/PUT/PATCH/DELETE need it in the X-API-Key header "
+        "(or Authorization: Bearer); reads stay open (SCENGEN_API_KEY)")
+    # limits on what one request may ask for (app/limits.py): 422/413 naming the setting
+    body_limit_bytes: int = Field(
+        default=10 * 1024 * 1024, ge=1,
+        description="largest request body other than a dataset upload (413 above)")
+    constraints_limit: int = Field(default=32, ge=1,
+                                   description="most constraints in one request")
+    constraint_length_limit: int = Field(default=200, ge=1,
+                                         description="longest constraint (characters)")
+    risk_objects_limit: int = Field(default=16, ge=1,
+                                    description="most objects in a POST /risk scenario")
+    risk_steps_limit: int = Field(default=1000, ge=2,
+                                  description="most time steps in a POST /risk scenario")
+    model_n_init_limit: int = Field(default=20, ge=1,
+                                    description="largest n_init of POST /models")
+    model_max_iter_limit: int = Field(default=2000, ge=1,
+                                      description="largest max_iter of POST /models")
+    model_cv_folds_limit: int = Field(default=20, ge=2,
+                                      description="largest cv_folds of POST /models")
+    model_report_samples_limit: int = Field(
+        default=200_000, ge=100, description="largest n_report_samples of POST /models")
+    model_k_limit: int = Field(default=16, ge=1,
+                               description="largest number of components of POST /models")
     resume_jobs: bool = Field(
         default=True, description="resume unfinished catalogue jobs when the service starts"
     )

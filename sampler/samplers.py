@@ -44,6 +44,23 @@ __all__ = [
 ]
 
 
+def raise_if_pilot_found_nothing(problem: Problem, pilot: Pilot, method: str) -> None:
+    """Empty-region check shared by the samplers: when neither the pilot nor its widened
+    search found one point inside the region, give up at once (``EmptyRegionError``)
+    instead of drawing up to ``max_draws`` (tens of seconds) to find none either. MCMC
+    stops on the same evidence (it has no point to start from)."""
+    if pilot.n_hits > 0 or pilot.search_hits.size > 0:
+        return
+    draws = pilot.n_draws + pilot.search_draws
+    widened = f" and {pilot.search_draws} widened" if pilot.search_draws else ""
+    raise EmptyRegionError(
+        f"{method} sampling: none of {pilot.n_draws} pilot draws{widened} fell inside "
+        f"{problem.region.describe()}: the region is empty or practically empty (mass "
+        f"below about {problem.proposal_mass * upper95(0, max(pilot.n_draws, 1)):.3g})",
+        n_draws=draws, n_hits=0,
+        p_upper=problem.proposal_mass * upper95(0, max(pilot.n_draws, 1)))
+
+
 class RejectionSampler(Sampler):
     """Exact rejection sampling from the truncated mixture.
 
@@ -65,6 +82,7 @@ class RejectionSampler(Sampler):
 
     def draw(self, problem: Problem, n: int, rng: np.random.Generator, pilot: Pilot,
              progress: ProgressFn | None = None) -> Draw:
+        raise_if_pilot_found_nothing(problem, pilot, self.name)
         kept = [pilot.hits[:n]]
         got = min(pilot.n_hits, n)
         draws, hits = pilot.n_draws, pilot.n_hits

@@ -15,6 +15,7 @@ from app import catalogues as service
 from app import jsonconv
 from app.db import repository as repo
 from app.deps import ContextDep, JobsDep, SessionDep
+from app.limits import INDEX_MAX
 from app.schemas import ApiModel, SamplingRequest
 from sampler.record import ScenarioRecord
 
@@ -134,7 +135,7 @@ def list_scenarios(
     catalogue_id: str,
     session: SessionDep,
     request: Request,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     order_by: Annotated[str, Query(description="sort key: index or a numeric field (ttc, "
                                    "risk, btn, a_req, ttr_true, ...); default btn")] = "btn",

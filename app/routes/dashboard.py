@@ -13,12 +13,14 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from app.dashboard import views
 from app.db import repository as repo
 from app.deps import ContextDep
 from app.errors import NotFound, ServiceError
+from app.limits import INDEX_MAX
 from app.schemas import SEED_MAX
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
@@ -135,7 +137,8 @@ def catalogue_risk(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
 
 @router.get("/api/catalogues/{catalogue_id}/scenarios/{index}", summary="One scenario: "
             "trajectories and its risk, TTC, WTTC, THW over time")
-def scenario(catalogue_id: str, index: int, ctx: ContextDep) -> dict[str, Any]:
+def scenario(catalogue_id: str, index: Annotated[int, PathParam(ge=0, le=INDEX_MAX)],
+             ctx: ContextDep) -> dict[str, Any]:
     if index < 0:
         raise NotFound(f"scenario index must be >= 0, got {index}", field="path.index")
     return views.scenario(ctx, catalogue_id, index)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import bz2
+import gzip
+import io
+import lzma
 import re
 import shutil
 import uuid
@@ -17,7 +21,9 @@ from app.db import repository as repo
 from app.db.models import DatasetRow
 from app.deps import ContextDep, SessionDep
 from app.errors import InvalidInput, PayloadTooLarge
+from app.limits import INDEX_MAX
 from app.schemas import ApiModel
+from datasets.plausibility import implausible
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 
@@ -75,7 +81,7 @@ def parameter_table(
     dataset_id: str,
     ctx: ContextDep,
     session: SessionDep,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
     limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
     format: Annotated[Literal["json", "csv"], Query()] = "json",
 ) -> ParameterPage | Response:
@@ -98,6 +104,9 @@ def upload_dataset(
     kind: Annotated[Literal["highd", "egocentric"], Form()],
     files: Annotated[list[UploadFile], File()],
     name: Annotated[str | None, Form(max_length=200)] = None,
+    allow_implausible: Annotated[bool, Form(
+        description="store the data even when its medians look like wrong units (speeds in "
+        "km/h, positions in mm); the report lists the warnings")] = False,
 ) -> DatasetInfo:
     limit = ctx.settings.upload_limit_bytes
     dataset_id = repo.new_id("ds")
@@ -106,9 +115,16 @@ def upload_dataset(
     raw.mkdir(parents=True)
     try:
         paths = _save_uploads(files, raw, limit)
+        check_expanded_size(paths, ctx.settings.upload_expanded_limit_bytes)
         table, report = domain.dataset_from_files(kind, paths)
         if len(table) == 0:
             raise InvalidInput("no cut-ins found in the uploaded files", field="body.files")
+        problems = implausible(table)
+        if problems and not allow_implausible:
+            raise InvalidInput("implausible values, wrong units? " + "; ".join(problems)
+                               + " (send allow_implausible=true to store it anyway)",
+                               field="body.files")
+        report["plausibility_warnings"] = problems
         data_hash = domain.table_hash(table)
         table.to_parquet(staging / "table.parquet", index=False)
         final = ctx.data_dir / "datasets" / dataset_id
@@ -128,6 +144,59 @@ def upload_dataset(
         shutil.rmtree(final, ignore_errors=True)
         raise
     return dataset_view(row)
+
+
+def _open_decompressed(path: Path) -> io.BufferedIOBase | None:
+    """The decompressed stream of a compressed file the readers accept (else None)."""
+    suffix = path.suffix.lower()
+    if suffix == ".gz":
+        return gzip.open(path, "rb")
+    if suffix == ".bz2":
+        return bz2.open(path, "rb")
+    if suffix == ".xz":
+        return lzma.open(path, "rb")
+    return None
+
+
+def check_expanded_size(paths: list[Path], limit: int) -> None:
+    """413 when the uploaded files would be larger than ``limit`` bytes once decompressed
+    (a small .csv.gz can expand to gigabytes): compressed CSVs are streamed through their
+    decompressor and counted, Parquet files count their row groups' uncompressed size."""
+    total = 0
+
+    def add(n: int) -> None:
+        nonlocal total
+        total += n
+        if total > limit:
+            raise PayloadTooLarge(f"upload larger than the limit of {limit} bytes once "
+                                  "decompressed (SCENGEN_UPLOAD_EXPANDED_LIMIT_BYTES)",
+                                  field="body.files")
+
+    for path in paths:
+        if path.suffix.lower() in (".gz", ".bz2", ".xz"):
+            try:
+                stream = _open_decompressed(path)
+                assert stream is not None
+                with stream as fh:
+                    while block := fh.read(_COPY_BLOCK):
+                        add(len(block))
+            except (OSError, EOFError, lzma.LZMAError) as exc:
+                raise InvalidInput(f"{path.name}: not a readable {path.suffix} file ({exc})",
+                                   field="body.files") from None
+        elif path.suffix.lower() in (".parquet", ".pq"):
+            add(max(path.stat().st_size, _parquet_uncompressed(path)))
+        else:
+            add(path.stat().st_size)
+
+
+def _parquet_uncompressed(path: Path) -> int:
+    import pyarrow.parquet as pq
+
+    try:
+        meta = pq.ParquetFile(path).metadata
+    except Exception:  # not Parquet: the reader says so with its own message
+        return 0
+    return sum(meta.row_group(k).total_byte_size for k in range(meta.num_row_groups))
 
 
 def _save_uploads(files: list[UploadFile], folder: Path, limit: int) -> list[Path]:

@@ -13,6 +13,7 @@ from app.db import repository as repo
 from app.db.models import ModelRow
 from app.deps import ContextDep, SessionDep
 from app.errors import InvalidInput
+from app.limits import check_model_options
 from app.schemas import ApiModel
 
 router = APIRouter(prefix="/models", tags=["models"])
@@ -80,6 +81,7 @@ def show_model(model_id: str, ctx: ContextDep) -> ModelDetail:
 
 @router.post("", status_code=201, response_model=ModelDetail, summary="Fit a GMM on a dataset")
 def fit(body: FitRequest, ctx: ContextDep) -> ModelDetail:
+    check_model_options(body.options, ctx.settings)
     with ctx.db.session() as s:
         dataset = repo.get_dataset(s, body.dataset, field="body.dataset")
     try:

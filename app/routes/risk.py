@@ -8,6 +8,8 @@ from fastapi import APIRouter, Body, Query
 from pydantic import Field
 
 from app import domain, jsonconv
+from app.deps import SettingsDep
+from app.limits import check_posted_scenario
 from app.schemas import ApiModel
 
 router = APIRouter(prefix="/risk", tags=["risk"])
@@ -34,10 +36,13 @@ class RiskReport(ApiModel):
              "scengen.concrete-scenario/1): summary and per-step series")
 def score(
     scenario: Annotated[dict[str, Any], Body(
-        description="a concrete scenario in the JSON form of riskcore.scenario")],
+        description="a concrete scenario in the JSON form of riskcore.scenario (at most "
+        "SCENGEN_RISK_OBJECTS_LIMIT objects and SCENGEN_RISK_STEPS_LIMIT time steps)")],
+    settings: SettingsDep,
     samples: Annotated[bool, Query(description="include every object's per-sample "
                                    "Monte-Carlo arrays (large: ~0.9 MB for 10 s)")] = False,
 ) -> RiskReport:
+    check_posted_scenario(scenario, settings)
     # encoded first: FastAPI loses ser_json_inf_nan inside ``Any`` and union values
     return RiskReport.model_validate(jsonconv.encode(domain.score_posted(scenario,
                                                                          samples=samples)))

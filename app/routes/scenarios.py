@@ -12,6 +12,7 @@ from app import domain
 from app.context import ServiceContext
 from app.deps import ContextDep
 from app.errors import InvalidInput
+from app.limits import check_constraints
 from app.schemas import ApiModel, PRegion, SamplingRequest
 from sampler.record import ScenarioRecord
 from sampler.scoring import score_part
@@ -69,6 +70,7 @@ def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosRespons
                            "POST /catalogues for larger sets", field="body.n")
     model_id = ctx.resolve_model_id(body.model)
     model = ctx.model(model_id, field="body.model")
+    check_constraints(body.constraints, ctx.settings)
     constraints = domain.parse_constraints(body.constraints)
     drawn = domain.sample(model, constraints, body.n, body.seed, method=body.sampler)
     records = _score(ctx, drawn, body)

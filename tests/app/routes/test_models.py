@@ -37,7 +37,7 @@ def test_fit_a_model_with_options(client: Any) -> None:
 @pytest.mark.parametrize(("body", "status", "field"), [
     ({"dataset": "nope"}, 404, "body.dataset"),
     ({"dataset": "tno-cutin", "options": {"no_such_option": 1}}, 422, "body.options"),
-    ({"dataset": "tno-cutin", "options": {"k_range": [3, 1]}}, 422, "body.options"),
+    ({"dataset": "tno-cutin", "options": {"k_range": [3, 1]}}, 422, "body.options.k_range"),
     ({"dataset": "tno-cutin", "extra": 1}, 422, "body.extra"),
     ({"dataset": 5}, 422, "body.dataset"),
 ])

@@ -1,0 +1,137 @@
+"""Request guards in front of every route (one ASGI middleware).
+
+* **Body size**: a dataset upload may be ``upload_limit_bytes`` (the route counts the
+  files as well), any other body ``body_limit_bytes``; above that 413 naming the limit,
+  before the body is read. A body without ``Content-Length`` (chunked) is counted as it
+  arrives.
+* **API key** (optional): when ``api_key`` is set, every mutating request (POST, PUT,
+  PATCH, DELETE) needs it in the ``X-API-Key`` header (or ``Authorization: Bearer``);
+  else 401. Reads stay open.
+* **Cross-site requests**: a browser on another site can POST a form (multipart, urlencoded
+  or text/plain) to the service without asking first (no CORS pre-flight). A mutating
+  request that a browser marks as cross-site (``Sec-Fetch-Site: cross-site``) or whose
+  ``Origin`` is not this service's is refused (403). Clients that are not browsers send
+  neither header and are not affected.
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+from collections.abc import Awaitable, Callable, MutableMapping
+from typing import Any
+from urllib.parse import urlsplit
+
+from app.errors import error_body
+from app.settings import Settings
+
+Scope = MutableMapping[str, Any]
+Message = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+MUTATING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+#: the upload route (multipart, its own larger limit)
+UPLOAD_PATH = "/datasets"
+
+
+class _TooLarge(BaseException):
+    """Raised from ``receive`` past the limit; a BaseException so that no route's
+    ``except Exception`` turns it into a 400."""
+
+
+async def _send_error(send: Send, status: int, message: str, field: str | None,
+                      headers: list[tuple[bytes, bytes]] | None = None) -> None:
+    body = json.dumps(error_body(status, message, field)).encode()
+    await send({"type": "http.response.start", "status": status,
+                "headers": [(b"content-type", b"application/json"),
+                            (b"content-length", str(len(body)).encode()), *(headers or [])]})
+    await send({"type": "http.response.body", "body": body})
+
+
+def _header(scope: Scope, name: bytes) -> str | None:
+    for key, value in scope.get("headers", []):
+        if key.lower() == name:
+            return bytes(value).decode("latin-1")
+    return None
+
+
+def _same_origin(scope: Scope, origin: str) -> bool:
+    host = _header(scope, b"host")
+    if origin == "null" or host is None:
+        return False
+    return urlsplit(origin).netloc.lower() == host.lower()
+
+
+class RequestGuards:
+    """The ASGI middleware; ``settings()`` gives the current settings."""
+
+    def __init__(self, app: ASGIApp, settings: Callable[[], Settings]) -> None:
+        self.app = app
+        self.settings = settings
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope.get("method", "GET") not in MUTATING:
+            await self.app(scope, receive, send)
+            return
+        settings = self.settings()
+        # cross-site browser requests
+        fetch_site = _header(scope, b"sec-fetch-site")
+        origin = _header(scope, b"origin")
+        if fetch_site == "cross-site" or (origin is not None
+                                          and not _same_origin(scope, origin)):
+            await _send_error(send, 403, "cross-site request refused: this service "
+                              "accepts changes only from its own pages and from clients "
+                              "that are not browsers", "header.origin")
+            return
+        # API key
+        key = settings.api_key.get_secret_value() if settings.api_key is not None else None
+        if key:
+            given = _header(scope, b"x-api-key")
+            auth = _header(scope, b"authorization")
+            if given is None and auth is not None and auth.lower().startswith("bearer "):
+                given = auth[7:].strip()
+            if given is None or not hmac.compare_digest(given.encode(), key.encode()):
+                await _send_error(send, 401, "this endpoint needs the service's API key in "
+                                  "the X-API-Key header (SCENGEN_API_KEY)", "header.x-api-key",
+                                  [(b"www-authenticate", b"ApiKey")])
+                return
+        # body size
+        upload = scope.get("path", "").rstrip("/") == UPLOAD_PATH
+        limit = settings.upload_limit_bytes + 64 * 1024 if upload else settings.body_limit_bytes
+        setting = "SCENGEN_UPLOAD_LIMIT_BYTES" if upload else "SCENGEN_BODY_LIMIT_BYTES"
+        shown = settings.upload_limit_bytes if upload else settings.body_limit_bytes
+        message = f"request body larger than the limit of {shown} bytes ({setting})"
+        field = "body.files" if upload else "body"
+        length = _header(scope, b"content-length")
+        if length is not None and length.strip().isdigit():
+            if int(length) > limit:
+                await _send_error(send, 413, message, field)
+                return
+            await self.app(scope, receive, send)
+            return
+        # no length given: count the chunks as they arrive
+        seen = 0
+        started = False
+
+        async def counted() -> Message:
+            nonlocal seen
+            msg = await receive()
+            if msg["type"] == "http.request":
+                seen += len(msg.get("body", b""))
+                if seen > limit:
+                    raise _TooLarge
+            return msg
+
+        async def tracking_send(msg: Message) -> None:
+            nonlocal started
+            if msg["type"] == "http.response.start":
+                started = True
+            await send(msg)
+
+        try:
+            await self.app(scope, counted, tracking_send)
+        except _TooLarge:
+            if not started:
+                await _send_error(send, 413, message, field)
