@@ -16,12 +16,14 @@ Every error body is ``{"error": {"status": <int>, "message": <str>, "field": <st
 from __future__ import annotations
 
 import logging
+import re
 from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 log = logging.getLogger("scengen.app")
 
@@ -57,8 +59,24 @@ class ServiceUnavailable(ServiceError):
     status = 503
 
 
+#: an absolute file path (two or more segments) at the start or after a space/quote/bracket
+_ABS_PATH = re.compile(r"""(?<![\w.:/])(?:/[\w.@+~-]+){2,}/?""")
+#: a token long enough to be a pasted blob rather than a word
+_LONG_TOKEN = re.compile(r"\S{121,}")
+MESSAGE_MAX = 2000
+
+
+def clean_message(message: str) -> str:
+    """What may be shown to a client: no absolute server paths (only the file name stays),
+    no 10 MB ids echoed back (long tokens are cut), at most MESSAGE_MAX characters."""
+    text = _ABS_PATH.sub(lambda m: m.group(0).rstrip("/").rsplit("/", 1)[-1], message)
+    text = _LONG_TOKEN.sub(lambda m: m.group(0)[:60] + "…", text)
+    return text if len(text) <= MESSAGE_MAX else text[:MESSAGE_MAX] + "…"
+
+
 def error_body(status: int, message: str, field: str | None = None) -> dict[str, Any]:
-    return {"error": {"status": status, "message": message, "field": field}}
+    shown = None if field is None else (field if len(field) <= 200 else field[:200] + "…")
+    return {"error": {"status": status, "message": clean_message(message), "field": shown}}
 
 
 def _response(status: int, message: str, field: str | None = None,
@@ -89,9 +107,22 @@ async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
     return _response(422, "; ".join(parts) + more, field)
 
 
+def _allowed_methods(request: Request) -> str:
+    """Every method some route of the app answers on this path (Starlette's 405 names only
+    the first matching route's)."""
+    methods = []
+    for method in ("DELETE", "GET", "PATCH", "POST", "PUT"):
+        scope = {**request.scope, "method": method}
+        if any(route.matches(scope)[0] == Match.FULL for route in request.app.router.routes):
+            methods.append(method)
+    return ", ".join(methods)
+
+
 async def _http_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, StarletteHTTPException)
     headers = dict(exc.headers) if exc.headers else None
+    if exc.status_code == 405:
+        headers = {**(headers or {}), "Allow": _allowed_methods(request)}
     return _response(exc.status_code, str(exc.detail), None, headers)
 
 

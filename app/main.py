@@ -20,6 +20,7 @@ from app.docs_offline import install_offline_docs
 from app.errors import install_error_handlers
 from app.guards import RequestGuards
 from app.jobs.manager import JobManager
+from app.openapi_extras import install_openapi_extras
 from app.routes import catalogues, dashboard, datasets, health, models, risk, scenarios
 from app.settings import Settings, get_settings
 
@@ -84,6 +85,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         application.state.settings = settings
         application.dependency_overrides[get_settings] = lambda: settings
     install_offline_docs(application)
+    install_openapi_extras(application)
 
     application.add_middleware(RequestGuards, settings=lambda: _settings_of(application))
 

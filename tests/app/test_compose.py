@@ -84,9 +84,15 @@ def test_the_four_services(services: dict[str, Any]) -> None:
     assert set(services) == {"api", "postgres", "scheduler", "worker"}
 
 
-def test_ports(services: dict[str, Any]) -> None:
-    assert "8000:8000" in services["api"]["ports"]
-    assert "8786:8786" in services["scheduler"]["ports"]
+def test_ports(services: dict[str, Any], compose: dict[str, Any]) -> None:
+    # the API is published on the loopback only; nothing else is published at all
+    assert services["api"]["ports"] == ["127.0.0.1:8000:8000"]
+    for name in ("scheduler", "worker", "postgres"):
+        assert "ports" not in services[name], name
+        assert services[name]["networks"] == ["backend"], name
+    assert compose["networks"]["backend"]["internal"] is True
+    assert set(services["api"]["networks"]) == {"default", "backend"}
+    assert _env(services["api"])["SCENGEN_API_KEY"] == "${SCENGEN_API_KEY:-}"
 
 
 def test_postgres_has_credentials_a_health_check_and_a_named_volume(
@@ -145,7 +151,7 @@ def test_dask_commands_are_real_and_point_at_the_scheduler(services: dict[str, A
     # the address the api and the worker use is the scheduler service's published port
     address = urlsplit(_env(services["api"])["SCENGEN_DASK_SCHEDULER"])
     assert (address.scheme, address.hostname, address.port) == ("tcp", "scheduler", 8786)
-    assert f"{address.port}:{address.port}" in services["scheduler"]["ports"]
+    assert str(address.port) in services["scheduler"]["expose"]
 
 
 def test_api_environment_points_at_the_other_services(services: dict[str, Any]) -> None:
@@ -154,6 +160,7 @@ def test_api_environment_points_at_the_other_services(services: dict[str, Any]) 
         "SCENGEN_DATABASE_URL": "postgresql+psycopg://scengen:scengen@postgres:5432/scengen",
         "SCENGEN_DASK_SCHEDULER": "tcp://scheduler:8786",
         "SCENGEN_DATA_DIR": "/data",
+        "SCENGEN_API_KEY": "${SCENGEN_API_KEY:-}",  # empty: no key required
     }
     url = urlsplit(env["SCENGEN_DATABASE_URL"])
     pg = _env(services["postgres"])
