@@ -76,9 +76,65 @@ def _error_response(text: str) -> dict[str, Any]:
             "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
 
 
+#: how a non-finite float is written (the service's JSON convention, app/schemas.py)
+NON_FINITE = {"type": "string", "enum": ["Infinity", "-Infinity", "NaN"]}
+
+
+def _refs(node: Any) -> set[str]:
+    if isinstance(node, dict):
+        out = {node["$ref"].rsplit("/", 1)[-1]} if isinstance(node.get("$ref"), str) else set()
+        for value in node.values():
+            out |= _refs(value)
+        return out
+    if isinstance(node, list):
+        return set().union(*(_refs(v) for v in node)) if node else set()
+    return set()
+
+
+def _allow_non_finite(node: Any) -> Any:
+    """Every ``"type": "number"`` in ``node`` also admits "Infinity"/"-Infinity"/"NaN"."""
+    if isinstance(node, list):
+        return [_allow_non_finite(v) for v in node]
+    if not isinstance(node, dict):
+        return node
+    out = {k: _allow_non_finite(v) for k, v in node.items()}
+    if out.get("type") == "number":
+        number = {k: out.pop(k) for k in list(out)
+                  if k in ("type", "minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum")}
+        out["anyOf"] = [number, dict(NON_FINITE)]
+    return out
+
+
+def _response_only_schemas(spec: dict[str, Any]) -> set[str]:
+    """Component schemas no request body or parameter refers to (directly or not)."""
+    schemas = spec.get("components", {}).get("schemas", {})
+    inputs: set[str] = set()
+    for item in spec.get("paths", {}).values():
+        for method in _METHODS:
+            op = item.get(method) or {}
+            inputs |= _refs(op.get("requestBody")) | _refs(op.get("parameters"))
+    todo = list(inputs)
+    while todo:
+        name = todo.pop()
+        for ref in _refs(schemas.get(name)) - inputs:
+            inputs.add(ref)
+            todo.append(ref)
+    return set(schemas) - inputs
+
+
 def enrich(spec: dict[str, Any]) -> dict[str, Any]:
-    """Add the error responses and media types described in the module docstring."""
-    spec.setdefault("components", {}).setdefault("schemas", {})["Error"] = ERROR_SCHEMA
+    """Add the error responses and media types described in the module docstring; numbers
+    in responses also admit the strings of non-finite floats."""
+    schemas = spec.setdefault("components", {}).setdefault("schemas", {})
+    for name in _response_only_schemas(spec):
+        schemas[name] = _allow_non_finite(schemas[name])
+    for item in spec.get("paths", {}).values():
+        for method in _METHODS:
+            for response in (item.get(method) or {}).get("responses", {}).values():
+                for media in (response.get("content") or {}).values():
+                    if "schema" in media and "$ref" not in media["schema"]:
+                        media["schema"] = _allow_non_finite(media["schema"])
+    schemas["Error"] = ERROR_SCHEMA
     for path, item in spec.get("paths", {}).items():
         for method in _METHODS:
             op = item.get(method)

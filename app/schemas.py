@@ -16,9 +16,9 @@ from sampler.record import ScenarioRecord
 
 __all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord"]
 
-#: the largest seed a request may give (numpy's SeedSequence takes any int >= 0; JSON
-#: clients handle int64)
-SEED_MAX = 2**63 - 1
+#: the largest seed a request may give: the largest integer every JSON parser holds exactly
+#: (JavaScript's Number.MAX_SAFE_INTEGER), so a seed survives any client unchanged
+SEED_MAX = 2**53 - 1
 
 SamplerName = Literal["auto", "rejection", "mcmc", "subset"]
 
@@ -35,7 +35,8 @@ class ApiModel(BaseModel):
 class SamplingRequest(BaseModel):
     """The fields every sampling request shares (POST /scenarios, POST /catalogues)."""
 
-    model_config = ConfigDict(extra="forbid")
+    # strict: false is not a seed, 0 is not a boolean, "5" is not a number
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     model: str = Field(default="default", description="model id ('default': the embedded "
                        "data's model)")

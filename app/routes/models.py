@@ -20,7 +20,7 @@ router = APIRouter(prefix="/models", tags=["models"])
 
 
 class FitRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)  # no silent coercion
 
     dataset: str = Field(default="tno-cutin", description="id of the dataset to fit on")
     options: dict[str, Any] = Field(
