@@ -168,17 +168,23 @@ def _clean(value: Any) -> Any:
 
 
 class _Progress:
-    """tqdm bars on stderr, one per stage."""
+    """tqdm bars on stderr, one per stage. A stage's ``total`` is its budget (the pilot's
+    is its largest number of draws), which it may not use up: when the next stage starts,
+    or at the end, a stage's bar ends at the count it really reached (100 %), not at 2 %."""
 
     def __init__(self, quiet: bool) -> None:
         self.quiet = quiet
         self.bars: dict[str, Any] = {}
+        self.current: str | None = None
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         if self.quiet:
             return
         from tqdm import tqdm
 
+        if stage != self.current:
+            self._finish(self.current)
+            self.current = stage
         bar = self.bars.get(stage)
         if bar is None:
             bar = self.bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr,
@@ -187,7 +193,15 @@ class _Progress:
         bar.n = min(done, total)
         bar.refresh()
 
+    def _finish(self, stage: str | None) -> None:
+        bar = self.bars.get(stage) if stage is not None else None
+        if bar is not None and bar.n < (bar.total or 0):
+            bar.total = bar.n  # the stage ended early: that was its real total
+            bar.refresh()
+
     def close(self) -> None:
+        self._finish(self.current)
+        self.current = None
         for bar in self.bars.values():
             bar.close()
         self.bars.clear()

@@ -198,7 +198,7 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
                 "data": _points(table, domain.PARAM_NAMES, MAX_CORNER_POINTS),
                 "model": _points(draws, domain.PARAM_NAMES, MAX_CORNER_POINTS),
             },
-            "density_method": "exact marginal of the mixture (see app.domain.marginal_density)",
+            "density_method": "exact marginal density of the fitted mixture",
         }
 
     result: dict[str, Any] = _views(ctx).get(_key(ctx, "fit", mid, ds_id, drow.data_hash), compute)
@@ -206,12 +206,25 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
 
 
 # --------------------------------------------------------------------------- view 2
+def bins_for_both(samples: Sequence[np.ndarray], bins: int,
+                  quantiles: tuple[float, float] = (0.005, 0.995)) -> np.ndarray:
+    """Edges whose range holds every sample's own central range (its ``quantiles``): a
+    small constrained sample is not squeezed into the edge bins of the much larger
+    unconstrained one, whose pooled quantiles would otherwise set the range alone."""
+    each = [shared_edges([s], bins=bins, quantiles=quantiles)
+            for s in samples if np.isfinite(np.asarray(s, dtype=float)).any()]
+    if not each:
+        return shared_edges([], bins=bins)
+    return shared_edges([], bins=bins, span=(min(float(e[0]) for e in each),
+                                             max(float(e[-1]) for e in each)))
+
+
 def _shift(reference: pd.DataFrame, constrained: pd.DataFrame) -> list[dict[str, Any]]:
     out = []
     for name in domain.PARAM_NAMES:
         ref = _column(reference, name)
         con = _column(constrained, name)
-        edges = shared_edges([ref, con], bins=PARAM_BINS, quantiles=(0.005, 0.995))
+        edges = bins_for_both([ref, con], bins=PARAM_BINS)
         out.append({
             "name": name,
             "label": PARAM_LABELS.get(name, name),
@@ -287,7 +300,10 @@ def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
                 risk.append(_float(r))
                 r_ind.append(_summary_value(summary, "risk_ind"))
                 ttc.append(_float(t))
-                min_ttr.append(_summary_value(summary, "min_ttr"))
+                ttr = _summary_value(summary, "min_ttr")
+                if r is not None and summary.get("min_ttr") is None:
+                    ttr = math.inf  # scored, and nothing collides: TTR is unbounded
+                min_ttr.append(ttr)
                 if r is not None:
                     evasion.append(_evasion_label(summary.get("min_ttr_evasion")))
         return {
@@ -413,7 +429,9 @@ def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
             "risk_hist": {"r_dep": histogram(risk, risk_edges),
                           "r_ind": histogram(r_ind, risk_edges)},
             "ttr_hist": histogram(min_ttr, ttr_edges),
-            "n_no_collision": int(np.sum(np.isinf(min_ttr))),
+            # the same rows the evasion chart calls "no collision" (stored as null or as
+            # "Infinity"): one definition for both panels
+            "n_no_collision": sum(1 for label in evasion if label is None),
             "evasion": shares(evasion, none_label="no collision"),
             "scatter": {
                 "index": jsonconv.plot_values(idx[keep]),

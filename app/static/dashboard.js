@@ -286,6 +286,11 @@
     }
     const k = names.length - 1;
     const gap = 0.03;
+    // axis titles: the name and its unit, e.g. "gap [m]" (the unit of the long label)
+    const withUnit = (n) => {
+      const m = /\[[^\]]*\]$/.exec((fit.corner.labels || {})[n] || "");
+      return m ? n + " " + m[0] : n;
+    };
     const size = (1 - gap * (k - 1)) / k;
     const traces = [];
     // the legend sits in the empty upper triangle
@@ -304,12 +309,12 @@
         const y1 = 1 - row * (size + gap);
         layout["xaxis" + suffix] = {
           domain: [x0, x0 + size], anchor: "y" + suffix, tickfont: { size: 9 },
-          title: row === k - 1 ? { text: xName, font: { size: 11 } } : undefined,
+          title: row === k - 1 ? { text: withUnit(xName), font: { size: 11 } } : undefined,
           showticklabels: row === k - 1,
         };
         layout["yaxis" + suffix] = {
           domain: [y1 - size, y1], anchor: "x" + suffix, tickfont: { size: 9 },
-          title: col === 0 ? { text: yName, font: { size: 11 } } : undefined,
+          title: col === 0 ? { text: withUnit(yName), font: { size: 11 } } : undefined,
           showticklabels: col === 0,
         };
         for (const [group, color, opacity] of [["model", COLORS.model, 0.35],
@@ -598,11 +603,11 @@
       { type: "scatter", mode: "lines", name: "THW", x: s.t, y: cap(s.thw), yaxis: "y2",
         line: { color: COLORS.thw } },
     ], {
-      title: { text: "Risk against TTC, WTTC and THW over time (TTX capped at 10 s; gaps: " +
-                     "not defined)", font: { size: 12 } },
+      title: { text: "Risk against TTC, WTTC and THW over time (the three capped at 10 s; " +
+                     "gaps: not defined)", font: { size: 12 } },
       xaxis: { title: { text: "t [s]" } },
       yaxis: { title: { text: "risk" }, range: [0, 1.02] },
-      yaxis2: { title: { text: "TTX [s]" }, overlaying: "y", side: "right", range: [0, 10.2] },
+      yaxis2: { title: { text: "TTC, WTTC, THW [s]" }, overlaying: "y", side: "right", range: [0, 10.2] },
       margin: { l: 48, r: 48, t: 30, b: 42 },
       shapes: [{ type: "line", x0: s.t[k], x1: s.t[k], yref: "paper", y0: 0, y1: 1,
                  line: { color: "#333", width: 1, dash: "dash" } }],

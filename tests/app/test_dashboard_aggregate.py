@@ -261,3 +261,23 @@ def test_view_cache_computes_a_key_once_even_concurrently_and_evicts_lru(
     with pytest.raises(RuntimeError):
         cache.get(("bad",), lambda: (_ for _ in ()).throw(RuntimeError("boom")))
     assert cache.get(("bad",), lambda: "ok") == "ok"
+
+
+def test_shift_bins_hold_both_samples() -> None:
+    """Issue 14 item 9: a small constrained sample far in the tail of the unconstrained one
+    is binned inside the range, not piled up outside its edges (hand-made samples)."""
+    import pandas as pd
+
+    from app.dashboard.views import _shift, bins_for_both
+
+    rng = np.random.default_rng(3)
+    ref = rng.normal(0.0, 1.0, 10_000)
+    con = rng.normal(8.0, 0.1, 100)  # 1 % of the pooled values, all beyond ref's 99.5 %
+    edges = bins_for_both([ref, con], bins=40)
+    assert edges[0] <= np.quantile(ref, 0.005) and edges[-1] >= np.quantile(con, 0.995)
+    views = _shift(pd.DataFrame({n: ref for n in domain.PARAM_NAMES}),
+                   pd.DataFrame({n: con for n in domain.PARAM_NAMES}))
+    for view in views:
+        hist = view["constrained"]
+        assert hist["below"] + hist["above"] <= 2, view["name"]  # only the 0.5 % tails
+        assert sum(hist["counts"]) >= 98

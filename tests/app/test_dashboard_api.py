@@ -239,3 +239,23 @@ def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     assert page.status_code == 200 and cid in page.text
     bad = client.get(f"/dashboard/catalogues/{cid}", params={"scenario": "first"})
     assert bad.status_code == 422 and "scenario must be a whole number" in bad.text
+
+
+def test_min_ttr_panel_and_evasion_chart_agree_on_no_collision(client: TestClient) -> None:
+    """Issue 14 item 9: a scored row whose min TTR is stored as null (riskcore's "nothing
+    collides") counts as "no collision" in both panels, as one stored as "Infinity" does."""
+    rows = []
+    for i, ttr in enumerate([None, "Infinity", None, 0.5]):
+        summary = {"risk": 0.1, "risk_ind": 0.1, "min_ttr": ttr,
+                   "min_ttr_evasion": "brake" if ttr == 0.5 else None}
+        rows.append({"idx": i, "chunk_index": 0, "ttc": 2.0, "risk": 0.1,
+                     "exposure_weight": 1.0, "summary": summary,
+                     "params": {"p_y1": 0.0, "p_t": 2.0, "p_a1": 0.0, "p_a2": 0.0,
+                                "p_a3": 0.0, "p_v0": 25.0, "dv": 2.0, "gap": 10.0}})
+    ctx = _ctx(client)
+    cid = store_synthetic_catalogue(ctx.db, ctx.data_dir, ctx.default_model_id, 4,
+                                    chunk_size=4, rows=rows)
+    view = client.get(f"/dashboard/api/catalogues/{cid}/risk").json()
+    ev = dict(zip(view["evasion"]["labels"], view["evasion"]["counts"], strict=True))
+    assert ev["no collision"] == 3
+    assert view["n_no_collision"] == 3

@@ -237,3 +237,18 @@ def test_embedded_dataset_name_gives_the_number_used() -> None:
 
     used = len(default_parameter_table())
     assert f"{used} usable of 297" in EMBEDDED_NAME
+
+
+# --------------------------------------------------------------------------- item 6
+def test_a_stage_that_ends_early_shows_its_real_total(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli_sampler import _Progress
+
+    bars = _Progress(quiet=False)
+    bars("pilot", 20_480, 1 << 20)  # the pilot stops after 2 % of its budget
+    bars("rejection", 5, 10)
+    bars("rejection", 10, 10)
+    bars.close()
+    err = capsys.readouterr().err
+    pilot = [part for part in re.split(r"[\r\n]", err) if part.startswith("pilot")]
+    assert pilot and "100%" in pilot[-1] and "20480/20480" in pilot[-1], pilot
