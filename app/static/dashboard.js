@@ -393,7 +393,8 @@
       $("risk-note").textContent = "No catalogue selected: pick one above or draw a new " +
         "sample (constraint, n, seed → Draw new sample).";
       $("catalogue-info").innerHTML = "";
-      divs.forEach((d) => clearPlot(d, ""));
+      divs.forEach((d) => clearPlot(d, "No catalogue yet: pick one above, or draw a new " +
+                                       "sample (constraint, n, seed, then Draw new sample)."));
       return;
     }
     busy(1);
@@ -494,7 +495,8 @@
       if (c.status === "queued" || c.status === "running") schedulePoll(id);
     } catch (e) {
       reportError("catalogue " + state.catalogue, e);
-      divs.forEach((d) => clearPlot(d, ""));
+      divs.forEach((d) => clearPlot(d, "This catalogue could not be shown (the message " +
+                                       "above says why): pick another one or draw a new sample."));
     } finally {
       busy(-1);
     }
@@ -557,8 +559,10 @@
     const source = sc.catalogue + "#" + sc.index;
     const lw = sc.lane_width || 3.75;
     const xs = [sc.ego.x].concat(sc.objects.map((o) => o.x)).flat();
-    const xmin = Math.min.apply(null, xs) - 10;
-    const xmax = Math.max.apply(null, xs) + 10;
+    // the markings span every view the time slider can show (it follows the ego from 35 m
+    // behind to 85 m ahead), not only the tracks
+    const xmin = Math.min.apply(null, xs) - 40;
+    const xmax = Math.max.apply(null, xs) + 90;
     const traces = [];
     for (const [y, dash] of [[-1.5 * lw, "solid"], [-0.5 * lw, "dash"], [0.5 * lw, "dash"],
                              [1.5 * lw, "solid"]]) {

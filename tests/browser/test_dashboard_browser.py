@@ -176,6 +176,12 @@ def test_page_loads_without_errors_and_every_plot_has_data(server: Server, page:
     assert count(page, "#corner-plot .scatterlayer .trace") == 12
     assert count(page, "#corner-plot .scatterlayer .point") > 6 * 200
     assert "no catalogue selected" in page.locator("#risk-note").inner_text().lower()
+    # empty panels say what to do (issue 14 item 9)
+    for panel in ("risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"):
+        assert "draw a new sample" in page.locator(f"#{panel}").inner_text(), panel
+    # pairwise axes carry units
+    titles = page.locator("#corner-plot .g-xtitle, #corner-plot .g-ytitle").all_inner_texts()
+    assert any("[m]" in t for t in titles) and any("[m/s]" in t for t in titles), titles
     shot(page, "#view-fit", "1-data-against-model.png")
     shot(page, "#view-shift", "2-constraint-shift-preview.png")
 
