@@ -72,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
     scen = sub.add_parser("scenarios", help="a catalogue's scenarios, ranked and filtered "
                           "(JSON lines, one record each)")
-    scen.add_argument("id")
+    scen.add_argument("id", help="catalogue id")
     scen.add_argument("--order-by", default="btn",
                       help="index or a numeric field (btn, a_req, ttr_true, ttc, risk, ...); "
                            "default btn")
@@ -84,8 +84,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     scen.add_argument("--filter", dest="filters", action="append", default=[],
                       metavar="NAME=VALUE",
                       help="as the API: btn_min=0.7, ttr_true_max=1, r157_cc_collision=false")
-    scen.add_argument("--limit", type=int, default=20)
-    scen.add_argument("--offset", type=int, default=0)
+    scen.add_argument("--limit", type=int, default=20, help="rows to print (20)")
+    scen.add_argument("--offset", type=int, default=0, help="rows to skip first (0)")
+    add_data_dir(scen)
     scen.set_defaults(func=_scenarios)
 
     listing = sub.add_parser("list", help="list the catalogues")
