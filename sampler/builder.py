@@ -39,6 +39,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from datasets.cutin_model import (
     DEFAULT_LANE_WIDTH,
@@ -89,6 +90,12 @@ def _positive(value: Any, name: str, unit: str) -> float:
     if not (math.isfinite(x) and x > 0):
         raise BuilderError(f"{name}: must be a positive finite number of {unit}, got {value!r}")
     return x
+
+
+def _time_grid(n_steps: int, dt: float) -> NDArray[np.float64]:
+    """``0, dt, ..., n_steps dt`` in s, each the float nearest its decimal value (3 x 0.1 is
+    0.30000000000000004 in floating point; exported files should read 0.3)."""
+    return np.round(np.arange(n_steps + 1, dtype=np.float64) * dt, 12)
 
 
 def build_scenario(
@@ -175,7 +182,7 @@ def build_scenario(
     pulse_end = p.p_a2 + p.p_a3 if p.p_a3 > 0 else 0.0
     t_settle = lead_in + max(2.0 * p.p_t, pulse_end, 0.0)
     n_settle = math.ceil(t_settle / dt - 1e-9) + 1
-    t_pre = np.arange(n_settle + 1, dtype=np.float64) * dt
+    t_pre = _time_grid(n_settle, dt)
     ego_pre, cut_pre = geometry.tracks(t_pre)
     t_res, how = conflict_resolution(t_pre, ego_pre, cut_pre)
     need = t_res - 1e-9 * max(1.0, t_res)
@@ -195,7 +202,7 @@ def build_scenario(
         raise BuilderError(
             f"params: the conflict is resolved ({how}) only at {t_res:.1f} s; scenarios "
             f"are at most {MAX_DURATION:.0f} s and 100000 steps")
-    t = np.arange(n_steps + 1, dtype=np.float64) * dt
+    t = _time_grid(n_steps, dt)
     ego, cutter = geometry.tracks(t)
     t_c = lead_in + tau_c
     prov: dict[str, Any] = {

@@ -142,3 +142,13 @@ def test_property_gap_at_crossing(gap: float, dv: float, p_v0: float, side: floa
     x_cut = np.interp(t_c, s.t, s.objects[0].x)
     assert x_cut - x_ego - 4.5 == pytest.approx(gap, abs=1e-3)
     assert np.isfinite(s.objects[0].x).all()
+
+
+def test_time_grid_has_no_float_noise_in_its_json() -> None:
+    # 3 x 0.1 is 0.30000000000000004 in floating point; the scenario's JSON (and so every
+    # export) must read 0.3, 0.7, ... : each step is the float nearest its decimal value
+    s = build_scenario(base_params(), seed=7)
+    text = json.dumps(s.to_dict()["t"])
+    assert "0.30000000000000004" not in text
+    for k, tk in enumerate(s.t):
+        assert repr(float(tk)) == repr(float(f"{k * 0.1:.6f}")), k
