@@ -438,7 +438,8 @@ def _ttr_true(f: _Frames, t_p: float, contact: float, rs: RiskSettings,
         return math.inf, None
     if react[0] < 0:
         return 0.0, "none"
-    return float(react[0] * dt), evasion_label(int(mask[0]), True)
+    # a whole number of steps: rounded so that 14 x 0.1 s reads 1.4, not 1.4000000000000001
+    return round(float(react[0] * dt), 12), evasion_label(int(mask[0]), True)
 
 
 # --------------------------------------------------------------------------- Wagner

@@ -154,8 +154,10 @@ def scenario_row(scenario: ConcreteScenario, summary: Mapping[str, Any]) -> dict
     else:
         row["ttc"] = None
     t = scenario.t
-    row["duration"] = float(t[-1] - t[0])
-    row["dt"] = scenario.dt
+    # differences of grid times carry float noise (10.6 - 10.5 = 0.09999999999999964);
+    # a picosecond is far below any step a scenario uses
+    row["duration"] = round(float(t[-1] - t[0]), 12)
+    row["dt"] = round(scenario.dt, 12)
     row["n_steps"] = int(t.shape[0])
     row["n_objects"] = len(scenario.objects)
     for name in SUMMARY_COLUMNS:

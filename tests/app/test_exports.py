@@ -898,3 +898,17 @@ def test_manoeuvre_step_is_the_last_straight_constant_speed_step(n: int, m: int,
     y = np.where(t > t[m], -0.1 * (t - t[m]), 0.0)
     track = Track("c", 4.0, 1.8, x=x, y=y, psi=psi, v=np.full_like(t, v))
     assert manoeuvre_step(track, t) == min(m, n - 1)
+
+
+def test_row_step_and_duration_carry_no_float_noise() -> None:
+    # differences of grid times are noisy in floating point (10.6 - 10.5 is
+    # 0.09999999999999964): the exported dt and duration read as the decimals they are
+    from sampler import build_scenario
+    from tests.sampler.factories import base_params
+
+    sc = build_scenario(base_params())
+    assert sc.dt != 0.1  # the median difference of the grid is noisy ...
+    row = scenario_row(sc, {})
+    assert repr(row["dt"]) == "0.1"  # ... the exported step is not
+    assert row["duration"] == float(f"{row['duration']:.6f}")
+    assert row["n_steps"] == round(row["duration"] / 0.1) + 1

@@ -312,3 +312,18 @@ def test_real_tno_cut_ins_are_no_conflict_or_preventable() -> None:
         counts[c.category] = counts.get(c.category, 0) + 1
     assert sum(counts.values()) == 208
     assert set(counts) <= {"no_conflict", "preventable"}, counts
+
+
+def test_ttr_true_is_a_clean_multiple_of_the_step() -> None:
+    # ttr_true is a whole number of 0.1 s steps: it must read 1.4, not 1.4000000000000001
+    seen = 0
+    for gap in (6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0):
+        c = evaluate_criticality(build_scenario({"p_y1": 0.05, "p_t": 2.0, "p_a1": 0.0,
+                                                 "p_a2": 0.0, "p_a3": 0.0, "p_v0": 25.0,
+                                                 "dv": 6.0, "gap": gap}))
+        ttr = c["ttr_true"]
+        assert isinstance(ttr, float)
+        if 0.0 < ttr < math.inf:
+            seen += 1
+            assert repr(ttr) == repr(float(f"{ttr:.6f}")), ttr
+    assert seen >= 4
