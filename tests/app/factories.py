@@ -5,7 +5,10 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import socket
+import subprocess
+import sys
 import time
 import uuid
 from collections.abc import Callable, Iterator
@@ -13,6 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import httpx
 import psycopg
 from fastapi import FastAPI
 from sqlalchemy.engine import make_url
@@ -117,3 +121,39 @@ def scenario_rows(chunk_index: int, start: int, count: int) -> list[dict[str, An
             "summary": {"risk": idx / 100.0, "min_ttr": "Infinity"},
         })
     return rows
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@contextmanager
+def uvicorn_service(env: dict[str, str], log: Path, *args: str) -> Iterator[str]:
+    """``uvicorn app.main:app`` in its own session on a free loopback port with ``env``;
+    yields its base URL once /health answers (bounded polling), then stops it (SIGTERM,
+    SIGKILL after 60 s). The server's output goes to ``log``."""
+    port = free_port()
+    with open(log, "wb") as log_file:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
+             "--port", str(port), *args], cwd=ROOT, env=env, stdout=log_file,
+            stderr=log_file, start_new_session=True)
+    base = f"http://127.0.0.1:{port}"
+
+    def up() -> bool:
+        if proc.poll() is not None:
+            raise AssertionError(f"uvicorn exited: {log.read_text()[-2000:]}")
+        try:
+            return httpx.get(f"{base}/health", timeout=2).status_code == 200
+        except httpx.TransportError:
+            return False
+
+    try:
+        wait_for(up, "uvicorn to answer /health", attempts=1200)
+        yield base
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
