@@ -11,7 +11,6 @@ import pytest
 from tests.app.factories import copy_model_cache, service_env, uvicorn_service, wait_for
 
 
-
 @pytest.fixture
 def server(tmp_path: Path, model_cache_dir: Path) -> Iterator[str]:
     data_dir = tmp_path / "data"
