@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tests.app.factories import pg_available, pg_database
+from app.settings import get_settings
+from tests.app.factories import TEST_MODEL_OPTIONS, copy_model_cache, pg_available, pg_database
 
 
 @pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
@@ -52,3 +54,20 @@ def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> I
     app = make_app(make_settings(data_dir, sync_n_limit=50, upload_limit_bytes=1_000_000))
     with TestClient(app) as test_client:
         yield test_client
+
+
+@pytest.fixture
+def store(tmp_path: Path, model_cache_dir: Path,
+          monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    """A private CLI store (SCENGEN_DATA_DIR) with the session's cached default model;
+    yields its data directory."""
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
+    monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
+    monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
+    monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
+    monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
+    get_settings.cache_clear()
+    yield data_dir
+    get_settings.cache_clear()

@@ -3,29 +3,11 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from app.cli import main
-from app.settings import get_settings
-from tests.app.factories import TEST_MODEL_OPTIONS, copy_model_cache
-
-
-@pytest.fixture
-def store(tmp_path: Path, model_cache_dir: Path,
-          monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
-    data_dir = tmp_path / "data"
-    copy_model_cache(model_cache_dir, data_dir)
-    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
-    monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
-    monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
-    monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
-    monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
-    get_settings.cache_clear()
-    yield data_dir
-    get_settings.cache_clear()
 
 
 def test_create_status_list_export(store: Path, tmp_path: Path,

@@ -17,7 +17,7 @@ import pytest
 
 from app.cli import build_parser, main
 from app.settings import Settings, get_settings
-from tests.app.factories import TEST_MODEL_OPTIONS, copy_model_cache
+from tests.app.factories import copy_model_cache
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "cut-in.json"
@@ -33,21 +33,6 @@ def no_store_env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Pa
     monkeypatch.setenv("XDG_DATA_HOME", str(xdg))
     get_settings.cache_clear()
     yield xdg / "scengen"
-    get_settings.cache_clear()
-
-
-@pytest.fixture
-def store(tmp_path: Path, model_cache_dir: Path,
-          monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
-    data_dir = tmp_path / "data"
-    copy_model_cache(model_cache_dir, data_dir)
-    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
-    monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
-    monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
-    monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
-    monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
-    get_settings.cache_clear()
-    yield data_dir
     get_settings.cache_clear()
 
 
