@@ -10,12 +10,8 @@ screenshot of the view under ``test-artifacts/dashboard/``.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import signal
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,10 +20,10 @@ import pytest
 from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
 
 from app.db.database import Database
+from tests.app.factories import uvicorn_service
 from tests.browser.factories import (
     CHROMIUM,
     CHROMIUM_ARGS,
-    free_port,
     prepare_data_dir,
     store_synthetic_catalogue,
 )
@@ -53,44 +49,12 @@ class Server:
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     data_dir = prepare_data_dir(tmp_path_factory.mktemp("browser-data"))
-    log = (data_dir / "uvicorn.log").open("wb")
-    port = free_port()
     env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0",
                SCENGEN_CHUNK_SIZE="6")
     for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
         env.pop(name, None)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1", "--port",
-         str(port)], cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT,
-        start_new_session=True)
-    base = f"http://127.0.0.1:{port}"
-    try:
-        for _ in range(2400):  # bounded polling, no wall-clock assertion
-            if proc.poll() is not None:
-                raise AssertionError("uvicorn exited: " +
-                                     (data_dir / "uvicorn.log").read_text()[-3000:])
-            try:
-                if httpx.get(f"{base}/health", timeout=2).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            proc_wait(proc, 0.1)
-        else:
-            raise AssertionError("uvicorn did not answer /health")
+    with uvicorn_service(env, data_dir / "uvicorn.log") as base:
         yield Server(base, data_dir)
-    finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=30)
-        log.close()
-
-
-def proc_wait(proc: subprocess.Popen[bytes], seconds: float) -> None:
-    with contextlib.suppress(subprocess.TimeoutExpired):
-        proc.wait(timeout=seconds)
 
 
 @pytest.fixture(scope="module")
