@@ -93,6 +93,34 @@ def _fit_surfaces(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenarios(args: argparse.Namespace) -> int:
+    import json
+    import re
+
+    from datasets.egocentric import egocentric_to_scenarios, read_egocentric
+
+    if args.events is None:
+        from datasets.embedded import SOURCE, load_default_events
+
+        frame, label = load_default_events(), f"embedded events ({SOURCE})"
+    else:
+        frame, label = read_egocentric(args.events), str(args.events)
+    scenarios = egocentric_to_scenarios(frame)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    names: set[str] = set()
+    for event_id, scenario in scenarios.items():
+        name = re.sub(r"[^A-Za-z0-9_.-]", "_", event_id) or "event"
+        while name in names:  # ids that differ only in replaced characters
+            name += "_"
+        names.add(name)
+        (out / f"{name}.json").write_text(json.dumps(scenario.to_dict()) + "\n",
+                                          encoding="utf-8")
+    print(f"{len(scenarios)} recorded events of {label} written as concrete scenarios to "
+          f"{out}/ (score one: scengen risk {out}/<event>.json --summary)")
+    return 0
+
+
 def _describe(args: argparse.Namespace) -> int:
     import pandas as pd
 
@@ -161,6 +189,13 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     add_out(p, required=True, help="surfaces JSON file")
     p.add_argument("--source", default="", help="text for the file's 'source' field")
     p.set_defaults(func=_fit_surfaces)
+
+    p = sub.add_parser("scenarios", help="write recorded events as concrete scenarios "
+                       "(JSON, for scengen risk and POST /risk)")
+    p.add_argument("events", nargs="?", default=None,
+                   help="ego-centric .csv/.parquet (default: the embedded TNO events)")
+    add_out(p, required=True, help="folder for the <event_id>.json files", metavar="DIR")
+    p.set_defaults(func=_scenarios)
 
     p = sub.add_parser("describe", help="summary statistics of a parameter table")
     p.add_argument("table", nargs="?", default=None,

@@ -41,12 +41,14 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     p = subparsers.add_parser(
         "risk", help="score a concrete scenario (Monte-Carlo time-to-react risk)",
         description="Read a concrete scenario (JSON) and print its risk per time step as "
-                    "JSON: series, per object and step the TTR, weight and evasion arrays.")
+                    "JSON: series, per object and step the TTR, weight and evasion arrays, and "
+                    "its criticality record as a cut-in (class, btn, ttr_true, ...).")
     p.add_argument("scenario", metavar="SCENARIO.json", help="concrete scenario (JSON form)")
     p.add_argument("--pretty", action="store_true", help="indent the JSON output")
     add_out(p, required=False, default="-", help="output file ('-' = stdout, the default)")
     p.add_argument("--summary", action="store_true",
-                   help="print only the flat summary (risk, min TTR, ...)")
+                   help="print only the flat summary (risk, min TTR, ...) and the "
+                        "criticality record")
     p.add_argument("--samples", action="store_true",
                    help="include the per-sample Monte-Carlo arrays (large)")
     p.add_argument("--surfaces", metavar="FILE", default=None,
@@ -84,14 +86,16 @@ def _run(args: argparse.Namespace) -> int:
     surfaces = InputSurfaces.load(args.surfaces) if args.surfaces else None
     data = _read_scenario(args.scenario)
     try:
-        result = evaluate_scenario(ConcreteScenario.from_dict(data), settings, surfaces)
+        scenario = ConcreteScenario.from_dict(data)
+        result = evaluate_scenario(scenario, settings, surfaces)
     except (ScenarioError, SceneError) as exc:  # name the file as well as the field
         raise ScenarioError(f"{args.scenario}: {exc}") from None
     from app import jsonconv
     from app.domain.risk import risk_report
 
-    report = risk_report(result, samples=args.samples)
-    out = report["summary"] if args.summary else report
+    report = risk_report(result, samples=args.samples, scenario=scenario)
+    out = ({**report["summary"], "criticality": report["criticality"]} if args.summary
+           else report)
     text = jsonconv.dumps(out)
     if args.pretty:
         text = json.dumps(json.loads(text), indent=2)

@@ -35,12 +35,14 @@ import numpy as np
 import pandas as pd
 
 from datasets.errors import FormatError
-from riskcore.scenario import ConcreteScenario
+from riskcore.scenario import ConcreteScenario, Track
 
 __all__ = [
     "EGO_COLUMNS",
     "OPTIONAL_COLUMNS",
     "REQUIRED_COLUMNS",
+    "egocentric_to_scenarios",
+    "event_to_scenario",
     "read_egocentric",
     "scenario_to_egocentric",
     "validate_egocentric",
@@ -255,3 +257,55 @@ def scenario_to_egocentric(
         EGO_Y: ego.y - ego.y[0],
         LANE_WIDTH: np.full(n, float(lane_width)),
     })
+
+
+def event_to_scenario(event: pd.DataFrame) -> ConcreteScenario:
+    """One recorded event (the rows of one ``event_id``) as a concrete scenario.
+
+    The inverse of :func:`scenario_to_egocentric` up to what the format does not carry:
+
+    * ego: x from the trapezoidal integral of ``ego_v`` (x = 0 at the first row),
+      y = ``ego_y`` (0 where unknown), heading from its velocity;
+    * target (object ``"cutter"``): x = ego x + ``target_dx``, y = ego y + ``target_dy``,
+      speed ``target_v``, heading from its velocity (the format has none; the direction
+      of motion is what a box drawn from a track follows);
+    * time from 0 at the first row; ``provenance``: the event id, ``source:
+      "egocentric"`` and ``lane_width`` when the column holds a finite value.
+
+    ``event`` must be validated (:func:`validate_egocentric` or :func:`read_egocentric`)
+    and hold one event, in time order.
+    """
+    ids = event[EVENT_ID].unique()
+    if len(ids) != 1:
+        raise FormatError(f"event: expected the rows of one event, got {len(ids)} events")
+    t = event[T].to_numpy(np.float64)
+    t = t - t[0]
+    v = event[EGO_V].to_numpy(np.float64)
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    y = np.nan_to_num(event[EGO_Y].to_numpy(np.float64), nan=0.0) \
+        if EGO_Y in event else np.zeros_like(t)
+    first = event.iloc[0]
+    ego = Track("ego", float(first[EGO_LENGTH]), float(first[EGO_WIDTH]), x, y,
+                _heading(t, x, y), v)
+    xc = x + event[TARGET_DX].to_numpy(np.float64)
+    yc = y + event[TARGET_DY].to_numpy(np.float64)
+    cutter = Track("cutter", float(first[TARGET_LENGTH]), float(first[TARGET_WIDTH]), xc,
+                   yc, _heading(t, xc, yc), event[TARGET_V].to_numpy(np.float64))
+    provenance: dict[str, object] = {"source": "egocentric", "event_id": str(ids[0])}
+    lw = float(first[LANE_WIDTH]) if LANE_WIDTH in event else float("nan")
+    if np.isfinite(lw) and lw > 0:
+        provenance["lane_width"] = lw
+    return ConcreteScenario(t=t, ego=ego, objects=(cutter,), provenance=provenance)
+
+
+def egocentric_to_scenarios(frame: pd.DataFrame) -> dict[str, ConcreteScenario]:
+    """Every event of an ego-centric frame as a concrete scenario, keyed by event id
+    (in the frame's order). See :func:`event_to_scenario`."""
+    frame = validate_egocentric(frame)
+    return {str(eid): event_to_scenario(ev)
+            for eid, ev in frame.groupby(EVENT_ID, sort=False)}
+
+
+def _heading(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Direction of motion from positions (central differences), rad."""
+    return np.asarray(np.arctan2(np.gradient(y, t), np.gradient(x, t)), dtype=np.float64)

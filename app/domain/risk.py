@@ -25,9 +25,11 @@ from riskcore import (
     evaluate_scenario,
     evasion_label,
 )
+from riskcore.criticality import evaluate_criticality
 from riskcore.scenario_risk import RESULT_FORMAT
 
-__all__ = ["SERIES", "parse_scenario", "risk_report", "scenario_risk_series", "score_posted"]
+__all__ = ["SERIES", "criticality_of", "parse_scenario", "risk_report", "scenario_risk_series",
+           "score_posted"]
 
 #: per-step series of a scenario's risk profile
 SERIES = ("r_dep", "r_ind", "min_ttr", "ttc", "wttc", "thw")
@@ -68,10 +70,24 @@ def _evasion(mask: NDArray[np.int64], collision_time: NDArray[np.float64]) -> li
     return out
 
 
-def risk_report(risk: ScenarioRisk, *, samples: bool = False) -> dict[str, Any]:
+def criticality_of(scenario: ConcreteScenario) -> dict[str, Any]:
+    """The criticality record of a posted scenario taken as a cut-in (the cutter: object
+    ``"cutter"``, else the first): ``{"criticality": record, "criticality_error": None}``,
+    or ``{"criticality": None, "criticality_error": why}`` when it is not one (no object,
+    no lateral movement towards the ego, a generated scenario cut off early)."""
+    try:
+        record = evaluate_criticality(scenario).to_record()
+    except RiskcoreError as exc:
+        return {"criticality": None, "criticality_error": str(exc)}
+    return {"criticality": record, "criticality_error": None}
+
+
+def risk_report(risk: ScenarioRisk, *, samples: bool = False,
+                scenario: ConcreteScenario | None = None) -> dict[str, Any]:
     """A scenario's risk as JSON-ready data (``format`` scengen.scenario-risk/1 layout):
     ``summary`` (the scored record's fields), ``series`` per step, ``objects`` with their
-    per-step series, and with ``samples`` each object's per-sample arrays."""
+    per-step series, and with ``samples`` each object's per-sample arrays. Given the
+    ``scenario``, also its criticality record (:func:`criticality_of`)."""
     series: dict[str, Any] = {"t": np.asarray(risk.t, dtype=np.float64).tolist()}
     for name in SERIES:
         series[name] = risk.series(name).tolist()
@@ -94,6 +110,7 @@ def risk_report(risk: ScenarioRisk, *, samples: bool = False) -> dict[str, Any]:
         "evasion_bits": {m.name: 1 << i for i, m in enumerate(MANOEUVRES)},
         "series": series,
         "objects": objects,
+        **(criticality_of(scenario) if scenario is not None else {}),
     }
 
 
@@ -105,7 +122,7 @@ def score_posted(data: Any, *, samples: bool = False, settings: RiskSettings | N
         risk = evaluate_scenario(scenario, settings, surfaces)
     except RiskcoreError as exc:
         raise InvalidInput(str(exc), field=_field(exc)) from None
-    return risk_report(risk, samples=samples)
+    return risk_report(risk, samples=samples, scenario=scenario)
 
 
 def scenario_risk_series(scenario: ConcreteScenario) -> dict[str, Any]:

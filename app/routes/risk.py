@@ -29,6 +29,12 @@ class RiskReport(ApiModel):
     objects: list[dict[str, Any]] = Field(
         description="per object: id, per-step series, and with samples=true the "
         "per-sample arrays (a, omega, weight, ttr, collision_time, evasion)")
+    criticality: dict[str, float | bool | str | None] | None = Field(
+        description="the scenario's criticality record taken as a cut-in (class, btn, "
+        "a_req, ttr_true, the reference drivers' outcomes, ...; docs/criticality.md); "
+        "null when it is not a cut-in (see criticality_error)")
+    criticality_error: str | None = Field(
+        description="why there is no criticality record (null when there is one)")
 
 
 @router.post("", response_model=RiskReport,

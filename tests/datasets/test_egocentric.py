@@ -17,6 +17,8 @@ from datasets.cutin_model import (
 )
 from datasets.egocentric import (
     EGO_COLUMNS,
+    egocentric_to_scenarios,
+    event_to_scenario,
     read_egocentric,
     scenario_to_egocentric,
     validate_egocentric,
@@ -163,3 +165,47 @@ def test_optional_columns_may_be_absent() -> None:
     assert len(table) == 1
     # (the cutter's own lateral displacement, here 3.52 m, not the builder's 3.6 m lane)
     assert table["lane_width"].iloc[0] == pytest.approx(lateral_displacement(P_LEFT), abs=0.02)
+
+
+def test_event_to_scenario_by_hand() -> None:
+    """Three rows, 0.5 s apart: ego at 20 then 22 then 24 m/s (trapezoid: x = 0, 10.5,
+    22 m); target 30 m ahead and 3.5 m left, moving 1 m right per step."""
+    ev = pd.DataFrame({
+        "event_id": ["a"] * 3, "t": [10.0, 10.5, 11.0], "ego_v": [20.0, 22.0, 24.0],
+        "target_dx": [30.0, 30.0, 30.0], "target_dy": [3.5, 2.5, 1.5],
+        "target_v": [20.0, 22.0, 24.0], "ego_length": [4.5] * 3, "ego_width": [1.8] * 3,
+        "target_length": [4.0] * 3, "target_width": [1.7] * 3,
+        "ego_y": [0.0] * 3, "lane_width": [3.5] * 3})
+    sc = egocentric_to_scenarios(ev)["a"]
+    np.testing.assert_allclose(sc.t, [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(sc.ego.x, [0.0, 10.5, 22.0])
+    np.testing.assert_allclose(sc.objects[0].x, [30.0, 40.5, 52.0])
+    np.testing.assert_allclose(sc.objects[0].y, [3.5, 2.5, 1.5])
+    # heading from the velocity by central differences: middle step dx/dt = 22, dy/dt = -2
+    assert sc.objects[0].psi[1] == pytest.approx(np.arctan2(-2.0, 22.0))
+    np.testing.assert_allclose(sc.ego.psi, 0.0)
+    assert (sc.ego.length, sc.objects[0].width) == (4.5, 1.7)
+    assert sc.objects[0].id == "cutter"
+    assert sc.provenance == {"source": "egocentric", "event_id": "a", "lane_width": 3.5}
+
+
+def test_scenario_egocentric_scenario_round_trip() -> None:
+    """scenario -> ego-centric -> scenario keeps the relative motion and the speeds."""
+    sc = _scenario(P_LEFT, 27.0, 110.0)
+    back = event_to_scenario(validate_egocentric(scenario_to_egocentric(sc, "e")))
+    np.testing.assert_allclose(back.t, sc.t - sc.t[0])
+    np.testing.assert_allclose(back.objects[0].x - back.ego.x,
+                               sc.objects[0].x - sc.ego.x, atol=1e-9)
+    np.testing.assert_allclose(back.objects[0].y - back.ego.y,
+                               sc.objects[0].y - sc.ego.y, atol=1e-12)
+    np.testing.assert_allclose(back.ego.x, sc.ego.x - sc.ego.x[0], atol=1e-9)
+    np.testing.assert_allclose(back.objects[0].v, sc.objects[0].v)
+    assert back.provenance["lane_width"] == pytest.approx(LANE)
+
+
+def test_event_to_scenario_refuses_two_events() -> None:
+    ev = validate_egocentric(pd.concat([
+        scenario_to_egocentric(_scenario(P_LEFT, 27.0, 110.0), "a"),
+        scenario_to_egocentric(_scenario(P_LEFT, 25.0, 100.0), "b")]))
+    with pytest.raises(FormatError, match="one event"):
+        event_to_scenario(ev)

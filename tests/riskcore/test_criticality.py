@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pandas as pd
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
@@ -284,31 +283,14 @@ def test_fast_drivers_agree_with_a_slow_reference(gap: float, dv: float, p_v0: f
 
 
 # --------------------------------------------------------------------------- TNO
-def _tno_scenario(ev: pd.DataFrame) -> ConcreteScenario:
-    t = ev["t"].to_numpy(float)
-    t = t - t[0]
-    v = ev["ego_v"].to_numpy(float)
-    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
-    z = np.zeros_like(t)
-    row = ev.iloc[0]
-    ego = Track("ego", float(row.ego_length), float(row.ego_width), x, z, z, v)
-    xc = x + ev["target_dx"].to_numpy(float)
-    yc = ev["target_dy"].to_numpy(float)
-    psi = np.arctan2(np.gradient(yc, t), np.gradient(xc, t))
-    cut = Track("cutter", float(row.target_length), float(row.target_width), xc, yc, psi,
-                ev["target_v"].to_numpy(float))
-    return ConcreteScenario(t=t, ego=ego, objects=(cut,),
-                            provenance={"lane_width": float(row.lane_width)})
-
-
 @pytest.mark.slow
 def test_real_tno_cut_ins_are_no_conflict_or_preventable() -> None:
+    from datasets.egocentric import egocentric_to_scenarios
     from datasets.embedded import load_default_events
 
-    events = load_default_events()
     counts: dict[str, int] = {}
-    for _, ev in events.groupby("event_id", sort=True):
-        c = evaluate_criticality(_tno_scenario(ev))
+    for scenario in egocentric_to_scenarios(load_default_events()).values():
+        c = evaluate_criticality(scenario)
         counts[c.category] = counts.get(c.category, 0) + 1
     assert sum(counts.values()) == 208
     assert set(counts) <= {"no_conflict", "preventable"}, counts
