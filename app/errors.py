@@ -9,6 +9,12 @@ Exception hierarchy::
     ├── Conflict                  409  the resource is not in a state that allows it
     └── ServiceUnavailable        503  the service cannot answer yet (no default model)
 
+The domain packages' own errors reach the client through the same body: a
+``sampler.SamplerError`` (``ConstraintError``, ``EmptyRegionError``, ``ModelError``, ...),
+a ``riskcore.errors.RiskcoreError`` or a ``datasets.errors.DatasetError`` that a route
+does not catch maps to the status in ``DOMAIN_STATUS`` (422 unless listed), and its
+structured ``field`` attribute (not its message) names the field, under ``body.``.
+
 Every error body is ``{"error": {"status": <int>, "message": <str>, "field": <str|null>}}``;
 ``field`` is a dotted path such as ``body.n`` or ``query.format`` when one field is to blame.
 """
@@ -24,6 +30,10 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
+
+from datasets.errors import DatasetError
+from riskcore.errors import RiskcoreError
+from sampler._exceptions import NotFittedError, SamplerError
 
 log = logging.getLogger("scengen.app")
 
@@ -93,6 +103,32 @@ async def _service_error(request: Request, exc: Exception) -> JSONResponse:
     return _response(exc.status, exc.message, exc.field)
 
 
+#: HTTP status of a domain error class (the first match in the class's MRO; else 422)
+DOMAIN_STATUS: dict[type[Exception], int] = {NotFittedError: 409}
+
+DOMAIN_ERRORS: tuple[type[Exception], ...] = (SamplerError, RiskcoreError, DatasetError)
+
+
+def domain_status(exc: Exception) -> int:
+    """The HTTP status of a domain error (``DOMAIN_STATUS``, by class; else 422)."""
+    for cls in type(exc).__mro__:
+        if cls in DOMAIN_STATUS:
+            return DOMAIN_STATUS[cls]
+    return 422
+
+
+def domain_field(exc: Exception, prefix: str = "body") -> str | None:
+    """The request field a domain error blames: its ``field`` attribute under ``prefix``."""
+    field = getattr(exc, "field", None)
+    if field is None:
+        return None
+    return f"{prefix}.{field}" if prefix else str(field)
+
+
+async def _domain_error(request: Request, exc: Exception) -> JSONResponse:
+    return _response(domain_status(exc), str(exc), domain_field(exc))
+
+
 async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, RequestValidationError)
     errors = list(exc.errors())
@@ -134,6 +170,8 @@ async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
 def install_error_handlers(app: FastAPI) -> None:
     """Map every error to the one body shape (see the module docstring)."""
     app.add_exception_handler(ServiceError, _service_error)
+    for cls in DOMAIN_ERRORS:
+        app.add_exception_handler(cls, _domain_error)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(StarletteHTTPException, _http_error)
     app.add_exception_handler(Exception, _unexpected)

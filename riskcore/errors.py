@@ -15,17 +15,23 @@ a user error: one line, no traceback.
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = ["RiskcoreError", "SceneError", "SettingsError", "SurfaceError"]
 
 
 class RiskcoreError(ValueError):
     """Base class: bad input to riskcore. The message names the field and the problem;
     ``field`` holds the field's dotted path (e.g. ``"ego.v[3]"``) when one field is to
-    blame, else None."""
+    blame, else None; ``problem`` a short phrase (``"not finite"``, ``"out of range"``) and
+    ``value`` the offending value, when the raiser gives them."""
 
-    def __init__(self, message: str, *, field: str | None = None) -> None:
+    def __init__(self, message: str, *, field: str | None = None, problem: str | None = None,
+                 value: Any = None) -> None:
         super().__init__(message)
         self.field = field
+        self.problem = problem
+        self.value = value
 
 
 class SettingsError(RiskcoreError):

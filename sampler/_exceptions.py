@@ -12,6 +12,8 @@ Hierarchy (every one is a ``ValueError``, so the CLI reports it as one line, exi
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
     "BuilderError",
     "ConstraintError",
@@ -23,11 +25,31 @@ __all__ = [
 
 
 class SamplerError(ValueError):
-    """Base class of every error raised by ``sampler``."""
+    """Base class of every error raised by ``sampler``.
+
+    Structured fields (for callers that map the error, e.g. to an HTTP response, without
+    reading the message): ``field`` the dotted name of the input to blame (``"constraints.0"``,
+    ``"lane_width"``, ``"params"``) or None; ``problem`` a short phrase (``"unknown
+    quantity"``, ``"not finite"``, ``"empty region"``) or None; ``value`` the offending
+    value or None.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None, problem: str | None = None,
+                 value: Any = None) -> None:
+        super().__init__(message)
+        self.field = field
+        self.problem = problem
+        self.value = value
 
 
 class ConstraintError(SamplerError):
-    """A constraint or a region is malformed. The message lists the valid choices."""
+    """A constraint or a region is malformed. The message lists the valid choices;
+    ``constraint`` holds the constraint's text when one constraint is to blame."""
+
+    def __init__(self, message: str, *, field: str | None = None, problem: str | None = None,
+                 value: Any = None, constraint: str | None = None) -> None:
+        super().__init__(message, field=field, problem=problem, value=value)
+        self.constraint = constraint
 
 
 class ModelError(SamplerError):
@@ -57,7 +79,7 @@ class EmptyRegionError(SamplerError):
 
     def __init__(self, message: str, *, n_draws: int = 0, n_hits: int = 0,
                  p_upper: float = float("nan")) -> None:
-        super().__init__(message)
+        super().__init__(message, field="constraints", problem="empty region")
         self.n_draws = n_draws
         self.n_hits = n_hits
         self.p_upper = p_upper

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
 from sampler._exceptions import ConstraintError
@@ -192,29 +192,33 @@ def parse_constraint(text: str) -> Constraint:
         the message lists the valid names or operators.
     """
     if not isinstance(text, str):
-        raise ConstraintError(f"constraint: expected text like 'ttc<3', got {type(text).__name__}")
+        raise ConstraintError(f"constraint: expected text like 'ttc<3', got {type(text).__name__}",
+                              problem="not text", value=text)
     m = _SHORT.match(text)
     if m is None:
         raise ConstraintError(
             f"constraint {text!r}: expected NAME OP VALUE such as 'ttc<3' "
-            f"(operators: {' '.join(OPERATORS)})"
-        )
+            f"(operators: {' '.join(OPERATORS)})", problem="malformed", value=text,
+            constraint=text)
     name, op, raw = m.group("name"), m.group("op"), m.group("value")
     if op not in OPERATORS:
         raise ConstraintError(
-            f"constraint {text!r}: unknown operator {op!r}; valid operators: {' '.join(OPERATORS)}"
-        )
+            f"constraint {text!r}: unknown operator {op!r}; valid operators: {' '.join(OPERATORS)}",
+            field="op", problem="unknown operator", value=op, constraint=text)
     if name not in QUANTITY_NAMES:
         raise ConstraintError(
             f"constraint {text!r}: unknown quantity {name!r}; valid names: "
-            f"{', '.join(QUANTITY_NAMES)}"
-        )
+            f"{', '.join(QUANTITY_NAMES)}", field="name", problem="unknown quantity", value=name,
+            constraint=text)
     try:
         value = float(raw)
     except ValueError:
-        raise ConstraintError(f"constraint {text!r}: value {raw!r} is not a number") from None
+        raise ConstraintError(f"constraint {text!r}: value {raw!r} is not a number",
+                              field="value", problem="not a number", value=raw,
+                              constraint=text) from None
     if not math.isfinite(value):
-        raise ConstraintError(f"constraint {text!r}: value must be finite, got {raw!r}")
+        raise ConstraintError(f"constraint {text!r}: value must be finite, got {raw!r}",
+                              field="value", problem="not finite", value=raw, constraint=text)
     return Constraint(name=name, op=op, value=value)
 
 
@@ -226,9 +230,14 @@ def _as_constraint(c: Any) -> Constraint:
     if isinstance(c, Mapping):
         try:
             return Constraint.model_validate(c)
-        except ValueError as exc:  # pydantic.ValidationError is a ValueError
-            raise ConstraintError(_pydantic_message(exc)) from None
-    raise ConstraintError(f"constraint: expected text, a mapping or Constraint, got {c!r}")
+        except ValidationError as exc:
+            errors = exc.errors()
+            loc = ".".join(str(x) for x in errors[0]["loc"]) or None if errors else None
+            raise ConstraintError(_pydantic_message(exc), field=loc, problem="invalid",
+                                  value=errors[0]["input"] if errors else None,
+                                  constraint=str(dict(c))) from None
+    raise ConstraintError(f"constraint: expected text, a mapping or Constraint, got {c!r}",
+                          problem="not a constraint", value=c)
 
 
 def _pydantic_message(exc: Exception) -> str:
@@ -249,7 +258,8 @@ def _params_matrix(params: ArrayLike | Mapping[str, ArrayLike]) -> FloatArray:
         cols: Any = params  # DataFrame or mapping
         missing = [k for k in PARAM_NAMES if k not in cols]
         if missing:
-            raise ConstraintError(f"params: missing column(s) {', '.join(missing)}")
+            raise ConstraintError(f"params: missing column(s) {', '.join(missing)}",
+                                  field="params", problem="missing columns", value=missing)
         arr = np.column_stack([np.asarray(cols[k], dtype=np.float64).reshape(-1)
                                for k in PARAM_NAMES])
     else:
@@ -259,8 +269,7 @@ def _params_matrix(params: ArrayLike | Mapping[str, ArrayLike]) -> FloatArray:
     if arr.ndim != 2 or arr.shape[1] != len(PARAM_NAMES):
         raise ConstraintError(
             f"params: expected shape (n, {len(PARAM_NAMES)}) in the order {PARAM_NAMES}, "
-            f"got {arr.shape}"
-        )
+            f"got {arr.shape}", field="params", problem="wrong shape", value=arr.shape)
     return arr
 
 
@@ -358,7 +367,8 @@ class Region(BaseModel):
             constraints = [constraints]
         cs = tuple(_as_constraint(c) for c in constraints)
         if not (isinstance(lane_width, int | float) and 0 < lane_width <= 10):
-            raise ConstraintError(f"lane_width: must be in (0, 10] m, got {lane_width!r}")
+            raise ConstraintError(f"lane_width: must be in (0, 10] m, got {lane_width!r}",
+                                  field="lane_width", problem="out of range", value=lane_width)
         return cls(constraints=cs, lane_width=float(lane_width), physical_bounds=physical_bounds)
 
     @property

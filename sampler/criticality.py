@@ -40,6 +40,7 @@ from riskcore import _kernels
 from riskcore.criticality import CriticalitySettings
 from riskcore.evasion import MANOEUVRES
 from riskcore.settings import RiskSettings
+from sampler._exceptions import SamplerError
 
 __all__ = ["CRITICALITY_QUANTITIES", "criticality_quantities"]
 
@@ -326,7 +327,8 @@ def criticality_quantities(params: FloatArray, lane_width: float = DEFAULT_LANE_
     """
     arr = np.ascontiguousarray(params, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 8:
-        raise ValueError(f"params: expected shape (n, 8), got {arr.shape}")
+        raise SamplerError(f"params: expected shape (n, 8), got {arr.shape}", field="params",
+                           problem="wrong shape", value=arr.shape)
     s = settings or CriticalitySettings()
     rs = risk_settings or RiskSettings()
     n = arr.shape[0]

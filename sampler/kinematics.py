@@ -24,6 +24,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from sampler._exceptions import SamplerError
+
 __all__ = ["CrossingKinematics", "crossing_kinematics", "plateau_speeds"]
 
 FloatArray = NDArray[np.float64]
@@ -148,11 +150,14 @@ def crossing_kinematics(params: FloatArray, offset: float,
     """
     arr = np.asarray(params, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] < 6:
-        raise ValueError(f"params: expected shape (n, >=6), got {arr.shape}")
+        raise SamplerError(f"params: expected shape (n, >=6), got {arr.shape}", field="params",
+                           problem="wrong shape", value=arr.shape)
     if not offset > 0:
-        raise ValueError(f"offset: must be > 0 m, got {offset}")
+        raise SamplerError(f"offset: must be > 0 m, got {offset}", field="offset",
+                           problem="out of range", value=offset)
     if n_grid < 2:
-        raise ValueError(f"n_grid: must be >= 2, got {n_grid}")
+        raise SamplerError(f"n_grid: must be >= 2, got {n_grid}", field="n_grid",
+                           problem="out of range", value=n_grid)
     out = np.empty((arr.shape[0], 4))
     one_minus_cos = _one_minus_cos(int(n_grid))
     _crossing_kernel(np.ascontiguousarray(arr[:, :6]), float(offset), one_minus_cos, out)

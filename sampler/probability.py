@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError
-from sampler.intervals import clopper_pearson
+from sampler.intervals import clopper_pearson, upper_bound
 from sampler.problem import Pilot, Problem, ProgressFn
 
 __all__ = ["PRegion", "PRegionEstimator"]
@@ -196,8 +196,7 @@ class PRegionEstimator:
         pilot.search_draws = total
         if pilot.n_hits == 0 and pilot.search_hits.shape[0] == 0:
             # one-sided upper bound of P(A and B): P(S) times the bound on P(A | S)
-            p_up = problem.proposal_mass * float(stats.beta.ppf(self.confidence, 1,
-                                                                 pilot.n_draws))
+            p_up = problem.proposal_mass * upper_bound(0, pilot.n_draws, self.confidence)
             what = "model draws" if problem.envelope is None else (
                 f"draws from the model restricted to the envelope {problem.envelope.source} "
                 f"(mass {problem.envelope.mass:.3g})")

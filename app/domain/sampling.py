@@ -11,7 +11,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from app import jsonconv
-from app.errors import InvalidInput
+from app.errors import InvalidInput, domain_field
 from sampler import (
     Constraint,
     CutInGMM,
@@ -61,10 +61,10 @@ def region_dict(pr: PRegion) -> dict[str, Any]:
 
 
 def _sampling_error(exc: ValueError) -> InvalidInput:
+    field = domain_field(exc) or "body"  # the error's structured field, under "body."
     if isinstance(exc, EmptyRegionError):
-        return InvalidInput(f"the region is (practically) empty: {exc}",
-                            field="body.constraints")
-    return InvalidInput(f"sampling failed: {exc}", field="body")
+        return InvalidInput(f"the region is (practically) empty: {exc}", field=field)
+    return InvalidInput(f"sampling failed: {exc}", field=field)
 
 
 class KnownRegion(PRegionEstimator):

@@ -12,10 +12,13 @@ from app.errors import (
     InvalidInput,
     NotFound,
     PayloadTooLarge,
-    ServiceError,
     ServiceUnavailable,
     install_error_handlers,
 )
+from datasets.errors import FormatError
+from riskcore.errors import SceneError
+from sampler import ConstraintError, EmptyRegionError, NotFittedError
+from sampler.constraints import Region, parse_constraint
 
 
 class Body(BaseModel):
@@ -25,12 +28,19 @@ class Body(BaseModel):
 def _app() -> FastAPI:
     app = FastAPI()
     install_error_handlers(app)
-    errors: dict[str, ServiceError] = {
+    errors: dict[str, Exception] = {
         "notfound": NotFound("thing 'x' not found", field="path.id"),
         "invalid": InvalidInput("n is too big", field="body.n"),
         "large": PayloadTooLarge("too big"),
         "conflict": Conflict("not finished"),
         "unavailable": ServiceUnavailable("no default model: not loaded"),
+        # domain errors: the status by class, the field from the attribute, not the text
+        "constraint": ConstraintError("text that names nothing", field="constraints.2",
+                                      problem="unknown quantity", value="foo"),
+        "empty": EmptyRegionError("nothing inside", n_draws=10),
+        "notfitted": NotFittedError("fit first: body.zzz"),
+        "scene": SceneError("bad", field="ego.v[3]"),
+        "format": FormatError("bad file"),
     }
 
     @app.get("/raise/{kind}")
@@ -52,6 +62,11 @@ def _app() -> FastAPI:
     ("large", 413, None),
     ("conflict", 409, None),
     ("unavailable", 503, None),
+    ("constraint", 422, "body.constraints.2"),
+    ("empty", 422, "body.constraints"),
+    ("notfitted", 409, None),
+    ("scene", 422, "body.ego.v[3]"),
+    ("format", 422, None),
 ])
 def test_service_errors_have_the_common_shape(kind: str, status: int, field: str | None) -> None:
     with TestClient(_app()) as client:
@@ -84,3 +99,28 @@ def test_unknown_route_and_unexpected_errors_keep_the_shape() -> None:
     assert r405.status_code == 405 and r405.json()["error"]["status"] == 405
     assert r500.status_code == 500
     assert r500.json()["error"]["message"] == "internal error: ZeroDivisionError"
+
+
+@pytest.mark.parametrize(("text", "field", "problem", "value"), [
+    ("foo<3", "name", "unknown quantity", "foo"),
+    ("ttc~3", None, "malformed", "ttc~3"),
+    ("ttc!=3", "op", "unknown operator", "!="),
+    ("ttc<abc", "value", "not a number", "abc"),
+    ("ttc<inf", "value", "not finite", "inf"),
+])
+def test_constraint_errors_carry_structured_fields(text: str, field: str | None,
+                                                   problem: str, value: str) -> None:
+    with pytest.raises(ConstraintError) as info:
+        parse_constraint(text)
+    assert (info.value.field, info.value.problem, info.value.value) == (field, problem, value)
+    assert info.value.constraint == text
+
+
+def test_region_errors_carry_structured_fields() -> None:
+    with pytest.raises(ConstraintError) as info:
+        Region.from_constraints(["ttc<3"], lane_width=12.0)
+    assert (info.value.field, info.value.problem, info.value.value) == (
+        "lane_width", "out of range", 12.0)
+    with pytest.raises(ConstraintError) as info:
+        Region.from_constraints([{"name": "ttc", "op": "<", "value": "x"}])
+    assert info.value.field == "value" and info.value.value == "x"
