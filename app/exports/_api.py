@@ -18,6 +18,7 @@ from app.exports._common import (
 from app.versions import versions
 from datasets.cutin_model import PARAM_NAMES, ttc_from_gap_dv
 from riskcore.scenario import ConcreteScenario
+from sampler.record import SCORE_FIELDS
 
 #: The formats ``export_catalogue`` writes.
 EXPORT_FORMATS: tuple[str, ...] = ("jsonl", "csv", "parquet", "xosc", "commonroad")
@@ -29,24 +30,12 @@ ID_COLUMNS: tuple[str, ...] = ("scenario_id", "seed")
 DERIVED_COLUMNS: tuple[str, ...] = ("ttc", "duration", "dt", "n_steps", "n_objects")
 
 #: Score columns in their fixed order (always present, None when the summary lacks them):
-#: the keys of ``riskcore``'s ``ScenarioRisk.summary()`` plus the sampler's exposure weight.
-#: ``risk`` is the scenario risk (max over steps of r_dep), ``risk_ind`` max r_ind,
-#: ``min_*`` the minima over the steps (s; riskcore writes +inf, "never", as None),
-#: ``min_ttr_evasion`` the evasion label behind ``min_ttr``, ``step_of_max_risk`` and
-#: ``t_of_max_risk`` (s) where the risk peaks, ``exposure_weight`` the importance weight.
-#: Any other summary key follows, sorted by name.
-SUMMARY_COLUMNS: tuple[str, ...] = (
-    "risk",
-    "risk_ind",
-    "min_ttr",
-    "min_ttc",
-    "min_wttc",
-    "min_thw",
-    "min_ttr_evasion",
-    "step_of_max_risk",
-    "t_of_max_risk",
-    "exposure_weight",
-)
+#: the scored record's fields after ``ttc`` (``sampler.record.ScenarioRecord``):
+#: ``exposure_weight`` (the scenario's share of P(A)), the criticality record
+#: (``SCORE_FIELDS`` = ``riskcore.criticality.CRITICALITY_FIELDS``, in its order; +inf is
+#: kept, e.g. ``ttr_true`` without a collision course) and ``error`` (why a vector has no
+#: scores). Any other summary key follows, sorted by name.
+SUMMARY_COLUMNS: tuple[str, ...] = ("exposure_weight", *SCORE_FIELDS, "error")
 
 #: Column names the exports add themselves (``index``: position in the catalogue; ``file``:
 #: the .xosc name in the xosc zip's catalogue.csv); a summary may not use them.
@@ -104,8 +93,9 @@ def scenario_row(scenario: ConcreteScenario, summary: Mapping[str, Any]) -> dict
     ----------
     scenario : ConcreteScenario
     summary : mapping of str to number, string or None
-        The scores (``ScenarioRisk.summary()``) and anything the caller adds
-        (``exposure_weight``, ``scenario_id``...). May be empty for unscored scenarios.
+        The scores (the record's ``SCORE_FIELDS``) and anything the caller adds
+        (``exposure_weight``, ``error``, ``scenario_id``...). May be empty for unscored
+        scenarios.
 
     Returns
     -------

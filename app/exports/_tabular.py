@@ -5,8 +5,9 @@ may leave an extra column empty but may not bring a new one: the writers are str
 cannot go back to widen the header, so that is an error naming the column.
 
 Parquet column types: the known columns have fixed types (``index``, ``seed``,
-``n_steps``, ``n_objects``, ``step_of_max_risk``: int64; the parameters, the derived
-floats and the numeric scores: float64; ``min_ttr_evasion``: string). Any other column
+``n_steps``, ``n_objects``: int64; the parameters, the derived floats, ``exposure_weight``
+and the criticality record's float fields: float64; its bool fields: bool; its text
+fields and ``error``: string). Any other column
 takes its type from the first row group: bool if it holds only booleans, string if only
 strings, int64 for an integer ``scenario_id``, float64 for numbers (and for a column that
 is empty in the whole first row group; string for an empty ``scenario_id``). A later value
@@ -25,6 +26,7 @@ import pyarrow.parquet as pq
 
 from app.exports._common import ExportError, Row, dumps
 from datasets.cutin_model import PARAM_NAMES
+from riskcore.criticality import CRITICALITY_FIELDS
 from riskcore.scenario import ConcreteScenario
 
 Item = tuple[int, ConcreteScenario, Mapping[str, Any], Row]
@@ -35,13 +37,15 @@ ROW_GROUP_SIZE = 2048
 #: Metadata key of the manifest (JSON) in the Parquet file.
 PARQUET_MANIFEST_KEY = b"scengen.manifest"
 
-_INT_COLUMNS = frozenset({"index", "seed", "n_steps", "n_objects", "step_of_max_risk"})
+_INT_COLUMNS = frozenset({"index", "seed", "n_steps", "n_objects"})
 _FLOAT_COLUMNS = frozenset({
-    *PARAM_NAMES, "ttc", "duration", "dt",
-    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "t_of_max_risk",
-    "exposure_weight",
+    *PARAM_NAMES, "ttc", "duration", "dt", "exposure_weight",
+    *(name for name, spec in CRITICALITY_FIELDS.items() if spec.kind == "float"),
 })
-_STRING_COLUMNS = frozenset({"min_ttr_evasion"})
+_BOOL_COLUMNS = frozenset(name for name, spec in CRITICALITY_FIELDS.items()
+                          if spec.kind == "bool")
+_STRING_COLUMNS = frozenset({
+    "error", *(name for name, spec in CRITICALITY_FIELDS.items() if spec.kind == "str")})
 
 
 def _with_index(index: int, row: Row) -> Row:
@@ -114,6 +118,8 @@ def _arrow_type(column: str, values: Sequence[Any]) -> pa.DataType:
         return pa.float64()
     if column in _STRING_COLUMNS:
         return pa.string()
+    if column in _BOOL_COLUMNS:
+        return pa.bool_()
     kinds = {_kind(v) for v in values} - {None}
     if not kinds:
         return pa.string() if column == "scenario_id" else pa.float64()

@@ -46,14 +46,27 @@ PARAMS_A = {"p_y1": -0.05, "p_t": 2.0, "p_a1": 0.5, "p_a2": 0.25, "p_a3": 1.0,
 PARAMS_B = {"p_y1": 0.04, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
             "p_v0": 31.0, "dv": -1.0, "gap": 20.0}  # opening: ttc = inf
 
-# the keys of riskcore's ScenarioRisk.summary() plus the exposure weight
-SUMMARY_A = {"risk": 0.4, "risk_ind": 0.5, "min_ttr": 1.2, "min_ttc": 2.5, "min_wttc": 1.75,
-             "min_thw": 0.625, "min_ttr_evasion": "brake", "step_of_max_risk": 2,
-             "t_of_max_risk": 0.2, "exposure_weight": 0.01}
-# riskcore writes +inf as None; another producer may pass inf itself: both must survive
-SUMMARY_B = {"risk": 0.0, "risk_ind": 0.0, "min_ttr": math.inf, "min_ttc": None,
-             "min_wttc": math.inf, "min_thw": 1.5, "min_ttr_evasion": None,
-             "step_of_max_risk": 0, "t_of_max_risk": 2.0, "exposure_weight": 2.0}
+# a scored record's summary: the criticality record (hand-made values), the exposure weight
+# and the error
+SUMMARY_A = {"exposure_weight": 0.01, "t_p": 2.75, "t_cross": 3.5, "ttr_true": 1.2,
+             "ttr_manoeuvre": "brake", "a_req": 3.25, "btn": 0.43, "class": "preventable",
+             "none_collision": True, "none_impact_speed": 4.0, "none_min_gap": 0.0,
+             "r157_cc_collision": False, "r157_cc_impact_speed": 0.0,
+             "r157_cc_min_gap": 1.5, "r157_cc_t_brake": 3.3, "rss_collision": False,
+             "rss_impact_speed": 0.0, "rss_min_gap": 2.25, "rss_t_brake": 3.1,
+             "r_dep_tp": 0.125, "r_ind_tp": 0.25, "r_dep_cross": 0.375, "r_ind_cross": 0.5,
+             "r_dep_tp_r157": 0.0625, "r_ind_tp_r157": 0.125, "r_dep_cross_r157": 0.25,
+             "r_ind_cross_r157": 0.375, "alarm_time": 0.625, "risk_peak": 0.4, "error": None}
+# an opening cut-in: no collision course (ttr_true +inf), nothing braked, never alarmed
+SUMMARY_B = {"exposure_weight": 2.0, "t_p": 2.5, "t_cross": 3.0, "ttr_true": math.inf,
+             "ttr_manoeuvre": None, "a_req": 0.0, "btn": 0.0, "class": "no_conflict",
+             "none_collision": False, "none_impact_speed": 0.0, "none_min_gap": 8.0,
+             "r157_cc_collision": False, "r157_cc_impact_speed": 0.0,
+             "r157_cc_min_gap": 8.0, "r157_cc_t_brake": None, "rss_collision": False,
+             "rss_impact_speed": 0.0, "rss_min_gap": 8.0, "rss_t_brake": None,
+             "r_dep_tp": 0.0, "r_ind_tp": 0.0, "r_dep_cross": 0.0, "r_ind_cross": 0.0,
+             "r_dep_tp_r157": 0.0, "r_ind_tp_r157": 0.0, "r_dep_cross_r157": 0.0,
+             "r_ind_cross_r157": 0.0, "alarm_time": None, "risk_peak": 0.0, "error": None}
 
 
 def _track(track_id: str, length: float, width: float, x: list[float], y: list[float],
@@ -99,8 +112,14 @@ EXPECTED_COLUMNS = [
     "scenario_id", "seed",
     "p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap",
     "ttc", "duration", "dt", "n_steps", "n_objects",
-    "risk", "risk_ind", "min_ttr", "min_ttc", "min_wttc", "min_thw", "min_ttr_evasion",
-    "step_of_max_risk", "t_of_max_risk", "exposure_weight",
+    "exposure_weight",
+    "t_p", "t_cross", "ttr_true", "ttr_manoeuvre", "a_req", "btn", "class",
+    "none_collision", "none_impact_speed", "none_min_gap",
+    "r157_cc_collision", "r157_cc_impact_speed", "r157_cc_min_gap", "r157_cc_t_brake",
+    "rss_collision", "rss_impact_speed", "rss_min_gap", "rss_t_brake",
+    "r_dep_tp", "r_ind_tp", "r_dep_cross", "r_ind_cross",
+    "r_dep_tp_r157", "r_ind_tp_r157", "r_dep_cross_r157", "r_ind_cross_r157",
+    "alarm_time", "risk_peak", "error",
 ]
 ROW_A = {"scenario_id": "a", "seed": 7, **PARAMS_A, "ttc": 3.0, "duration": 0.3, "dt": 0.1,
          "n_steps": 4, "n_objects": 1, **SUMMARY_A}
@@ -140,16 +159,17 @@ def test_row_has_parameters_then_derived_then_scores_in_fixed_order() -> None:
 def test_row_of_an_opening_cut_in_has_infinite_ttc_and_keeps_none() -> None:
     row = scenario_row(scenario_b(), SUMMARY_B)
     assert row["ttc"] == math.inf
-    assert row["min_ttr_evasion"] is None
-    assert row["min_ttc"] is None
-    assert row["min_ttr"] == math.inf
+    assert row["ttr_manoeuvre"] is None
+    assert row["r157_cc_t_brake"] is None
+    assert row["ttr_true"] == math.inf
 
 
 def test_row_without_scores_has_empty_score_columns_and_extras_sorted_last() -> None:
     sc = scenario_a()
     row = scenario_row(sc, {"zeta": 1, "alpha": "x"})
     assert list(row) == [*EXPECTED_COLUMNS, "alpha", "zeta"]
-    assert row["risk"] is None and row["exposure_weight"] is None
+    assert row["risk_peak"] is None and row["exposure_weight"] is None
+    assert row["class"] is None and row["error"] is None
     assert row["alpha"] == "x" and row["zeta"] == 1
 
 
@@ -166,15 +186,15 @@ def test_row_of_a_recorded_drive_without_parameters() -> None:
 
 
 def test_row_accepts_numpy_scalars_as_plain_numbers() -> None:
-    row = scenario_row(scenario_a(), {"risk": np.float64(0.5), "n_hits": np.int64(3)})
-    assert type(row["risk"]) is float and row["risk"] == 0.5
+    row = scenario_row(scenario_a(), {"risk_peak": np.float64(0.5), "n_hits": np.int64(3)})
+    assert type(row["risk_peak"]) is float and row["risk_peak"] == 0.5
     assert type(row["n_hits"]) is int and row["n_hits"] == 3
 
 
 @pytest.mark.parametrize(
     ("summary", "message"),
     [
-        ({"risk": [0.1, 0.2]}, "summary['risk']: expected a number, string or None, got list"),
+        ({"btn": [0.1, 0.2]}, "summary['btn']: expected a number, string or None, got list"),
         ({"ttc": 2.0}, "column 'ttc' = 2.0 conflicts with the value 3.0"),
         ({3: 1.0}, "summary: keys must be non-empty strings"),
         ({"index": 1}, "summary['index']: the column name 'index' is reserved"),
@@ -260,15 +280,15 @@ def test_jsonl_round_trip_is_lossless(tmp_path: Path) -> None:
     back = list(read_jsonl(path))
     assert [sc for sc, _ in back] == [scenario_a(), scenario_b()]
     assert [summary for _, summary in back] == [SUMMARY_A, SUMMARY_B]
-    assert back[1][1]["min_ttr"] == math.inf
+    assert back[1][1]["ttr_true"] == math.inf
     assert read_jsonl_manifest(path) == manifest()
 
 
 def test_jsonl_writes_numpy_scalars_as_plain_numbers(tmp_path: Path) -> None:
-    summary = {"risk": np.float64(0.25), "n_hits": np.int64(3), "flag": np.bool_(True)}
+    summary = {"risk_peak": np.float64(0.25), "n_hits": np.int64(3), "flag": np.bool_(True)}
     path = export_catalogue("jsonl", [(scenario_a(), summary)], {}, tmp_path / "c.jsonl")
     [(_, back)] = list(read_jsonl(path))
-    assert back == {"risk": 0.25, "n_hits": 3, "flag": True}
+    assert back == {"risk_peak": 0.25, "n_hits": 3, "flag": True}
     assert [type(v) for v in back.values()] == [float, int, bool]
 
 
@@ -280,7 +300,7 @@ def test_jsonl_is_strict_json_one_record_per_line(tmp_path: Path) -> None:
     assert records[0]["manifest"]["seed"] == 42
     assert [r["kind"] for r in records[1:]] == ["scenario", "scenario"]
     assert [r["index"] for r in records[1:]] == [0, 1]
-    assert records[2]["summary"]["min_ttr"] == "Infinity"
+    assert records[2]["summary"]["ttr_true"] == "Infinity"
     assert records[1]["scenario"] == scenario_a().to_dict()
 
 
@@ -319,11 +339,12 @@ def test_csv_has_one_row_per_scenario_with_every_column(tmp_path: Path) -> None:
     assert a["gap"] == "12.0" and a["dv"] == "4.0" and a["ttc"] == "3.0"
     assert a["p_y1"] == "-0.05" and a["p_a2"] == "0.25"
     assert a["n_steps"] == "4" and a["n_objects"] == "1"
-    assert a["risk"] == "0.4" and a["min_thw"] == "0.625" and a["min_ttr_evasion"] == "brake"
-    assert a["step_of_max_risk"] == "2" and a["t_of_max_risk"] == "0.2"
-    assert a["exposure_weight"] == "0.01"
-    assert b["ttc"] == "inf" and b["min_ttr"] == "inf"
-    assert b["min_ttr_evasion"] == "" and b["min_ttc"] == ""  # None
+    assert a["risk_peak"] == "0.4" and a["alarm_time"] == "0.625"
+    assert a["ttr_manoeuvre"] == "brake" and a["class"] == "preventable"
+    assert a["none_collision"] == "True" and a["r157_cc_collision"] == "False"
+    assert a["exposure_weight"] == "0.01" and a["error"] == ""
+    assert b["ttc"] == "inf" and b["ttr_true"] == "inf"
+    assert b["ttr_manoeuvre"] == "" and b["r157_cc_t_brake"] == ""  # None
     assert float(a["duration"]) == pytest.approx(0.3)
     assert "\r" not in text
 
@@ -354,8 +375,12 @@ def test_parquet_has_typed_columns_values_and_the_manifest(tmp_path: Path) -> No
     assert table.schema.field("index").type == pa.int64()
     assert table.schema.field("seed").type == pa.int64()
     assert table.schema.field("gap").type == pa.float64()
-    assert table.schema.field("min_ttr_evasion").type == pa.string()
-    assert table.schema.field("step_of_max_risk").type == pa.int64()
+    assert table.schema.field("ttr_manoeuvre").type == pa.string()
+    assert table.schema.field("class").type == pa.string()
+    assert table.schema.field("error").type == pa.string()  # empty in every row: still text
+    assert table.schema.field("none_collision").type == pa.bool_()
+    assert table.schema.field("r157_cc_t_brake").type == pa.float64()
+    assert table.schema.field("ttr_true").type == pa.float64()
     assert table.schema.field("scenario_id").type == pa.string()
     rows = table.to_pylist()
     _assert_close_row({k: v for k, v in rows[0].items() if k != "index"}, ROW_A)
@@ -656,7 +681,7 @@ def test_xosc_manifest_and_index(xosc_zip: Path) -> None:
     assert m["export"]["road_file"] == "road.xodr"
     assert [r["file"] for r in index] == ["scenario_0000000.xosc", "scenario_0000001.xosc"]
     assert [r["scenario_id"] for r in index] == ["a", "b"]
-    assert index[0]["risk"] == "0.4"
+    assert index[0]["risk_peak"] == "0.4"
 
 
 def test_xosc_road_grows_lanes_for_far_vehicles_and_uses_the_lane_width(
