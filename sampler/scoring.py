@@ -5,7 +5,8 @@ the scenario, score it with riskcore), in chunks of ``chunk_size`` samples. With
 ``n_workers > 1`` the chunks run on a ``concurrent.futures.ProcessPoolExecutor`` (default
 start method ``spawn``: safe with numba, threaded BLAS and threaded servers, but a calling
 script needs the ``if __name__ == "__main__":`` guard; ``mp_context="fork"`` starts faster
-from a single-threaded command-line process); results come back in input order whatever
+from a single-threaded command-line process; the workers die with the calling process
+however it ends, see :mod:`sampler.lifeline`); results come back in input order whatever
 the number of workers, so the output is deterministic. Each chunk runs with BLAS limited
 to one thread (one process per core is the parallelism).
 
@@ -16,6 +17,7 @@ A sample that cannot be built or scored does not stop the batch: its record carr
 from __future__ import annotations
 
 import multiprocessing
+import os
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
@@ -27,6 +29,7 @@ from riskcore.settings import RiskSettings
 from riskcore.surfaces import InputSurfaces
 from sampler._exceptions import SamplerError
 from sampler._threads import single_threaded
+from sampler.lifeline import die_with_parent
 from sampler.record import ScenarioRecord, score_rows
 from sampler.sampleset import SampleSet
 
@@ -135,7 +138,9 @@ def score_samples(
                 progress(len(out), total)
         return out
     ctx = multiprocessing.get_context(mp_context)
-    with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
+    # the workers end with this process however it ends (SIGKILL included): lifeline
+    with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx,
+                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = [pool.submit(score_part, part, start, w, kw) for part, start, w in parts]
         for fut in futures:
             out.extend(fut.result())

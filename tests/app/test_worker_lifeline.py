@@ -70,12 +70,45 @@ def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) ->
 
 
 def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
-    from app.jobs import lifeline
+    from sampler import lifeline
 
     # the parent pid the worker was started by is not its parent: it ends at once
-    code = ("import os; from app.jobs.lifeline import die_with_parent; "
+    code = ("import os; from sampler.lifeline import die_with_parent; "
             "die_with_parent(os.getppid() + 100000); print('survived')")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                           text=True, timeout=60)
     assert done.returncode == 1 and "survived" not in done.stdout
     assert lifeline.PR_SET_PDEATHSIG == 1
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux process tree")
+def test_cli_scoring_workers_die_with_a_sigkilled_cli(store: Path, tmp_path: Path) -> None:
+    """Issue 14 item 15: ``scengen sample --score --workers 2`` SIGKILLed mid-run leaves no
+    scoring worker behind (sampler.scoring's pool has the lifeline initializer)."""
+    out = tmp_path / "out.jsonl"
+    cli = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())",
+           "sample", "-n", "5000", "--seed", "3", "--score", "--workers", "2", "-q",
+           "-o", str(out)]
+    parent = subprocess.Popen(cli, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    children: list[psutil.Process] = []
+
+    def workers_started() -> bool:
+        nonlocal children
+        children = [c for c in psutil.Process(parent.pid).children(recursive=True)
+                    if _alive(c.pid)]
+        return len(children) >= 2
+
+    try:
+        wait_for(workers_started, "two scoring workers", attempts=1800)
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(timeout=30)
+        wait_for(lambda: not any(_alive(c.pid) for c in children),
+                 "the scoring workers to die with the CLI", attempts=200)
+        assert not out.exists() or out.stat().st_size == 0  # killed before writing
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+            parent.wait(timeout=30)
+        for child in children:  # only what this test started
+            if _alive(child.pid):
+                child.kill()

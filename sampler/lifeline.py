@@ -1,4 +1,5 @@
-"""Pool workers that die with their parent.
+"""Pool workers that die with their parent (the service's catalogue pool and
+``sampler.scoring.score_samples``' pool, e.g. ``scengen sample --score --workers N``).
 
 A ``ProcessPoolExecutor``'s workers outlive a parent that is SIGKILLed (no clean shutdown
 runs): they are reparented to PID 1 and keep their memory. ``die_with_parent`` is a pool
