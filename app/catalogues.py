@@ -4,9 +4,13 @@ export and delete. Routes and CLI commands stay thin wrappers around these."""
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+from sqlalchemy.orm import Session
 
 from app import domain, jsonconv
 from app.context import ServiceContext
@@ -51,6 +55,39 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     return row
 
 
+class _ChunkValues:
+    """A catalogue's ``repo.stat_values`` kept per stored chunk (chunks never change once
+    stored), so a status poll reads only the chunks stored since the last one."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.parts: dict[int, np.ndarray] = {}
+
+
+def _stat_values(ctx: ServiceContext, session: Session, catalogue_id: str) -> np.ndarray:
+    """The catalogue's status values (rows x ``repo.STAT_COLUMNS``) of every stored chunk,
+    in chunk order; the chunks seen before come from ``ctx``'s cache."""
+    kept: _ChunkValues = ctx.cache("catalogue.stat_values", 8).get((catalogue_id,),
+                                                                   _ChunkValues)
+    with kept.lock:
+        stored = repo.stored_chunk_indices(session, catalogue_id)
+        new = stored - kept.parts.keys()
+        if new:
+            chunk_of, values = repo.stat_values(session, catalogue_id,
+                                                None if not kept.parts else new)
+            order = np.argsort(chunk_of, kind="stable")
+            for rows in np.split(order, np.flatnonzero(np.diff(chunk_of[order])) + 1):
+                c = int(chunk_of[rows[0]]) if rows.size else -1
+                if c in new:
+                    kept.parts[c] = values[rows]
+            for c in new - kept.parts.keys():  # a chunk without rows
+                kept.parts[c] = values[:0]
+        parts = [kept.parts[c] for c in sorted(stored)]
+    if not parts:
+        return np.zeros((0, len(repo.STAT_COLUMNS)))
+    return np.concatenate(parts)
+
+
 def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     """Status, progress, counts, P(A) and summary statistics of a catalogue."""
     with ctx.db.read_session() as s:
@@ -60,8 +97,8 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     key = (catalogue_id, n_done, stored, row.updated_at.isoformat())
 
     def compute() -> dict[str, Any]:
-        with ctx.db.session() as s:
-            return {"summary": repo.summary_statistics(s, catalogue_id),
+        with ctx.db.read_session() as s:
+            return {"summary": repo.statistics_of(_stat_values(ctx, s, catalogue_id)),
                     "classes": repo.class_counts(s, catalogue_id)}
 
     cached: dict[str, Any] = ctx.cache("catalogue.statistics", 256).get(key, compute)

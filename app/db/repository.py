@@ -13,11 +13,12 @@ import math
 import os
 import shutil
 import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
@@ -241,44 +242,57 @@ STAT_COLUMNS = ("risk", "ttc", "exposure_weight", "btn", "a_req", "ttr_true",
                 "r157_cc_impact_speed", "none_impact_speed", "r_dep_tp", "alarm_time")
 
 
-def column_statistics(session: Session, catalogue_id: str, column: Any) -> dict[str, Any]:
-    """Count, min, max, mean, p05 … p95 of a column's finite values (and how many are +inf),
-    computed in SQL.
-
-    The quantiles are exact (linear interpolation between order statistics, as
-    ``numpy.quantile``'s default): two index-ordered rows at the right offset each, so a
-    poll costs a few index look-ups, not a read and sort of every row.
-    """
-    finite = (ScenarioRow.catalogue_id == catalogue_id, column.is_not(None),
-              column > -math.inf, column < math.inf)
-    k, lo, hi, mean = session.execute(
-        select(func.count(column), func.min(column), func.max(column), func.avg(column))
-        .where(*finite)).one()
-    n_inf = int(session.scalar(select(func.count()).select_from(ScenarioRow).where(
-        ScenarioRow.catalogue_id == catalogue_id, column == math.inf)) or 0)
-    if not k:
+def value_statistics(values: np.ndarray) -> dict[str, Any]:
+    """Count, min, max, mean, p05 … p95 of the finite values of a float array (NaN = null),
+    and ``count_inf``, how many are +inf. The quantiles are exact: ``numpy.quantile``'s
+    default (linear interpolation between order statistics)."""
+    n_inf = int(np.count_nonzero(values == np.inf))
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
         return {"count": 0, "count_inf": n_inf}
-    count = int(k)
+    p05, p25, p50, p75, p95 = (float(v) for v in np.quantile(finite, QUANTILES))
+    return {"count": int(finite.size), "count_inf": n_inf, "min": float(finite.min()),
+            "max": float(finite.max()), "mean": float(finite.mean()), "p05": p05,
+            "p25": p25, "p50": p50, "p75": p75, "p95": p95}
 
-    def q(p: float) -> float:
-        pos = p * (count - 1)
-        below = math.floor(pos)
-        pair = [float(v) for v in session.scalars(
-            select(column).where(*finite).order_by(column).offset(below).limit(2))]
-        if len(pair) == 1 or pos == below:
-            return pair[0]
-        return pair[0] + (pair[1] - pair[0]) * (pos - below)
 
-    return {"count": count, "count_inf": n_inf, "min": float(lo), "max": float(hi),
-            "mean": float(mean), "p05": q(0.05), "p25": q(0.25), "p50": q(0.5),
-            "p75": q(0.75), "p95": q(0.95)}
+#: the quantiles of ``value_statistics``
+QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+
+
+def stat_values(session: Session, catalogue_id: str,
+                chunks: Collection[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(chunk_index, values)`` of a catalogue's rows (of ``chunks``; None: all):
+    ``values`` has one float column per ``STAT_COLUMNS`` name (NaN = null).
+
+    One query, plain tuples (Core rows, no ORM objects), turned into arrays by
+    ``numpy.fromiter`` (``numpy.array`` of a list of tuples is ~30x slower).
+    """
+    columns = [ScenarioRow.chunk_index, *(getattr(ScenarioRow, n) for n in STAT_COLUMNS)]
+    stmt = select(*columns).where(ScenarioRow.catalogue_id == catalogue_id)
+    if chunks is not None:
+        stmt = stmt.where(ScenarioRow.chunk_index.in_(sorted(chunks)))
+    rows = session.connection().execute(stmt).all()
+    width = len(columns)
+    flat = np.fromiter((math.nan if v is None else v for row in rows for v in row),
+                       dtype=np.float64, count=len(rows) * width).reshape(len(rows), width)
+    return flat[:, 0].astype(np.int64), flat[:, 1:]
+
+
+def statistics_of(values: np.ndarray) -> dict[str, Any]:
+    """``value_statistics`` of each column of ``stat_values``' array, by STAT_COLUMNS name."""
+    return {name: value_statistics(values[:, j]) for j, name in enumerate(STAT_COLUMNS)}
 
 
 def summary_statistics(session: Session, catalogue_id: str) -> dict[str, Any]:
     """Distribution summaries (finite values; ``count_inf``: how many are +inf) of the
-    ``STAT_COLUMNS``: risk, TTC, exposure weight and the criticality margins."""
-    return {name: column_statistics(session, catalogue_id, getattr(ScenarioRow, name))
-            for name in STAT_COLUMNS}
+    ``STAT_COLUMNS``: risk, TTC, exposure weight and the criticality margins.
+
+    One scan of the catalogue's rows (``stat_values``), summarised by numpy: not a sort
+    per quantile and column in SQL. ``app.catalogues.describe`` keeps the values per chunk
+    and reads only the chunks stored since its last poll.
+    """
+    return statistics_of(stat_values(session, catalogue_id)[1])
 
 
 def delete_catalogue(session: Session, catalogue_id: str) -> None:

@@ -157,3 +157,48 @@ def test_sql_statistics_equal_numpy_on_the_finite_values(database_url: str, tmp_
             assert got[f"p{q:02d}"] == pytest.approx(np.quantile(finite, q / 100), rel=1e-12)
     assert stats["exposure_weight"]["p95"] == 0.5
     db.dispose()
+
+
+def test_status_statistics_hand_case_and_read_per_new_chunk(
+        database_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # risk of idx i is i / 100 (scenario_rows); chunk 0 holds idx 0..4, chunk 1 idx 5..9
+    from app import catalogues
+    from app.cache import ViewCache
+
+    class Ctx:  # the part of ServiceContext the status uses
+        def __init__(self) -> None:
+            self.caches: dict[str, ViewCache] = {}
+
+        def cache(self, name: str, size: int) -> ViewCache:
+            return self.caches.setdefault(name, ViewCache(size))
+
+    asked: list[object] = []
+    real = repo.stat_values
+
+    def spy(session: object, cid: str, chunks: object = None) -> object:
+        asked.append(None if chunks is None else sorted(chunks))  # type: ignore[call-overload]
+        return real(session, cid, chunks)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(repo, "stat_values", spy)
+    db = _store(database_url)
+    _catalogue(db)
+    ctx = Ctx()
+    with db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 0, scenario_rows(0, 0, 5), None, None, {})
+    with db.session() as s:
+        first = repo.statistics_of(catalogues._stat_values(ctx, s, "cat-1"))["risk"]  # type: ignore[arg-type]
+    # 0, .01, .02, .03, .04: p25 at position 1 -> 0.01; p05 at 0.2 -> 0.002
+    assert first["count"] == 5 and first["p50"] == pytest.approx(0.02)
+    assert first["p25"] == pytest.approx(0.01) and first["p05"] == pytest.approx(0.002)
+    with db.session() as s:
+        repo.store_chunk(s, tmp_path, "cat-1", 1, scenario_rows(1, 5, 5), None, None, {})
+    with db.session() as s:
+        both = repo.statistics_of(catalogues._stat_values(ctx, s, "cat-1"))  # type: ignore[arg-type]
+    # 0 .. 0.09: p50 at position 4.5 -> 0.045; p95 at 8.55 -> 0.0855; mean 0.045
+    assert both["risk"]["count"] == 10 and both["risk"]["p50"] == pytest.approx(0.045)
+    assert both["risk"]["p95"] == pytest.approx(0.0855)
+    assert both["risk"]["mean"] == pytest.approx(0.045)
+    # ttc of idx 0, 4, 8 is +inf (scenario_rows): not in the finite statistics
+    assert both["ttc"]["count_inf"] == 3 and both["ttc"]["count"] == 7
+    assert asked == [None, [1]]  # all at first, then only the chunk stored since
+    db.dispose()
