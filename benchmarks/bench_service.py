@@ -10,7 +10,13 @@ Measures, against ``uvicorn app.main:app`` started here in a subprocess:
    through ``SCENGEN_DASK_SCHEDULER``), and the Dask/local ratio;
 4. that both catalogues (same seed) export to the same CSV bytes;
 5. ``GET /catalogues/{id}`` (status and statistics) on a stored catalogue of ``--rows``
-   rows (default 100,000; hand-made rows written straight into the store).
+   rows (default 100,000; hand-made rows written straight into the store);
+6. ``/health`` p50/p99 under mixed load (issue 14 item 14): a scored catalogue job of
+   ``--health-n`` scenarios running on the pool while ``--readers`` threads page its
+   scenarios and poll its status, on SQLite and (``--pg-url``, a fresh database created and
+   dropped there) on PostgreSQL.
+
+``--only status,scenarios,catalogue,health`` runs a subset (default: all).
 
 Before/after (issue 13), measured in the same run, in this process, one core:
 
@@ -156,6 +162,74 @@ def catalogue(base: str, n: int, seed: int, chunk_size: int) -> tuple[float, str
         note(f"  catalogue {cid}: {n} scored scenarios in {elapsed:.1f} s, P(A) "
              f"{state['p_region']['estimate']:.3g}")
     return elapsed, cid
+
+
+def health_under_load(base: str, n: int, seed: int, chunk_size: int,
+                      readers: int) -> dict[str, Any]:
+    """/health latency while a scored catalogue job runs and ``readers`` threads read."""
+    import threading
+
+    with httpx.Client(base_url=base, timeout=600) as http:
+        r = http.post("/catalogues", json={"n": n, "seed": seed, "score": True,
+                                           "chunk_size": chunk_size})
+        r.raise_for_status()
+        cid = r.json()["id"]
+    done = threading.Event()
+    reads = [0]
+
+    def read() -> None:
+        with httpx.Client(base_url=base, timeout=600) as http:
+            k = 0
+            while not done.is_set():
+                http.get(f"/catalogues/{cid}/scenarios",
+                         params={"limit": 100, "offset": 100 * (k % 5), "order_by": "btn"})
+                http.get(f"/catalogues/{cid}")
+                reads[0] += 2
+                k += 1
+
+    def watch() -> None:
+        with httpx.Client(base_url=base, timeout=600) as http:
+            while http.get(f"/catalogues/{cid}").json()["status"] not in (
+                    "done", "failed", "cancelled"):
+                time.sleep(0.5)
+        done.set()
+
+    threads = [threading.Thread(target=read, daemon=True) for _ in range(readers)]
+    threads.append(threading.Thread(target=watch, daemon=True))
+    for t in threads:
+        t.start()
+    times: list[float] = []
+    with httpx.Client(base_url=base, timeout=600) as http:
+        while not done.is_set():
+            t0 = time.perf_counter()
+            http.get("/health").raise_for_status()
+            times.append(time.perf_counter() - t0)
+            time.sleep(0.05)
+    for t in threads:
+        t.join(timeout=600)
+    return {"catalogue_n": n, "readers": readers, "health_requests": len(times),
+            "reads": reads[0], "p50_s": percentile(times, 0.5),
+            "p99_s": percentile(times, 0.99), "max_s": max(times), "load": load()}
+
+
+def pg_fresh_database(admin_url: str) -> tuple[str, Any]:
+    """A fresh PostgreSQL database next to ``admin_url``'s: (its URL, a drop function)."""
+    import uuid
+
+    import psycopg
+    from sqlalchemy.engine import make_url
+
+    url = make_url(admin_url)
+    name = f"scengen_bench_{uuid.uuid4().hex[:12]}"
+    libpq = url.set(drivername="postgresql").render_as_string(hide_password=False)
+    with psycopg.connect(libpq, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+
+    def drop() -> None:
+        with psycopg.connect(libpq, autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+    return url.set(database=name).render_as_string(hide_password=False), drop
 
 
 def store_rows(data_dir: Path, rows: int, chunk: int = 10_000) -> str:
@@ -313,7 +387,17 @@ def main(argv: list[str] | None = None) -> int:
                     help="rows of the stored catalogue whose status is timed")
     ap.add_argument("--quick", action="store_true",
                     help="a 1,000-scenario catalogue and 5 requests (minutes, not tens)")
+    ap.add_argument("--only", default="status,scenarios,catalogue,health",
+                    help="comma-separated parts to run: status (with the before/after), "
+                         "scenarios, catalogue (local and Dask), health")
+    ap.add_argument("--health-n", type=int, default=2000,
+                    help="scenarios of the catalogue running while /health is timed")
+    ap.add_argument("--readers", type=int, default=4, help="reader threads during it")
+    ap.add_argument("--pg-url", default="postgresql+psycopg://postgres@127.0.0.1:5432/test",
+                    help="PostgreSQL to time /health on ('' to skip); a fresh database is "
+                         "created beside this one and dropped")
     args = ap.parse_args(argv)
+    only = set(args.only.split(","))
     if args.quick:
         args.catalogue_n, args.requests = min(args.catalogue_n, 1000), min(args.requests, 5)
 
@@ -333,25 +417,53 @@ def main(argv: list[str] | None = None) -> int:
         server = Server(data_dir, {"SCENGEN_LOCAL_WORKERS": str(args.workers)}, log)
         try:
             server.wait()
-            note(f"storing a {args.rows}-row catalogue")
-            big = store_rows(data_dir, args.rows)
-            note("before/after in this process")
-            results["before_after"] = before_after(data_dir, big, args.chunk_size, args.quick)
-            results["status_latency"] = status_latency(server.base, big, 20)
-            note(f"  GET /catalogues/{{id}} at {args.rows} rows: p50 "
-                 f"{results['status_latency']['p50_s'] * 1e3:.1f} ms")
-            note(f"POST /scenarios n={args.n} with scoring, {args.requests} requests")
-            results["scenarios_latency"] = latency(server.base, args.n, args.requests)
-            note(f"  p50 {results['scenarios_latency']['p50_s']:.2f} s")
-            note("catalogue on the local process pool")
-            local_s, local_id = catalogue(server.base, args.catalogue_n, args.seed,
-                                          args.chunk_size)
-            results["catalogue_local_s"] = local_s
-            results["catalogue_local_load"] = load()
-            local_csv = export_csv(server.base, local_id)
+            if "status" in only:
+                note(f"storing a {args.rows}-row catalogue")
+                big = store_rows(data_dir, args.rows)
+                note("before/after in this process")
+                results["before_after"] = before_after(data_dir, big, args.chunk_size,
+                                                       args.quick)
+                results["status_latency"] = status_latency(server.base, big, 20)
+                note(f"  GET /catalogues/{{id}} at {args.rows} rows: p50 "
+                     f"{results['status_latency']['p50_s'] * 1e3:.1f} ms")
+            if "scenarios" in only:
+                note(f"POST /scenarios n={args.n} with scoring, {args.requests} requests")
+                results["scenarios_latency"] = latency(server.base, args.n, args.requests)
+                note(f"  p50 {results['scenarios_latency']['p50_s']:.2f} s")
+            if "health" in only:
+                note(f"/health under load (SQLite): a {args.health_n}-scenario job and "
+                     f"{args.readers} readers")
+                h = health_under_load(server.base, args.health_n, args.seed, args.chunk_size,
+                                      args.readers)
+                results["health_sqlite"] = h
+                note(f"  /health p50 {h['p50_s'] * 1e3:.1f} ms, p99 {h['p99_s'] * 1e3:.1f} ms")
+            if "catalogue" in only:
+                note("catalogue on the local process pool")
+                local_s, local_id = catalogue(server.base, args.catalogue_n, args.seed,
+                                              args.chunk_size)
+                results["catalogue_local_s"] = local_s
+                results["catalogue_local_load"] = load()
+                local_csv = export_csv(server.base, local_id)
         finally:
             server.stop()
-        if not args.skip_dask:
+        if "health" in only and args.pg_url:
+            url, drop = pg_fresh_database(args.pg_url)
+            try:
+                server = Server(data_dir, {"SCENGEN_LOCAL_WORKERS": str(args.workers),
+                                           "SCENGEN_DATABASE_URL": url}, log)
+                try:
+                    server.wait()
+                    note("/health under load (PostgreSQL)")
+                    h = health_under_load(server.base, args.health_n, args.seed,
+                                          args.chunk_size, args.readers)
+                    results["health_postgresql"] = h
+                    note(f"  /health p50 {h['p50_s'] * 1e3:.1f} ms, "
+                         f"p99 {h['p99_s'] * 1e3:.1f} ms")
+                finally:
+                    server.stop()
+            finally:
+                drop()
+        if "catalogue" in only and not args.skip_dask:
             from distributed import LocalCluster
 
             note(f"catalogue on a {args.workers}-worker Dask LocalCluster")

@@ -34,7 +34,13 @@ from app.domain.model import (
     model_lane_width,
 )
 from app.domain.risk import parse_scenario, risk_report, scenario_risk_series, score_posted
-from app.domain.sampling import SampleResult, estimate_region, parse_constraints, sample
+from app.domain.sampling import (
+    SampleResult,
+    add_region_report,
+    estimate_region,
+    parse_constraints,
+    sample,
+)
 from datasets.cutin_model import PARAM_NAMES
 
 __all__ = [
@@ -42,6 +48,7 @@ __all__ = [
     "PARAM_NAMES",
     "FittedModel",
     "SampleResult",
+    "add_region_report",
     "dataset_from_files",
     "describe_model",
     "embedded_parameter_table",

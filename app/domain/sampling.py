@@ -25,6 +25,7 @@ from sampler import (
 from sampler import sample as sampler_sample
 from sampler.exposure import region_report
 from sampler.problem import Problem
+from sampler.sampleset import SampleSet
 
 __all__ = ["SampleResult", "estimate_region", "parse_constraints", "sample"]
 
@@ -50,6 +51,7 @@ class SampleResult:
     p_region: dict[str, Any]  # {"estimate", "ci": [lo, hi], ...}
     diagnostics: dict[str, Any]
     lane_width: float  # m, the region's lane width: build the scenarios with it
+    sample_set: SampleSet | None = None  # the sampler's set (for ``add_region_report``)
 
 
 def region_dict(pr: PRegion) -> dict[str, Any]:
@@ -95,9 +97,12 @@ def region_of(data: dict[str, Any]) -> PRegion:
 
 
 def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int,
-           method: str = "auto", known_region: dict[str, Any] | None = None) -> SampleResult:
+           method: str = "auto", known_region: dict[str, Any] | None = None, *,
+           report: bool = True) -> SampleResult:
     """``n`` samples of ``model`` in the region (``sampler.sample``). ``known_region``: the
-    region's P(A) dict when it is already estimated (reused, not estimated again)."""
+    region's P(A) dict when it is already estimated (reused, not estimated again).
+    ``report=False`` leaves the model interval and rates out of ``p_region`` for the caller
+    to add later (``add_region_report``, e.g. while the samples are being scored)."""
     estimator = None if known_region is None else KnownRegion(region_of(known_region))
     try:
         ss = sampler_sample(model, list(constraints), n, seed, method, estimator=estimator)
@@ -106,22 +111,30 @@ def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int
     diagnostics = jsonconv.encode(dict(ss.diagnostics))
     diagnostics["method"] = ss.method
     diagnostics["requested_method"] = ss.requested
-    p_region = region_dict(ss.p_region)
-    if known_region is None and (model.bootstrap_ or model.exposure_):
-        # issue 12: the "model" interval beside the Monte Carlo one, and rates per hour /
-        # 10^6 km with both (sampler.exposure.region_report)
-        report = region_report(model, ss, seed=seed)
-        p_region["model_ci"] = report["p_region"]["model_ci"]
-        p_region["mc_ci"] = report["p_region"]["mc_ci"]
-        if "rates" in report:
-            p_region["rates"] = jsonconv.encode(report["rates"])
-    return SampleResult(
+    result = SampleResult(
         params=ss.params,
         weights=np.asarray(ss.exposure_weights, dtype=np.float64),
-        p_region=p_region,
+        p_region=region_dict(ss.p_region),
         diagnostics=diagnostics,
         lane_width=float(ss.region.lane_width),
+        sample_set=ss,
     )
+    if report and known_region is None:
+        add_region_report(model, result, seed)
+    return result
+
+
+def add_region_report(model: CutInGMM, result: SampleResult, seed: int) -> None:
+    """Issue 12: the "model" interval of P(A) beside the Monte Carlo one, and rates per hour
+    / 10^6 km with both (``sampler.exposure.region_report``), added to ``result.p_region``
+    when the model has bootstrap refits or an exposure."""
+    if result.sample_set is None or not (model.bootstrap_ or model.exposure_):
+        return
+    report = region_report(model, result.sample_set, seed=seed)
+    result.p_region["model_ci"] = report["p_region"]["model_ci"]
+    result.p_region["mc_ci"] = report["p_region"]["mc_ci"]
+    if "rates" in report:
+        result.p_region["rates"] = jsonconv.encode(report["rates"])
 
 
 def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],

@@ -41,6 +41,8 @@ class ChunkExecutor(Protocol):
 
     def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]: ...
 
+    def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]: ...
+
     def close(self) -> None: ...
 
 
@@ -62,6 +64,10 @@ class InlineExecutor:
     def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]:
         """``fn`` over zipped ``args`` in this thread, results in order."""
         return [fn(*a) for a in zip(*args, strict=True)]
+
+    def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]:
+        """``map`` run when the returned function is called (nothing runs in between)."""
+        return lambda: self.map(fn, *args)
 
     def close(self) -> None:
         return None
@@ -133,9 +139,14 @@ class FuturesExecutor:
     def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]:
         """``fn`` over zipped ``args`` on the executor's workers, results in order (what
         ``POST /scenarios`` uses to score its vectors on every core)."""
+        return self.map_later(fn, *args)()
+
+    def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]:
+        """Submit ``fn`` over zipped ``args`` now; the returned function waits for the
+        results (in order), so the caller can work while the workers do."""
         executor = self._get()
         futures = [executor.submit(fn, *a) for a in zip(*args, strict=True)]
-        return [f.result() for f in futures]
+        return lambda: [f.result() for f in futures]
 
     def close(self) -> None:
         with self._lock:

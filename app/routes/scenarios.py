@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import APIRouter
@@ -44,21 +45,22 @@ POOL_MIN_N = 8
 
 
 def _score(ctx: ServiceContext, drawn: domain.SampleResult,
-           body: ScenarioRequest) -> list[ScenarioRecord]:
-    """Score the drawn vectors (``score_vector`` each): on the service's executor, split
-    in one part per worker slot, or here for a few vectors or nothing to score."""
+           body: ScenarioRequest) -> Callable[[], list[ScenarioRecord]]:
+    """Start scoring the drawn vectors (``score_vector`` each) on the service's executor,
+    split in one part per worker slot; the returned function waits for the records. A few
+    vectors, or nothing to score, are done here when the function is called."""
     kwargs: dict[str, Any] = {"lane_width": drawn.lane_width, "seed": body.seed,
                               "score": body.score, "include_scenario": body.include_trajectories}
     table, weights = drawn.params, [float(w) for w in drawn.weights]
     n = len(table)
     if not body.score or n < POOL_MIN_N:
-        return score_part(table, 0, weights, kwargs)
+        return lambda: score_part(table, 0, weights, kwargs)
     parts = min(n, 4)
     starts = [n * k // parts for k in range(parts + 1)]
-    results = ctx.executor.map(
+    results = ctx.executor.map_later(
         score_part, [table.iloc[a:b].reset_index(drop=True) for a, b in itertools.pairwise(starts)],
         starts[:-1], [weights[a:b] for a, b in itertools.pairwise(starts)], [kwargs] * parts)
-    return [record for part in results for record in part]
+    return lambda: [record for part in results() for record in part]
 
 
 @router.post("", response_model=ScenariosResponse,
@@ -72,8 +74,11 @@ def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosRespons
     model = ctx.model(model_id, field="body.model")
     check_constraints(body.constraints, ctx.settings)
     constraints = domain.parse_constraints(body.constraints)
-    drawn = domain.sample(model, constraints, body.n, body.seed, method=body.sampler)
-    records = _score(ctx, drawn, body)
+    drawn = domain.sample(model, constraints, body.n, body.seed, method=body.sampler,
+                          report=False)
+    later = _score(ctx, drawn, body)  # the workers score while this thread ...
+    domain.add_region_report(model, drawn, body.seed)  # ... adds the model interval, rates
+    records = later()
     return ScenariosResponse(
         model=model_id, n=len(records), seed=body.seed, sampler=body.sampler,
         constraints=body.constraints, p_region=PRegion.model_validate(drawn.p_region),

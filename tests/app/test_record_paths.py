@@ -122,8 +122,11 @@ def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
     pool = LocalPoolExecutor(1)
     try:
         pooled = pool.map(score_part, *args)
+        later = pool.map_later(score_part, *args)  # submitted now, gathered below
+        gathered = later()
     finally:
         pool.close()
     inline = InlineExecutor().map(score_part, *args)
+    assert gathered == pooled == InlineExecutor().map_later(score_part, *args)()
     assert pooled == inline and [r.index for p in pooled for r in p] == [0, 1, 2, 3]
     assert all(r.class_ is not None for p in pooled for r in p)
