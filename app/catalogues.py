@@ -19,6 +19,7 @@ from app.db import repository as repo
 from app.db.models import CatalogueRow, ScenarioRow
 from app.errors import Conflict, InvalidInput, ServiceError
 from app.jobs.chunk import CatalogueSpec, rebuild_scenario
+from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
 from riskcore.scenario import ConcreteScenario
 from sampler.record import SCORE_FIELDS, ScenarioRecord
@@ -93,6 +94,12 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     with ctx.db.read_session() as s:
         row = repo.get_catalogue(s, catalogue_id)
         n_done, stored = repo.chunk_counts(s, catalogue_id)
+        chunks = (repo.stored_chunk_indices(s, catalogue_id)
+                  if row.status == "running" else set())
+    # per scenario: the workers' reports of the chunks being computed (app.db.chunkfile)
+    done = (scenarios_done(row.n, row.chunk_size, chunks,
+                           chunkfile.progress_dir(ctx.data_dir, catalogue_id))
+            if row.status == "running" else stored)
     # the statistics change only when a chunk is stored: computed once per stored state
     key = (catalogue_id, n_done, stored, row.updated_at.isoformat())
 
@@ -115,7 +122,8 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "chunk_size": row.chunk_size,
         "chunks": {"total": row.n_chunks, "done": n_done},
         "scenarios_stored": stored,
-        "progress": n_done / row.n_chunks if row.n_chunks else 1.0,
+        "scenarios_done": done,
+        "progress": min(1.0, done / row.n) if row.n else 1.0,
         "p_region": row.p_region,
         "summary": stats,
         "classes": classes,

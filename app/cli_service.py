@@ -157,7 +157,7 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
         if not show_progress:
             return
         if bar is None:
-            bar = tqdm(total=total, initial=done, unit="chunk", file=sys.stderr,
+            bar = tqdm(total=total, initial=done, unit="scenario", file=sys.stderr,
                        desc=catalogue_id)
         else:
             bar.update(done - bar.n)

@@ -4,17 +4,26 @@ A chunk file holds the concrete scenarios of one chunk as gzip'd JSON lines (one
 ``scengen.concrete-scenario/1`` object per line, in index order; ``null`` for a vector the
 builder refused, whose row carries the error), written with a fixed
 gzip mtime so that the same chunk always gives the same bytes (its sha256 is stored).
+
+Beside them, while a chunk is being computed, a worker on this machine keeps a progress
+file (``progress_<index>``: how many of the chunk's scenarios are done) so that the status
+and the CLI bar move per scenario, not per chunk; the runner removes it when the chunk is
+stored. A worker that cannot write there (a Dask worker on another machine) reports nothing
+and the progress moves per chunk.
 """
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import json
+import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["encode", "read_at", "read_scenarios", "relative_path"]
+__all__ = ["clear_progress", "encode", "progress_dir", "read_at", "read_progress",
+           "read_scenarios", "relative_path", "write_progress"]
 
 
 def relative_path(catalogue_id: str, index: int) -> str:
@@ -43,3 +52,35 @@ def read_at(path: Path, position: int) -> dict[str, Any] | None:
         if k == position:
             return data
     return None
+
+
+def progress_dir(data_dir: Path, catalogue_id: str) -> Path:
+    """Folder of a catalogue's chunk files and progress files."""
+    return data_dir / "catalogues" / catalogue_id
+
+
+def write_progress(folder: str | Path, index: int, done: int) -> None:
+    """Record that ``done`` scenarios of chunk ``index`` are computed (best effort: a
+    folder that cannot be written is skipped)."""
+    path = Path(folder) / f"progress_{index:06d}"
+    tmp = path.with_name(f".{path.name}.{os.getpid()}")
+    with contextlib.suppress(OSError):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(str(int(done)))
+        os.replace(tmp, path)
+
+
+def read_progress(folder: Path) -> dict[int, int]:
+    """Chunk index -> scenarios done, of the chunks with a progress file."""
+    out: dict[int, int] = {}
+    with contextlib.suppress(OSError):
+        for path in folder.glob("progress_*"):
+            with contextlib.suppress(OSError, ValueError):
+                out[int(path.name.removeprefix("progress_"))] = int(path.read_text())
+    return out
+
+
+def clear_progress(folder: Path, index: int) -> None:
+    """Remove chunk ``index``'s progress file (its chunk is stored)."""
+    with contextlib.suppress(OSError):
+        (folder / f"progress_{index:06d}").unlink()

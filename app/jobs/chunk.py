@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -24,6 +25,9 @@ from app.db import chunkfile
 from riskcore.scenario import ConcreteScenario
 from sampler import Constraint, CutInGMM
 from sampler.record import ScenarioRecord, score_rows, score_vector
+
+#: seconds between two progress reports of a chunk being computed
+PROGRESS_EVERY = 0.25
 
 #: spawn-key prefixes that keep the seed streams apart
 _CHUNK_KEY = 1
@@ -61,6 +65,9 @@ class CatalogueSpec:
     p_region: float | None = None
     #: the catalogue's whole P(A) record (with P(B)): every chunk reuses it
     region: dict[str, Any] | None = None
+    #: where a worker reports per-scenario progress (``chunkfile.write_progress``); not
+    #: part of the catalogue: no chunk's content depends on it
+    progress_dir: str | None = None
 
     @property
     def n_chunks(self) -> int:
@@ -137,12 +144,16 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     weights = spec.p_region / spec.n if spec.p_region is not None else drawn.weights
     rows: list[dict[str, Any]] = []
     scenarios: list[dict[str, Any] | None] = []
+    reported = time.monotonic()
     for record, _ in score_rows(
             drawn.params, start=start, exposure_weights=weights, lane_width=drawn.lane_width,
             seed=spec.seed, provenance=lambda idx: scenario_provenance(spec, idx),
             score=spec.score, include_scenario=spec.store_trajectories):
         rows.append(scenario_row(record, index))
         scenarios.append(record.scenario)  # None: the builder refused the vector
+        if spec.progress_dir is not None and time.monotonic() - reported >= PROGRESS_EVERY:
+            chunkfile.write_progress(spec.progress_dir, index, len(rows))
+            reported = time.monotonic()
     blob = chunkfile.encode(scenarios) if spec.store_trajectories else None
     diagnostics = jsonconv.encode({"sampler": drawn.diagnostics, "p_region": drawn.p_region})
     return ChunkResult(index=index, rows=rows, blob=blob, diagnostics=diagnostics)

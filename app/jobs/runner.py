@@ -10,6 +10,7 @@ because chunk i depends only on (spec, i).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 from collections.abc import Callable
@@ -17,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from app import domain, jsonconv
+from app.db import chunkfile
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
@@ -25,7 +27,7 @@ from app.jobs.executors import ChunkExecutor
 
 log = logging.getLogger("scengen.jobs")
 
-Progress = Callable[[int, int], None]  # (chunks stored, chunks in total)
+Progress = Callable[[int, int], None]  # (scenarios done, scenarios in total)
 
 
 class _Either:
@@ -62,6 +64,66 @@ def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
     return encoded
 
 
+def scenarios_done(n: int, chunk_size: int, stored: set[int], folder: Path) -> int:
+    """Scenarios of the stored chunks (of a catalogue of ``n`` in chunks of ``chunk_size``)
+    plus those the workers report done in the chunks being computed
+    (``chunkfile.read_progress``)."""
+    n_chunks = (n + chunk_size - 1) // chunk_size
+
+    def size(i: int) -> int:
+        return min(n, (i + 1) * chunk_size) - i * chunk_size
+
+    partial = sum(min(k, size(i)) for i, k in chunkfile.read_progress(folder).items()
+                  if i not in stored and 0 <= i < n_chunks)
+    return sum(size(i) for i in stored if 0 <= i < n_chunks) + partial
+
+
+class _Meter:
+    """Calls ``progress(scenarios done, n)`` when a chunk is stored and, from a ticker
+    thread, every ``PROGRESS_TICK`` s while chunks are computed (per scenario)."""
+
+    def __init__(self, spec: CatalogueSpec, folder: Path, stored: set[int],
+                 progress: Progress | None) -> None:
+        self.spec, self.folder, self.progress = spec, folder, progress
+        self.done = set(stored)
+        self.lock = threading.Lock()
+        self.halt = threading.Event()
+        self.last = -1
+        self._report()
+        self.thread: threading.Thread | None = None
+        if progress is not None:
+            self.thread = threading.Thread(target=self._tick, name="catalogue-progress",
+                                           daemon=True)
+            self.thread.start()
+
+    def _report(self) -> None:
+        if self.progress is None:
+            return
+        with self.lock:
+            n = scenarios_done(self.spec.n, self.spec.chunk_size, self.done, self.folder)
+            if n > self.last:  # never backwards (a chunk between its file and its row)
+                self.last = n
+                self.progress(n, self.spec.n)
+
+    def _tick(self) -> None:
+        while not self.halt.wait(PROGRESS_TICK):
+            self._report()
+
+    def stored(self, index: int) -> None:
+        with self.lock:
+            self.done.add(index)
+        self._report()
+
+    def close(self) -> None:
+        self.halt.set()
+        if self.thread is not None:
+            self.thread.join(timeout=5)
+
+
+#: seconds between two progress reports of the runner while chunks are computed
+PROGRESS_TICK = 0.5
+
+
 class CatalogueRunner:
     """Runs catalogue jobs against one database/data dir with one executor."""
 
@@ -93,8 +155,8 @@ class CatalogueRunner:
         total = spec.n_chunks
         log.info("catalogue %s: %d of %d chunks stored, running the rest on %s",
                  catalogue_id, len(done), total, self.executor.name)
-        if progress is not None:
-            progress(len(done), total)
+        folder = chunkfile.progress_dir(self.data_dir, catalogue_id)
+        meter = _Meter(spec, folder, done, progress)
         try:
             if need_region:
                 p_region = self.region(spec)
@@ -102,19 +164,20 @@ class CatalogueRunner:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region
                     spec = worker_spec(row, model_json)
+            spec = dataclasses.replace(spec, progress_dir=str(folder))
             todo = [i for i in range(total) if i not in done]
-            stored = len(done)
+            for i in todo:  # what an interrupted run reported is redone from 0
+                chunkfile.clear_progress(folder, i)
             for result in self.executor.run(spec, todo, halt):
                 with self.db.session() as s:
                     ok = repo.store_chunk(s, self.data_dir, catalogue_id, result.index,
                                           result.rows, result.blob, result.sha256,
                                           result.diagnostics)
+                chunkfile.clear_progress(folder, result.index)
                 if not ok and not self._exists(catalogue_id):
                     repo.remove_catalogue_files(self.data_dir, catalogue_id)
                     return "deleted"
-                stored += 1
-                if progress is not None:
-                    progress(stored, total)
+                meter.stored(result.index)
             if cancel is not None and cancel.is_set():
                 return self._finish(catalogue_id, "cancelled", None)
             if stop is not None and stop.is_set():
@@ -129,6 +192,8 @@ class CatalogueRunner:
         except Exception as exc:
             log.exception("catalogue %s failed", catalogue_id)
             return self._finish(catalogue_id, "failed", f"{type(exc).__name__}: {exc}")
+        finally:
+            meter.close()
 
     def _exists(self, catalogue_id: str) -> bool:
         with self.db.session() as s:

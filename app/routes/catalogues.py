@@ -82,7 +82,9 @@ class CatalogueStatus(ApiModel):
     chunk_size: int
     chunks: ChunkProgress
     scenarios_stored: int
-    progress: float = Field(description="chunks stored / chunks, 0 … 1")
+    scenarios_done: int = Field(description="scenarios stored plus, while the job runs, "
+                                "those its workers report computed in unfinished chunks")
+    progress: float = Field(description="scenarios_done / n, 0 … 1 (moves per scenario)")
     p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate")
     summary: dict[str, dict[str, float]]
     classes: dict[str, int] = Field(default_factory=dict, description="scenarios per "

@@ -17,7 +17,7 @@ def test_create_status_list_export(store: Path, tmp_path: Path,
     out, err = capsys.readouterr()
     result = json.loads(out.strip().splitlines()[-1])
     assert result["status"] == "done"
-    assert "2/2" in err  # the progress bar (chunks) on stderr
+    assert "4/4" in err and "scenario" in err  # the progress bar (per scenario) on stderr
     cid = result["id"]
     assert main(["catalogue", "status", cid]) == 0
     status = json.loads(capsys.readouterr().out)

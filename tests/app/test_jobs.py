@@ -76,7 +76,7 @@ def test_a_job_stores_every_chunk_and_p_region(tmp_path: Path) -> None:
     seen: list[tuple[int, int]] = []
     runner = CatalogueRunner(db, tmp_path, InlineExecutor(fake_chunk), region=region)
     assert runner.run("a", progress=lambda d, t: seen.append((d, t))) == "done"
-    assert seen[0] == (0, 5) and seen[-1] == (5, 5)
+    assert seen[0] == (0, 23) and seen[-1] == (23, 23)  # scenarios, not chunks
     with db.session() as s:
         row = repo.get_catalogue(s, "a")
         assert row.status == "done" and row.finished_at is not None
@@ -160,3 +160,47 @@ def test_spec_bounds_cover_n_exactly() -> None:
     with pytest.raises(IndexError):
         spec.bounds(5)
     assert CatalogueSpec.from_dict(spec.to_dict()) == spec
+
+
+def test_progress_moves_per_scenario_while_a_chunk_runs(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # issue 14 item 6: workers report each scenario (app.db.chunkfile progress files); the
+    # runner's meter passes the count on before the chunk is stored
+    from app.db import chunkfile
+    from app.jobs import runner as runner_module
+    from tests.app.factories import wait_for
+
+    monkeypatch.setattr(runner_module, "PROGRESS_TICK", 0.01)
+    seen: list[tuple[int, int]] = []
+
+    def reporting_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
+        assert spec.progress_dir is not None
+        start, stop = spec.bounds(index)
+        for k in range(1, stop - start):
+            chunkfile.write_progress(spec.progress_dir, index, k)
+            wait_for(lambda k=k: bool(seen) and seen[-1][0] == start + k,  # type: ignore[misc]
+                     f"scenario {start + k} reported", attempts=500, pause=0.01)
+        return fake_chunk(spec, index)
+
+    db = _db(tmp_path)
+    _catalogue(db, "p", n=12)  # chunks of 5, 5, 2
+    runner = CatalogueRunner(db, tmp_path, InlineExecutor(reporting_chunk), region=region)
+    assert runner.run("p", progress=lambda d, t: seen.append((d, t))) == "done"
+    assert [d for d, _ in seen] == list(range(13))  # 0, 1, ..., 12: every scenario
+    assert {t for _, t in seen} == {12}
+    assert chunkfile.read_progress(chunkfile.progress_dir(tmp_path, "p")) == {}  # cleared
+
+
+def test_scenarios_done_counts_stored_chunks_and_reports(tmp_path: Path) -> None:
+    from app.db import chunkfile
+    from app.jobs.runner import scenarios_done
+
+    # n = 12 in chunks of 5: sizes 5, 5, 2
+    assert scenarios_done(12, 5, set(), tmp_path) == 0
+    assert scenarios_done(12, 5, {0, 2}, tmp_path) == 7
+    chunkfile.write_progress(tmp_path, 1, 3)
+    chunkfile.write_progress(tmp_path, 2, 2)  # stored already: counted once
+    chunkfile.write_progress(tmp_path, 7, 4)  # no such chunk: ignored
+    assert scenarios_done(12, 5, {0, 2}, tmp_path) == 10
+    chunkfile.write_progress(tmp_path, 1, 9)  # more than the chunk holds: capped
+    assert scenarios_done(12, 5, {0, 2}, tmp_path) == 12

@@ -206,3 +206,25 @@ def test_export_of_an_unfinished_catalogue_is_409(client: Any) -> None:
     r = client.get(f"/catalogues/{row.id}/export")
     assert r.status_code == 409 and "queued" in r.json()["error"]["message"]
     assert client.get(f"/catalogues/{row.id}").json()["progress"] == 0.0
+
+
+def test_status_of_a_running_catalogue_counts_the_workers_reports(client: Any) -> None:
+    # issue 14 item 6: the status moves per scenario while a chunk is being computed
+    from app import catalogues
+    from app.db import chunkfile
+    from app.db import repository as repo
+
+    ctx = client.app.state.ctx
+    row = catalogues.create(ctx, n=12, seed=2, constraints=["ttc<3"], chunk_size=5)
+    with ctx.db.session() as s:
+        repo.get_catalogue(s, row.id).status = "running"
+    folder = chunkfile.progress_dir(ctx.data_dir, row.id)
+    chunkfile.write_progress(folder, 1, 3)  # 3 of chunk 1 (idx 5..9) done, none stored
+    status = client.get(f"/catalogues/{row.id}").json()
+    assert status["scenarios_done"] == 3 and status["scenarios_stored"] == 0
+    assert status["progress"] == pytest.approx(3 / 12)
+    chunkfile.write_progress(folder, 1, 4)
+    assert client.get(f"/catalogues/{row.id}").json()["scenarios_done"] == 4
+    with ctx.db.session() as s:
+        repo.get_catalogue(s, row.id).status = "cancelled"
+    chunkfile.clear_progress(folder, 1)
