@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from riskcore.errors import FieldError
+
 __all__ = [
     "BuilderError",
     "ConstraintError",
@@ -24,31 +26,18 @@ __all__ = [
 ]
 
 
-class SamplerError(ValueError):
-    """Base class of every error raised by ``sampler``.
-
-    Structured fields (for callers that map the error, e.g. to an HTTP response, without
-    reading the message): ``field`` the dotted name of the input to blame (``"constraints.0"``,
-    ``"lane_width"``, ``"params"``) or None; ``problem`` a short phrase (``"unknown
-    quantity"``, ``"not finite"``, ``"empty region"``) or None; ``value`` the offending
-    value or None.
-    """
-
-    def __init__(self, message: str, *, field: str | None = None, problem: str | None = None,
-                 value: Any = None) -> None:
-        super().__init__(message)
-        self.field = field
-        self.problem = problem
-        self.value = value
+class SamplerError(FieldError):
+    """Base class of every error raised by ``sampler``; structured fields ``field``,
+    ``problem``, ``value`` as in ``riskcore.errors.FieldError`` (e.g. ``"constraints.0"``,
+    ``"unknown quantity"``, ``"foo"``)."""
 
 
 class ConstraintError(SamplerError):
     """A constraint or a region is malformed. The message lists the valid choices;
     ``constraint`` holds the constraint's text when one constraint is to blame."""
 
-    def __init__(self, message: str, *, field: str | None = None, problem: str | None = None,
-                 value: Any = None, constraint: str | None = None) -> None:
-        super().__init__(message, field=field, problem=problem, value=value)
+    def __init__(self, message: str, *, constraint: str | None = None, **fields: Any) -> None:
+        super().__init__(message, **fields)
         self.constraint = constraint
 
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 import datetime as dt
 import tempfile
 import warnings
-import zipfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -41,7 +40,6 @@ import numpy as np
 from lxml import etree
 
 from app.exports._common import ExportError, Row, dumps
-from app.exports._tabular import CsvRowWriter
 from app.exports._xosc import (
     INDEX_DIGITS,
     INDEX_FILE,
@@ -50,7 +48,7 @@ from app.exports._xosc import (
     _creation_date,
     _lane_width,
     assemble_zip,
-    check_index,
+    write_scratch,
 )
 from riskcore.scenario import ConcreteScenario, Track
 
@@ -213,19 +211,14 @@ def write_commonroad_zip(items: Iterator[Item], manifest: Mapping[str, Any],
     scratch_zip = path.with_name(path.name + ".scenarios")
     scratch_csv = path.with_name(path.name + ".csv")
     scratch_dir = Path(tempfile.mkdtemp(prefix=".commonroad-", dir=path.parent))
-    count = 0
+
+    def content(index: int, scenario: ConcreteScenario, row: Row, name: str) -> bytes:
+        return scenario_xml(scenario, index=index, lane_width=_lane_width(scenario, index),
+                            date=date, scratch_dir=scratch_dir)
+
     try:
-        with zipfile.ZipFile(scratch_zip, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zs, \
-                scratch_csv.open("w", encoding="utf-8", newline="") as fh:
-            index_writer = CsvRowWriter(fh, lead=("file",))
-            for index, scenario, _summary, row in items:
-                check_index(index, "commonroad")
-                name = scenario_file_name(index)
-                width = _lane_width(scenario, index)
-                zs.writestr(name, scenario_xml(scenario, index=index, lane_width=width,
-                                               date=date, scratch_dir=scratch_dir))
-                index_writer.write(index, row, (name,))
-                count += 1
+        count = write_scratch(items, scratch_zip, scratch_csv, "commonroad",
+                              scenario_file_name, content)
         full_manifest = dict(manifest)
         full_manifest["export"] = {
             "format": "commonroad",

@@ -38,7 +38,7 @@ import os
 import threading
 import xml.etree.ElementTree as ET
 import zipfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -473,6 +473,26 @@ def check_index(index: int, fmt: str) -> None:
                           "scenarios; split the catalogue")
 
 
+def write_scratch(items: Iterator[Item], scratch_zip: Path, scratch_csv: Path, fmt: str,
+                  file_name: Callable[[int], str],
+                  content: Callable[[int, ConcreteScenario, Row, str], bytes]) -> int:
+    """The scenario files of a zip export (``content(index, scenario, row, name)`` under
+    ``file_name(index)``) in a scratch zip and their index rows (CSV, a leading ``file``
+    column) in a scratch CSV, streamed; returns how many. ``assemble_zip`` makes the
+    final zip of them."""
+    count = 0
+    with zipfile.ZipFile(scratch_zip, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zs, \
+            scratch_csv.open("w", encoding="utf-8", newline="") as fh:
+        index_writer = CsvRowWriter(fh, lead=("file",))
+        for index, scenario, _summary, row in items:
+            check_index(index, fmt)
+            name = file_name(index)
+            zs.writestr(name, content(index, scenario, row, name))
+            index_writer.write(index, row, (name,))
+            count += 1
+    return count
+
+
 def assemble_zip(path: Path, entries: Mapping[str, bytes | Path], scratch_zip: Path) -> None:
     """The final zip: ``entries`` (content or a file holding it) sorted by name, then the
     scenario files of ``scratch_zip`` in their order (their names sort after the others)."""
@@ -499,31 +519,28 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
     scratch_csv = path.with_name(path.name + ".csv")
     logical = LogicalCatalogue(path.with_name(path.name + ".logical"), date)
     extent: RoadExtent | None = None
-    count = 0
+
+    def content(index: int, scenario: ConcreteScenario, row: Row, name: str) -> bytes:
+        nonlocal extent
+        width = _lane_width(scenario, index)
+        if extent is None:
+            extent = RoadExtent(lane_width=width)
+        elif width != extent.lane_width:
+            raise ExportError(
+                f"item {index}: lane_width {width} m differs from the catalogue's "
+                f"{extent.lane_width} m; one xosc export shares one road"
+            )
+        extent.add(scenario)
+        try:
+            data = scenario_xosc(scenario, index=index, row=row, mode=mode, date=date)
+        except ExportError as exc:
+            raise ExportError(f"item {index}: {exc}") from None
+        logical.add(index, scenario, row, name)
+        return data
+
     try:
-        with zipfile.ZipFile(scratch_zip, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zs, \
-                scratch_csv.open("w", encoding="utf-8", newline="") as fh:
-            index_writer = CsvRowWriter(fh, lead=("file",))
-            for index, scenario, _summary, row in items:
-                check_index(index, "xosc")
-                width = _lane_width(scenario, index)
-                if extent is None:
-                    extent = RoadExtent(lane_width=width)
-                elif width != extent.lane_width:
-                    raise ExportError(
-                        f"item {index}: lane_width {width} m differs from the catalogue's "
-                        f"{extent.lane_width} m; one xosc export shares one road"
-                    )
-                extent.add(scenario)
-                name = scenario_file_name(index)
-                try:
-                    data = scenario_xosc(scenario, index=index, row=row, mode=mode, date=date)
-                except ExportError as exc:
-                    raise ExportError(f"item {index}: {exc}") from None
-                zs.writestr(name, data)
-                index_writer.write(index, row, (name,))
-                logical.add(index, scenario, row, name)
-                count += 1
+        count = write_scratch(items, scratch_zip, scratch_csv, "xosc", scenario_file_name,
+                              content)
         logical.close()
         assert extent is not None  # an empty catalogue raised in the item stream
         road = road_xodr(extent)

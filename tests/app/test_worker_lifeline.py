@@ -44,6 +44,25 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _sigkill_and_wait_for_orphans(parent: subprocess.Popen[bytes],
+                                  children: list[psutil.Process]) -> None:
+    """SIGKILL ``parent``; then poll (bounded) until none of ``children`` is left."""
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.wait(timeout=30)
+    wait_for(lambda: not any(_alive(c.pid) for c in children),
+             "the pool workers to die with their parent", attempts=200)
+
+
+def _reap(parent: subprocess.Popen[bytes], children: list[psutil.Process]) -> None:
+    """Clean up what this test started, whatever happened."""
+    if parent.poll() is None:
+        parent.kill()
+        parent.wait(timeout=30)
+    for child in children:
+        if _alive(child.pid):
+            child.kill()
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux process tree")
 def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) -> None:
     env = {**os.environ, "LIFELINE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
@@ -56,17 +75,9 @@ def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) ->
         workers = {int(p.name.split("-")[1]) for p in tmp_path.glob("worker-*")}
         assert workers <= {c.pid for c in children}
         assert len(children) >= 3  # two workers and the resource tracker
-        os.kill(parent.pid, signal.SIGKILL)
-        parent.wait(timeout=30)
-        wait_for(lambda: not any(_alive(c.pid) for c in children),
-                 "the pool to die with its parent", attempts=200)
+        _sigkill_and_wait_for_orphans(parent, children)
     finally:
-        if parent.poll() is None:
-            parent.kill()
-            parent.wait(timeout=30)
-        for child in children:  # only what this test started
-            if _alive(child.pid):
-                child.kill()
+        _reap(parent, children)
 
 
 def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
@@ -100,15 +111,7 @@ def test_cli_scoring_workers_die_with_a_sigkilled_cli(store: Path, tmp_path: Pat
 
     try:
         wait_for(workers_started, "two scoring workers", attempts=1800)
-        os.kill(parent.pid, signal.SIGKILL)
-        parent.wait(timeout=30)
-        wait_for(lambda: not any(_alive(c.pid) for c in children),
-                 "the scoring workers to die with the CLI", attempts=200)
+        _sigkill_and_wait_for_orphans(parent, children)
         assert not out.exists() or out.stat().st_size == 0  # killed before writing
     finally:
-        if parent.poll() is None:
-            parent.kill()
-            parent.wait(timeout=30)
-        for child in children:  # only what this test started
-            if _alive(child.pid):
-                child.kill()
+        _reap(parent, children)
