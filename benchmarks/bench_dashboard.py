@@ -64,7 +64,7 @@ def _api(base: str, cid: str) -> None:
     print("\nJSON views (cold = first request, computed; warm = repeated, cached):")
     print(f"  {'view':44s} {'cold ms':>8s} {'warm ms':>8s} {'kB':>7s}")
     with httpx.Client(base_url=base, timeout=300) as http:
-        for path in (f"/dashboard/api/catalogues/{cid}/risk",
+        for path in (f"/dashboard/api/catalogues/{cid}/criticality",
                      f"/dashboard/api/catalogues/{cid}/shift",
                      "/dashboard/api/models/default/fit"):
             times = []
@@ -106,7 +106,7 @@ def _page(base: str, cid: str, other: str) -> None:
                                        "[e.name, Math.round(e.startTime), "
                                        "Math.round(e.duration)])"):
                     print("     ", e)
-            points = page.locator("#ttc-risk .scatterlayer .point").count()
+            points = page.locator("#ttc-btn .scatterlayer .point").count()
             bars = page.locator(".barlayer .point").count()
             print(f"  {label:42s} catalogue view {risk_view:5.2f} s, all views "
                   f"{elapsed:5.2f} s ({points} scatter points, {bars} bars drawn)")

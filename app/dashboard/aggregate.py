@@ -6,7 +6,8 @@ Every plot of the dashboard gets a fixed-size summary, whatever the number of sc
 * scatter plots are thinned here (``thin_scatter``): at most ``MAX_SCATTER`` points, chosen
   by a documented, deterministic rule (no randomness, so the same catalogue always shows
   the same points);
-* categorical shares are counted here (``shares``).
+* readable bin edges for a range are chosen here (``nice_edges``; the histograms of a
+  catalogue's criticality record are then counted in SQL, ``app.dashboard.queries``).
 
 All functions are pure numpy on plain arrays, so they are tested on hand-made data.
 """
@@ -25,8 +26,8 @@ __all__ = [
     "MAX_BINS",
     "MAX_SCATTER",
     "histogram",
+    "nice_edges",
     "shared_edges",
-    "shares",
     "thin_scatter",
 ]
 
@@ -176,23 +177,34 @@ def thin_scatter(x: ArrayLike, y: ArrayLike, max_points: int = MAX_SCATTER,
     return ok[np.flatnonzero(chosen)].astype(np.int64)
 
 
-def shares(labels: Sequence[str | None], order: Sequence[str] = (),
-           none_label: str = "no collision") -> dict[str, Any]:
-    """Counts and shares of categorical labels (None counted as ``none_label``).
+#: the bin widths ``nice_edges`` picks from, times a power of ten
+NICE_STEPS = (1.0, 2.0, 2.5, 5.0)
 
-    Labels listed in ``order`` come first in that order (also when absent, with count 0);
-    the others follow by decreasing count, then name.
+
+def nice_edges(lo: float, hi: float, max_bins: int = 40) -> FloatArray:
+    """Bin edges on round numbers covering [lo, hi]: the smallest width of the form
+    {1, 2, 2.5, 5} · 10^k that needs at most ``max_bins`` bins, edges at whole multiples of
+    it (so 0 … 1.23 with 40 bins gives width 0.05, edges 0, 0.05, …, 1.25).
+
+    A degenerate range (lo == hi) gets one bin of width 1 starting at ``floor(lo)``; lo > hi
+    or a non-finite bound is an error.
     """
-    counts: dict[str, int] = {}
-    for lab in labels:
-        name = none_label if lab is None else str(lab)
-        counts[name] = counts.get(name, 0) + 1
-    total = sum(counts.values())
-    names = list(order) + sorted((k for k in counts if k not in order),
-                                 key=lambda k: (-counts[k], k))
-    return {
-        "labels": names,
-        "counts": [counts.get(k, 0) for k in names],
-        "shares": [counts.get(k, 0) / total if total else 0.0 for k in names],
-        "n": total,
-    }
+    if not 1 <= max_bins <= MAX_BINS:
+        raise ValueError(f"max_bins must be in 1 ... {MAX_BINS}, got {max_bins}")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        raise ValueError(f"need finite lo <= hi, got {lo!r}, {hi!r}")
+    if hi == lo:
+        start = math.floor(lo)
+        return np.array([start, start + 1.0])
+    exp = math.floor(math.log10((hi - lo) / max_bins)) - 1
+    while True:
+        for m in NICE_STEPS:
+            step = m * 10.0 ** exp
+            first, last = math.floor(lo / step), math.ceil(hi / step)
+            if last == first:
+                last += 1
+            if last - first <= max_bins:
+                # whole multiples of the step, rounded to the step's decimals (no 0.30000000004)
+                digits = max(0, 2 - exp)
+                return np.round(np.arange(first, last + 1) * step, digits)
+        exp += 1

@@ -9,8 +9,11 @@ of every view is bounded whatever the size of the dataset or catalogue:
 * ``shift_preview``   constrained against unconstrained for a model and constraints typed
                       in the page (samples drawn now, without scoring);
 * ``catalogue_shift`` the same for a stored catalogue (its own samples);
-* ``catalogue_risk``  a catalogue's risk distributions, P(A), seed and sampler diagnostics;
-* ``scenario``        one scenario's trajectories and its risk/TTC/WTTC/THW over time.
+* ``catalogue_criticality`` a catalogue's criticality: class counts, distributions of the
+                      record's fields (counted in SQL, ``app.dashboard.queries``), TTC
+                      against btn, the riskiest scenarios, P(A) and sampler diagnostics;
+* ``scenario``        one scenario's trajectories, its criticality record, and Wagner's
+                      risk over time for the scripted and the R157 driver's ego.
 
 Views of immutable things (models, finished catalogues, scenarios) are cached in memory
 (``ViewCache``), keyed by what they depend on.
@@ -29,12 +32,12 @@ from app import catalogues as catalogue_service
 from app import domain, jsonconv
 from app.cache import ViewCache
 from app.context import ServiceContext
+from app.dashboard import queries
 from app.dashboard.aggregate import (
-    MAX_BINS,
     MAX_SCATTER,
     histogram,
+    nice_edges,
     shared_edges,
-    shares,
     thin_scatter,
 )
 from app.db import repository as repo
@@ -42,11 +45,12 @@ from app.db.models import CatalogueRow
 from app.errors import Conflict, InvalidInput, NotFound
 
 __all__ = [
+    "CLASS_LABELS",
     "CORNER_DEFAULT",
     "MAX_CORNER_POINTS",
     "PARAM_LABELS",
     "ViewCache",
-    "catalogue_risk",
+    "catalogue_criticality",
     "catalogue_shift",
     "model_fit",
     "scenario",
@@ -75,8 +79,25 @@ MODEL_DRAWS = 5000
 DENSITY_POINTS = 120
 #: bins of the per-parameter histograms
 PARAM_BINS = 30
-#: bins of the risk histograms over [0, 1]
-RISK_BINS = 50
+#: bins of the risk histograms over [0, 1] (width 0.05)
+RISK_BINS = 20
+#: largest number of bins of the other criticality histograms (``nice_edges``)
+CRITICALITY_BINS = 40
+#: rows of the "riskiest scenarios" table
+TOP_N = 10
+#: what each criticality class means, for the page (docs/criticality.md)
+CLASS_LABELS: dict[str, str] = {
+    "no_conflict": "no conflict (no collision without reaction)",
+    "preventable": "preventable (careful driver avoids it)",
+    "unpreventable": "unpreventable (careful driver collides; some manoeuvre avoids it)",
+    "unavoidable": "unavoidable (nothing avoids it)",
+}
+#: the reference drivers whose impact speeds view 3 shows
+DRIVER_LABELS: dict[str, str] = {
+    "none": "no reaction (scripted ego)",
+    "r157_cc": "R157 careful driver",
+    "rss": "RSS response",
+}
 #: largest n of a constrained preview drawn from the page
 PREVIEW_N_LIMIT = 5000
 #: the model's unconstrained reference draws come from this seed (documented)
@@ -277,44 +298,22 @@ def _version(row: CatalogueRow) -> tuple[Any, ...]:
 
 
 def _columns(ctx: ServiceContext, crow: CatalogueRow) -> dict[str, Any]:
-    """A catalogue's stored rows as compact columns (read once per catalogue version and
-    shared by the views): ``idx``, ``params`` (DataFrame), ``risk``, ``r_ind``, ``ttc``,
-    ``min_ttr`` (float arrays; NaN = missing, inf kept) and ``evasion`` labels of the
-    scored rows."""
+    """A catalogue's stored parameter vectors as compact columns (read once per catalogue
+    version): ``idx`` and ``params`` (DataFrame; NaN = missing)."""
     def compute() -> dict[str, Any]:
         names = list(domain.PARAM_NAMES)
         idx: list[int] = []
         params: list[list[float]] = []
-        risk: list[float] = []
-        r_ind: list[float] = []
-        ttc: list[float] = []
-        min_ttr: list[float] = []
-        evasion: list[str | None] = []
         # streamed in batches: only the columns are kept, never the ORM rows
         with ctx.db.read_session() as s:
-            for i, p, r, t, summary in repo.scenario_columns(s, crow.id):
+            for i, p, _, _, _ in repo.scenario_columns(s, crow.id):
                 idx.append(i)
                 p = p or {}
-                summary = summary or {}
                 params.append([_float(p.get(name)) for name in names])
-                risk.append(_float(r))
-                r_ind.append(_summary_value(summary, "risk_ind"))
-                ttc.append(_float(t))
-                ttr = _summary_value(summary, "min_ttr")
-                if r is not None and summary.get("min_ttr") is None:
-                    ttr = math.inf  # scored, and nothing collides: TTR is unbounded
-                min_ttr.append(ttr)
-                if r is not None:
-                    evasion.append(_evasion_label(summary.get("min_ttr_evasion")))
         return {
             "idx": np.array(idx, dtype=np.int64),
             "params": pd.DataFrame(np.array(params, dtype=np.float64).reshape(-1, len(names)),
                                    columns=names),
-            "risk": np.array(risk, dtype=np.float64),
-            "r_ind": np.array(r_ind, dtype=np.float64),
-            "ttc": np.array(ttc, dtype=np.float64),
-            "min_ttr": np.array(min_ttr, dtype=np.float64),
-            "evasion": evasion,
         }
 
     cols: dict[str, Any] = _column_cache(ctx).get(_key(ctx, "columns", *_version(crow)), compute)
@@ -387,67 +386,104 @@ def _diagnostics(chunks: Sequence[Any]) -> dict[str, Any]:
     }
 
 
-def _summary_value(summary: dict[str, Any], key: str) -> float:
-    """A number of a stored summary (``"Infinity"`` → inf; missing → NaN)."""
-    v = summary.get(key)
-    if v == "Infinity":
-        return math.inf
-    if isinstance(v, int | float) and not isinstance(v, bool):
-        return float(v)
-    return math.nan
+def _edges_from(session: Any, catalogue_id: str, cols: Sequence[Any],
+                where: Sequence[Any] = (), at_least: float = 1.0) -> np.ndarray:
+    """Round-number edges from 0 to the largest finite value of ``cols`` (at least
+    ``at_least``): the fields of view 3 are all >= 0."""
+    hi = at_least
+    for col in cols:
+        rng = queries.finite_range(session, catalogue_id, col, where)
+        if rng is not None:
+            hi = max(hi, rng[1])
+    return nice_edges(0.0, hi, CRITICALITY_BINS)
 
 
-def _evasion_label(value: Any) -> str | None:
-    """riskcore's label of the smallest TTR's evasion: None (nothing collides), "none"
-    (no evasion works: unavoidable) or manoeuvre names joined by "+"."""
-    if value is None:
-        return None
-    return "unavoidable" if value == "none" else str(value)
+def _scatter(session: Any, catalogue_id: str) -> dict[str, Any]:
+    """TTC against btn, thinned (the envelope keeps the highest btn of each cell)."""
+    cols = queries.scatter_columns(session, catalogue_id)
+    idx, ttc, btn, cls = cols["idx"], cols["ttc"], cols["btn"], cols["class"]
+    keep = thin_scatter(ttc, btn, MAX_SCATTER)
+    plottable = int((np.isfinite(ttc) & np.isfinite(btn)).sum())
+    return {
+        "index": [int(i) for i in idx[keep]],
+        "ttc": [float(v) for v in ttc[keep]],
+        "btn": [float(v) for v in btn[keep]],
+        "cls": [str(cls[i]) for i in keep],
+        "n_total": int(idx.size),
+        "n_plottable": plottable,
+        "n_shown": int(keep.size),
+        "n_ttc_inf": int(np.isinf(ttc).sum()),
+        "n_btn_inf": int(np.isinf(btn).sum()),
+        "selection": "all points" if keep.size == plottable
+        else f"envelope grid + evenly spaced, at most {MAX_SCATTER} points",
+    }
 
 
-def catalogue_risk(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
-    """A catalogue's risk distributions, P(A), n, seed and sampler diagnostics."""
+def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
+    """A catalogue's criticality (class counts, the record's distributions, TTC against
+    btn, the riskiest scenarios), P(A), n, seed and sampler diagnostics. Every histogram is
+    counted in SQL."""
+    from riskcore.criticality import CLASSES, CriticalitySettings
+
     crow = _catalogue(ctx, catalogue_id)
+    decel_max = CriticalitySettings().decel_max
 
     def compute() -> dict[str, Any]:
         info = catalogue_service.describe(ctx, catalogue_id)
-        cols = _columns(ctx, crow)
+        col = queries.column
+        scored = col("class").is_not(None)
         with ctx.db.read_session() as s:
-            chunks = repo.chunk_rows(s, catalogue_id)
-            diag = _diagnostics(chunks)
-        idx, risk, r_ind = cols["idx"], cols["risk"], cols["r_ind"]
-        ttc, min_ttr, evasion = cols["ttc"], cols["min_ttr"], cols["evasion"]
-        scored = int(np.isfinite(risk).sum())
-        risk_edges = shared_edges([], bins=RISK_BINS, span=(0.0, 1.0))
-        ttr_edges = shared_edges([], bins=min(MAX_BINS, 31), span=(-0.05, 3.05))
-        keep = thin_scatter(ttc, risk, MAX_SCATTER)
+            diag = _diagnostics(repo.chunk_rows(s, catalogue_id))
+            counts = repo.class_counts(s, catalogue_id)
+            n_rows = sum(counts.values())
+            n_scored = n_rows - counts.get("unscored", 0)
+            btn = queries.column_histogram(
+                s, catalogue_id, col("btn"), _edges_from(s, catalogue_id, [col("btn")]),
+                [scored])
+            ttr = queries.column_histogram(
+                s, catalogue_id, col("ttr_true"),
+                _edges_from(s, catalogue_id, [col("ttr_true")]), [scored])
+            speeds = [(d, col(f"{d}_impact_speed"), col(f"{d}_collision").is_(True))
+                      for d in DRIVER_LABELS]
+            hi = 1.0
+            for _, c, hit in speeds:
+                rng = queries.finite_range(s, catalogue_id, c, [hit])
+                hi = max(hi, rng[1]) if rng else hi
+            speed_edges = nice_edges(0.0, hi, CRITICALITY_BINS)
+            impact = [{"driver": d, "label": DRIVER_LABELS[d],
+                       "histogram": queries.column_histogram(s, catalogue_id, c, speed_edges,
+                                                             [hit])}
+                      for d, c, hit in speeds]
+            risk_edges = nice_edges(0.0, 1.0, RISK_BINS)
+            r_dep_tp = {name: queries.column_histogram(s, catalogue_id, col(field),
+                                                       risk_edges, [scored])
+                        for name, field in (("scripted", "r_dep_tp"),
+                                            ("r157", "r_dep_tp_r157"))}
+            alarm = queries.column_histogram(
+                s, catalogue_id, col("alarm_time"),
+                _edges_from(s, catalogue_id, [col("alarm_time")]), [scored])
+            scatter = _scatter(s, catalogue_id)
+            top = queries.top_rows(s, catalogue_id, TOP_N)
         return {
-            "catalogue": info,
-            "n_rows": int(idx.size),
-            "n_scored": scored,
+            "catalogue": jsonconv.encode(info),
+            "n_rows": n_rows,
+            "n_scored": n_scored,
             "diagnostics": diag,
-            "risk_hist": {"r_dep": histogram(risk, risk_edges),
-                          "r_ind": histogram(r_ind, risk_edges)},
-            "ttr_hist": histogram(min_ttr, ttr_edges),
-            # the same rows the evasion chart calls "no collision" (stored as null or as
-            # "Infinity"): one definition for both panels
-            "n_no_collision": sum(1 for label in evasion if label is None),
-            "evasion": shares(evasion, none_label="no collision"),
-            "scatter": {
-                "index": jsonconv.plot_values(idx[keep]),
-                "ttc": jsonconv.plot_values(ttc[keep]),
-                "risk": jsonconv.plot_values(risk[keep]),
-                "n_total": int(idx.size),
-                "n_plottable": int((np.isfinite(ttc) & np.isfinite(risk)).sum()),
-                "n_shown": int(keep.size),
-                "n_ttc_inf": int(np.sum(np.isinf(ttc))),
-                "selection": "all points" if keep.size == int(
-                    (np.isfinite(ttc) & np.isfinite(risk)).sum())
-                else f"envelope grid + evenly spaced, at most {MAX_SCATTER} points",
-            },
+            "classes": [{"name": c, "label": CLASS_LABELS[c], "count": counts.get(c, 0)}
+                        for c in CLASSES],
+            "n_unscored": counts.get("unscored", 0),
+            "decel_max": decel_max,
+            "btn": btn,
+            "ttr_true": ttr,
+            "impact_speed": impact,
+            "r_dep_tp": r_dep_tp,
+            "alarm_time": alarm,
+            "scatter": scatter,
+            "top": top,
         }
 
-    result: dict[str, Any] = _views(ctx).get(_key(ctx, "risk", *_version(crow)), compute)
+    result: dict[str, Any] = _views(ctx).get(_key(ctx, "criticality", *_version(crow)),
+                                             compute)
     return result
 
 
@@ -456,9 +492,26 @@ def _track(data: dict[str, Any]) -> dict[str, Any]:
     return {k: data.get(k) for k in ("id", "length", "width", "x", "y", "psi", "v")}
 
 
+def _profiles(sc: Any) -> tuple[dict[str, Any] | None, str | None]:
+    """Wagner's r(t) for the scripted and the R157 driver's ego and the R157 ego's track
+    (``riskcore.criticality.criticality_profiles``, computed for this one scenario), as
+    plot data; or None and why not."""
+    from riskcore.criticality import criticality_profiles
+    from riskcore.errors import RiskcoreError
+
+    try:
+        prof = criticality_profiles(sc)
+    except RiskcoreError as exc:
+        return None, str(exc)
+    out: dict[str, Any] = jsonconv.plot_values(prof)
+    return out, None
+
+
 def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, Any]:
-    """One scenario of a catalogue: trajectories (top-down view) and the risk, TTC, WTTC
-    and THW series over time (computed with riskcore on request, then cached)."""
+    """One scenario of a catalogue: trajectories (top-down view, with the R157 driver's
+    reacted ego), its stored criticality record, and the risk, TTC, WTTC and THW series
+    over time for the scripted ego and r(t) for the R157 ego (computed with riskcore on
+    request, then cached)."""
     crow = _catalogue(ctx, catalogue_id)
     with ctx.db.read_session() as s:
         found = repo.scenario_batch(s, catalogue_id, index - 1, 1)
@@ -478,19 +531,21 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
         data = sc.to_dict()
         risk = domain.scenario_risk_series(sc)
         prov = data.get("provenance") or {}
+        profiles, profiles_error = _profiles(sc)
         return {
             "catalogue": crow.id,
             "index": row.idx,
             "params": row.params,
             "trajectory_source": source,
-            "ttc": jsonconv.plot_values(row.ttc),
-            "risk": jsonconv.plot_values(row.risk),
             "lane_width": prov.get("lane_width"),
             "t": data["t"],
             "ego": _track(data["ego"]),
             "objects": [_track(o) for o in data.get("objects", [])],
-            "summary": risk["summary"],
+            "record": catalogue_service.record_of(row),
+            "summary": jsonconv.encode(risk["summary"]),
             "series": risk["series"],
+            "profiles": profiles,
+            "profiles_error": profiles_error,
         }
 
     result: dict[str, Any] = _views(ctx).get(_key(ctx, "scenario", crow.id, index),

@@ -17,6 +17,12 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from app.dashboard import views
+from app.dashboard.schemas import (
+    CatalogueCriticalityView,
+    ModelFitView,
+    ScenarioView,
+    ShiftView,
+)
 from app.db import repository as repo
 from app.deps import ContextDep
 from app.errors import NotFound, ServiceError
@@ -103,15 +109,17 @@ def static_file(name: str) -> FileResponse:
 
 
 # --------------------------------------------------------------------------- JSON views
-@router.get("/api/models/{model_id}/fit", summary="Data against model: histograms with the "
-            "GMM marginal densities, corner points")
+@router.get("/api/models/{model_id}/fit", response_model=ModelFitView,
+            summary="Data against model: histograms with the GMM marginal densities, "
+            "corner points")
 def model_fit(model_id: str, ctx: ContextDep,
-              dataset: Annotated[str | None, Query(max_length=64)] = None) -> dict[str, Any]:
-    return views.model_fit(ctx, model_id, dataset or None)
+              dataset: Annotated[str | None, Query(max_length=64)] = None) -> ModelFitView:
+    return ModelFitView.model_validate(views.model_fit(ctx, model_id, dataset or None))
 
 
-@router.get("/api/models/{model_id}/shift", summary="Constrained against unconstrained "
-            "samples for constraints typed in the page (not scored)")
+@router.get("/api/models/{model_id}/shift", response_model=ShiftView,
+            summary="Constrained against unconstrained samples for constraints typed in the "
+            "page (not scored)")
 def model_shift(
     model_id: str,
     ctx: ContextDep,
@@ -119,26 +127,31 @@ def model_shift(
                                       description="e.g. 'ttc<3; v_ego>=20'")] = "ttc<3",
     n: Annotated[int, Query(ge=1, le=views.PREVIEW_N_LIMIT)] = 1000,
     seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
-) -> dict[str, Any]:
-    return views.shift_preview(ctx, model_id, constraints, n, seed)
+) -> ShiftView:
+    return ShiftView.model_validate(views.shift_preview(ctx, model_id, constraints, n, seed))
 
 
-@router.get("/api/catalogues/{catalogue_id}/shift", summary="Constrained (the catalogue's "
-            "samples) against unconstrained model samples")
-def catalogue_shift(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
-    return views.catalogue_shift(ctx, catalogue_id)
+@router.get("/api/catalogues/{catalogue_id}/shift", response_model=ShiftView,
+            summary="Constrained (the catalogue's samples) against unconstrained model "
+            "samples")
+def catalogue_shift(catalogue_id: str, ctx: ContextDep) -> ShiftView:
+    return ShiftView.model_validate(views.catalogue_shift(ctx, catalogue_id))
 
 
-@router.get("/api/catalogues/{catalogue_id}/risk", summary="A catalogue's risk "
-            "distributions (binned), TTC-risk scatter (thinned), P(A), diagnostics")
-def catalogue_risk(catalogue_id: str, ctx: ContextDep) -> dict[str, Any]:
-    return views.catalogue_risk(ctx, catalogue_id)
+@router.get("/api/catalogues/{catalogue_id}/criticality", response_model=CatalogueCriticalityView,
+            summary="A catalogue's criticality: class counts, distributions of btn/a_req, "
+            "ttr_true, impact speeds, r_dep at t_p and alarm time (counted in SQL), TTC "
+            "against btn (thinned), the riskiest scenarios, P(A), sampler diagnostics")
+def catalogue_criticality(catalogue_id: str, ctx: ContextDep) -> CatalogueCriticalityView:
+    return CatalogueCriticalityView.model_validate(
+        views.catalogue_criticality(ctx, catalogue_id))
 
 
-@router.get("/api/catalogues/{catalogue_id}/scenarios/{index}", summary="One scenario: "
-            "trajectories and its risk, TTC, WTTC, THW over time")
+@router.get("/api/catalogues/{catalogue_id}/scenarios/{index}", response_model=ScenarioView,
+            summary="One scenario: trajectories with the R157 driver's reacted ego, its "
+            "criticality record, and r(t), TTC, WTTC, THW over time")
 def scenario(catalogue_id: str, index: Annotated[int, PathParam(ge=0, le=INDEX_MAX)],
-             ctx: ContextDep) -> dict[str, Any]:
+             ctx: ContextDep) -> ScenarioView:
     if index < 0:
         raise NotFound(f"scenario index must be >= 0, got {index}", field="path.index")
-    return views.scenario(ctx, catalogue_id, index)
+    return ScenarioView.model_validate(views.scenario(ctx, catalogue_id, index))

@@ -13,7 +13,7 @@
   const COLORS = {
     data: "#1f5fbf", model: "#e07b00", unconstrained: "#8a94a3", constrained: "#c62828",
     r_dep: "#c62828", r_ind: "#1f5fbf", ego: "#1f5fbf", cutter: "#c62828",
-    ttc: "#2e7d32", wttc: "#6a1b9a", thw: "#e07b00",
+    ttc: "#00838f", wttc: "#6a1b9a", thw: "#e07b00", r157: "#2e7d32",
   };
   const CONFIG = { displaylogo: false, responsive: true,
                    modeBarButtonsToRemove: ["lasso2d", "select2d"] };
@@ -104,10 +104,19 @@
   }
 
   // ------------------------------------------------------------------ formatting
+  // the service writes +inf, -inf and NaN as the strings "Infinity", "-Infinity", "NaN"
+  const NONFINITE = { "Infinity": Infinity, "-Infinity": -Infinity, "NaN": NaN };
+
+  function num(x) {
+    return typeof x === "string" && x in NONFINITE ? NONFINITE[x] : x;
+  }
+
   function fmt(x, digits) {
+    x = num(x);
     if (x === null || x === undefined) return "–";
+    if (Number.isNaN(x)) return "NaN";
     if (typeof x !== "number") return String(x);
-    if (!isFinite(x)) return "∞";
+    if (!isFinite(x)) return x > 0 ? "∞" : "−∞";
     const d = digits === undefined ? 3 : digits;
     if (x !== 0 && (Math.abs(x) < 1e-3 || Math.abs(x) >= 1e5)) return x.toExponential(d - 1);
     return Number(x.toPrecision(d)).toString();
@@ -128,6 +137,8 @@
   // ------------------------------------------------------------------ plotting
   async function draw(div, traces, layout, source) {
     const full = Object.assign({}, BASE_LAYOUT, layout || {});
+    // the message of an empty panel goes when the panel has data again
+    div.querySelectorAll(":scope > p.note").forEach((el) => el.remove());
     await Plotly.react(div, traces, full, CONFIG);
     div.dataset.rendered = "1";
     div.dataset.source = source || "";
@@ -387,12 +398,74 @@
   }
 
   // ------------------------------------------------------------------ view 3
+  const CLASS_COLORS = { no_conflict: "#7cb342", preventable: "#1f5fbf",
+                         unpreventable: "#e07b00", unavoidable: "#b3261e" };
+  const DRIVER_COLORS = { none: "#8a94a3", r157_cc: "#1f5fbf", rss: "#6a1b9a" };
+  const CLASS_LABELS = {
+    no_conflict: "no conflict (no collision without reaction)",
+    preventable: "preventable (careful driver avoids it)",
+    unpreventable: "unpreventable (careful driver collides; some manoeuvre avoids it)",
+    unavoidable: "unavoidable (nothing avoids it)",
+  };
+  const VIEW3_PLOTS = ["class-counts", "ttc-btn", "btn-hist", "ttr-hist", "impact-hist",
+                       "rdep-hist", "alarm-hist"];
+
+  // "name (what it means, …)" as "name<br>(what it means,<br>…)": readable tick labels
+  function wrapLabel(text, width) {
+    const words = text.split(" ");
+    const lines = [];
+    let line = "";
+    for (const w of words) {
+      if (line && (line + " " + w).length > width) {
+        lines.push(line);
+        line = w;
+      } else {
+        line = line ? line + " " + w : w;
+      }
+    }
+    if (line) lines.push(line);
+    return lines.join("<br>");
+  }
+
+  function note(text) {
+    return { text: text, xref: "paper", yref: "paper", x: 0.98, y: 0.97, showarrow: false,
+             xanchor: "right", yanchor: "top", align: "right",
+             bgcolor: "rgba(255,255,255,0.85)", font: { size: 10 } };
+  }
+
+  function vline(x, text) {
+    return {
+      shape: { type: "line", x0: x, x1: x, yref: "paper", y0: 0, y1: 1,
+               line: { color: "#333", width: 1, dash: "dash" } },
+      annotation: { text: text, x: x, xref: "x", yref: "paper", y: 0.8, yanchor: "top",
+                    xanchor: "right", align: "right", showarrow: false, font: { size: 10 },
+                    bgcolor: "rgba(255,255,255,0.85)" },
+    };
+  }
+
+  // a histogram of counts, or a message saying why there is nothing to draw
+  async function histogramPanel(div, hist, spec, source) {
+    if (!hist.n_finite) {
+      clearPlot(div, spec.empty);
+      return;
+    }
+    const traces = [bars(hist, spec.name, spec.color, "counts")].concat(spec.extra || []);
+    await draw(div, traces, Object.assign({
+      bargap: 0.05, showlegend: false,
+      title: { text: spec.title, font: { size: 12 } },
+      xaxis: { title: { text: spec.x } },
+      yaxis: { title: { text: "scenarios" } },
+      annotations: spec.notes ? [note(spec.notes.join("<br>"))] : [],
+    }, spec.layout || {}), source);
+  }
+
   async function loadRisk() {
-    const divs = ["risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"].map($);
+    const divs = VIEW3_PLOTS.map($);
     if (!state.catalogue) {
       $("risk-note").textContent = "No catalogue selected: pick one above or draw a new " +
         "sample (constraint, n, seed → Draw new sample).";
       $("catalogue-info").innerHTML = "";
+      $("top-table").innerHTML = "";
       divs.forEach((d) => clearPlot(d, "No catalogue yet: pick one above, or draw a new " +
                                        "sample (constraint, n, seed, then Draw new sample)."));
       return;
@@ -401,7 +474,7 @@
     try {
       const id = state.catalogue;
       const view = await prefetched("/dashboard/api/catalogues/" + encodeURIComponent(id) +
-                                    "/risk");
+                                    "/criticality");
       if (id !== state.catalogue) return;
       const c = view.catalogue;
       const d = view.diagnostics;
@@ -409,10 +482,13 @@
       if (!pr.ci && pr.ci_low !== undefined && pr.ci_high !== undefined) {
         pr.ci = [pr.ci_low, pr.ci_high];
       }
+      const sc = view.scatter;
       $("risk-note").textContent = "Catalogue " + c.id + " (" + c.status + "): " +
-        view.n_rows + " scenarios stored, " + view.n_scored + " scored. Histograms are " +
-        "binned and the scatter is thinned on the server (" + view.scatter.n_shown + " of " +
-        view.scatter.n_plottable + " points shown: " + view.scatter.selection + ").";
+        view.n_rows + " scenarios stored, " + view.n_scored + " with a criticality record" +
+        (view.n_unscored ? " (" + view.n_unscored + " without: not scored or refused by " +
+                           "the builder)" : "") + ". Histograms are counted and the " +
+        "scatter thinned on the server (" + sc.n_shown + " of " + sc.n_plottable +
+        " points shown: " + sc.selection + "). Classes and fields: docs/criticality.md.";
       const rows = [
         ["constraints", esc(c.constraints.join(" and ") || "none")],
         ["n · seed", esc(c.n + " · " + c.seed)],
@@ -437,68 +513,205 @@
       for (const w of d.warnings) rows.push(["warning", esc(w), "warn"]);
       $("catalogue-info").innerHTML = table(rows);
 
-      const h = view.risk_hist;
-      await draw(divs[0], [
-        bars(h.r_dep, "r_dep (" + h.r_dep.n_finite + ")", COLORS.r_dep, "counts",
-             { width: null }),
-        bars(h.r_ind, "r_ind (" + h.r_ind.n_finite + ")", COLORS.r_ind, "counts",
-             { width: null }),
-      ], { barmode: "group", bargap: 0.1,
-           legend: { x: 0.98, xanchor: "right", y: 0.98, bgcolor: "rgba(255,255,255,0.85)" },
-           title: { text: "Scenario risk (max over time)", font: { size: 12 } },
-           xaxis: { title: { text: "risk" }, range: [0, 1] },
-           yaxis: { title: { text: "scenarios" } } }, id);
-
-      const s = view.scatter;
-      await draw(divs[1], [{
-        type: "scatter", mode: "markers", name: "scenario", x: s.ttc, y: s.risk,
-        customdata: s.index,
-        marker: { size: 7, color: s.risk, cmin: 0, cmax: 1,
-                  colorscale: [[0, "#fdd49e"], [0.5, "#fc8d59"], [1, "#b30000"]],
-                  line: { width: 0.5, color: "#555" } },
-        hovertemplate: "scenario %{customdata}<br>TTC %{x:.2f} s<br>risk %{y:.3f}" +
-          "<extra>click to open</extra>",
-      }], { title: { text: "TTC against risk (click a point)", font: { size: 12 } },
-            hovermode: "closest", showlegend: false,
-            xaxis: { title: { text: "TTC at the crossing [s]" } },
-            yaxis: { title: { text: "risk r_dep" }, range: [-0.03, 1.03] },
-            annotations: s.n_ttc_inf ? [{ text: s.n_ttc_inf + " with TTC = ∞ not shown",
-                                          xref: "paper", yref: "paper", x: 0.98, y: 0.97,
-                                          showarrow: false, xanchor: "right",
-                                          yanchor: "top" }] : [] }, id);
-      divs[1].removeAllListeners && divs[1].removeAllListeners("plotly_click");
-      divs[1].on("plotly_click", (ev) => {
-        const pt = ev && ev.points && ev.points[0];
-        if (pt && pt.customdata !== undefined) openScenario(state.catalogue, pt.customdata);
-      });
-
-      const t = view.ttr_hist;
-      await draw(divs[2], [bars(t, "min TTR", "#455a64", "counts")], {
-        bargap: 0.05, title: { text: "Minimum time-to-react per scenario", font: { size: 12 } },
-        xaxis: { title: { text: "min TTR [s] (0 = unavoidable)" } },
-        yaxis: { title: { text: "scenarios" } }, showlegend: false,
-        annotations: [{ text: view.n_no_collision + " scenario(s) without any predicted " +
-                              "collision (TTR = ∞)", xref: "paper", yref: "paper", x: 0.98,
-                        y: 0.97, showarrow: false, xanchor: "right", yanchor: "top",
-                        bgcolor: "rgba(255,255,255,0.85)" }],
+      if (!view.n_scored) {
+        const why = "No scenario of this catalogue has a criticality record (drawn without " +
+          "scoring, or every vector was refused by the builder): draw a new sample with " +
+          "scoring to see the classes and margins.";
+        divs.forEach((div) => clearPlot(div, why));
+        $("top-table").innerHTML = "<p class=\"note\">" + esc(why) + "</p>";
+        if (c.status === "queued" || c.status === "running") schedulePoll(id);
+        return;
+      }
+      await drawClasses(divs[0], view, id);
+      await drawTtcBtn(divs[1], view, id);
+      const dm = view.decel_max;
+      const btn = view.btn;
+      const edges = btn.edges;
+      const one = vline(1, "btn = 1: full braking <br>of the careful driver ");
+      await histogramPanel(divs[2], btn, {
+        name: "btn", color: "#455a64",
+        title: "Brake threat number at perception (btn = a_req / " + fmt(dm) + " m/s²)",
+        x: "btn: constant deceleration needed from t_p + 0.75 s, over 0.774 g",
+        empty: "No finite btn: " + btn.n_inf + " scenario(s) collide before the careful " +
+          "driver could brake (btn = ∞).",
+        layout: {
+          // a_req in m/s² on the top axis: the same bars, scaled by decel_max
+          xaxis: { title: { text: "btn: constant deceleration needed from t_p + 0.75 s, " +
+                                  "over 0.774 g" }, range: [edges[0], edges[edges.length - 1]] },
+          xaxis2: { title: { text: "a_req [m/s²]", standoff: 2 }, overlaying: "x",
+                    side: "top", range: [edges[0] * dm, edges[edges.length - 1] * dm] },
+          margin: { l: 48, r: 12, t: 64, b: 42 },
+          shapes: [one.shape],
+          annotations: [note(btn.n_inf + " with btn = ∞ (contact before t_p + 0.75 s)<br>" +
+                             "btn = 0: no collision at constant speed"), one.annotation],
+        },
+        // an invisible point on the top axis, so that plotly draws it
+        extra: [{ type: "scatter", x: [edges[0] * dm], y: [0], xaxis: "x2", mode: "markers",
+                  hoverinfo: "skip", marker: { opacity: 0 }, showlegend: false }],
       }, id);
-
-      const ev = view.evasion;
-      await draw(divs[3], [{
-        type: "bar", x: ev.labels, y: ev.shares.map((v) => 100 * v), text: ev.counts,
-        textposition: "outside", marker: { color: "#5c6bc0" },
-        hovertemplate: "%{x}: %{y:.1f}% (%{text})<extra></extra>",
-      }], { title: { text: "Evasion giving the minimum TTR (share of scenarios)",
-                     font: { size: 12 } },
-            yaxis: { title: { text: "%" }, rangemode: "tozero" },
-            xaxis: { automargin: true }, showlegend: false }, id);
+      const ttr = view.ttr_true;
+      await histogramPanel(divs[3], ttr, {
+        name: "ttr_true", color: "#00796b",
+        title: "Time to react at perception, true cutter path (ttr_true)",
+        x: "ttr_true: latest reaction after t_p that still avoids it [s] (0 = nothing does)",
+        empty: "No finite ttr_true: " + ttr.n_inf + " scenario(s) have no collision at " +
+          "constant speed (ttr_true = ∞).",
+        notes: [ttr.n_inf + " with no collision at constant speed (ttr_true = ∞)"]
+          .concat(ttr.n_null ? [ttr.n_null + " without t_p (not a cut-in seen)"] : []),
+      }, id);
+      await drawImpact(divs[4], view, id);
+      await drawRiskAtTp(divs[5], view, id);
+      const alarm = view.alarm_time;
+      await histogramPanel(divs[6], alarm, {
+        name: "alarm time", color: "#8e24aa",
+        title: "Alarm time: from t_p until Wagner's r_dep first reaches 0.5",
+        x: "alarm time after t_p [s] (scripted ego)",
+        empty: "r_dep never reaches 0.5 in any scenario of this catalogue (" + alarm.n_null +
+          " scenario(s)): an online predictor would raise no alarm.",
+        notes: [alarm.n_null + " never reach 0.5 (up to the contact)"],
+      }, id);
+      drawTop(view, id);
       if (c.status === "queued" || c.status === "running") schedulePoll(id);
     } catch (e) {
       reportError("catalogue " + state.catalogue, e);
       divs.forEach((d) => clearPlot(d, "This catalogue could not be shown (the message " +
                                        "above says why): pick another one or draw a new sample."));
+      $("top-table").innerHTML = "";
     } finally {
       busy(-1);
+    }
+  }
+
+  async function drawClasses(div, view, id) {
+    const total = view.classes.reduce((a, k) => a + k.count, 0);
+    await draw(div, [{
+      type: "bar", x: view.classes.map((k) => wrapLabel(k.label, 24)),
+      y: view.classes.map((k) => k.count),
+      customdata: view.classes.map((k) => k.name),
+      text: view.classes.map((k) => k.count + " (" + fmt(total ? 100 * k.count / total : 0, 3) +
+                             "%)"),
+      textposition: "outside", cliponaxis: false,
+      marker: { color: view.classes.map((k) => CLASS_COLORS[k.name]) },
+      hovertemplate: "%{customdata}: %{y} scenarios<extra></extra>",
+    }], { title: { text: "Criticality classes (" + total + " scored scenarios)",
+                   font: { size: 12 } },
+          yaxis: { title: { text: "scenarios" }, rangemode: "tozero" },
+          xaxis: { automargin: true, tickfont: { size: 10 } },
+          margin: { l: 48, r: 12, t: 36, b: 20 }, showlegend: false }, id);
+  }
+
+  async function drawTtcBtn(div, view, id) {
+    const s = view.scatter;
+    if (!s.n_shown) {
+      clearPlot(div, "No scenario with a finite TTC and btn to plot (" + s.n_ttc_inf +
+                " with TTC = ∞, " + s.n_btn_inf + " with btn = ∞).");
+      return;
+    }
+    const traces = view.classes.map((k) => {
+      const pick = [];
+      s.cls.forEach((c, i) => { if (c === k.name) pick.push(i); });
+      return {
+        type: "scatter", mode: "markers", name: k.name.replace("_", " "),
+        x: pick.map((i) => s.ttc[i]), y: pick.map((i) => s.btn[i]),
+        customdata: pick.map((i) => s.index[i]),
+        marker: { size: 7, color: CLASS_COLORS[k.name], opacity: 0.8,
+                  line: { width: 0.5, color: "#333" } },
+        hovertemplate: "scenario %{customdata}<br>TTC %{x:.2f} s<br>btn %{y:.3f}" +
+          "<extra>" + k.name + " · click to open</extra>",
+      };
+    }).filter((t) => t.x.length);
+    const inf = [];
+    if (s.n_ttc_inf) inf.push(s.n_ttc_inf + " with TTC = ∞ not shown");
+    if (s.n_btn_inf) inf.push(s.n_btn_inf + " with btn = ∞ not shown");
+    await draw(div, traces, {
+      title: { text: "TTC against btn, by class (click a point to open it)",
+               font: { size: 12 } },
+      hovermode: "closest",
+      legend: { orientation: "h", y: -0.22, x: 0, font: { size: 10 } },
+      xaxis: { title: { text: "TTC at the crossing [s]" }, rangemode: "tozero" },
+      yaxis: { title: { text: "btn (1 = careful driver's full braking)" }, rangemode: "tozero" },
+      margin: { l: 52, r: 12, t: 30, b: 70 },
+      // btn = 1: the careful driver's full braking
+      shapes: [{ type: "line", xref: "paper", x0: 0, x1: 1, yref: "y", y0: 1, y1: 1,
+                 line: { color: "#333", width: 1, dash: "dash" } }],
+      annotations: inf.length ? [note(inf.join("<br>"))] : [],
+    }, id);
+    div.removeAllListeners && div.removeAllListeners("plotly_click");
+    div.on("plotly_click", (ev) => {
+      const pt = ev && ev.points && ev.points[0];
+      if (pt && pt.customdata !== undefined) openScenario(state.catalogue, pt.customdata);
+    });
+  }
+
+  async function drawImpact(div, view, id) {
+    const drivers = view.impact_speed;
+    const hits = drivers.filter((d) => d.histogram.n > 0);
+    if (!hits.length) {
+      clearPlot(div, "No reference driver collides in this catalogue, not even the " +
+                "non-reacting one: no impact speeds to show.");
+      return;
+    }
+    const n = view.n_scored;
+    await draw(div, drivers.map((d) => bars(
+      d.histogram, d.label + ": " + d.histogram.n + " of " + n + " collide",
+      DRIVER_COLORS[d.driver], "counts", { width: null })), {
+      barmode: "group", bargap: 0.1,
+      title: { text: "Impact speed of the colliding scenarios, per reference driver",
+               font: { size: 12 } },
+      legend: { orientation: "h", x: 0, y: -0.22, font: { size: 10 } },
+      margin: { l: 48, r: 12, t: 30, b: 78 },
+      xaxis: { title: { text: "relative speed at contact [m/s]" } },
+      yaxis: { title: { text: "scenarios" } },
+    }, id);
+  }
+
+  async function drawRiskAtTp(div, view, id) {
+    const h = view.r_dep_tp;
+    if (!h.scripted.n_finite) {
+      clearPlot(div, "No scenario has Wagner's risk at t_p (no perception moment found).");
+      return;
+    }
+    await draw(div, [
+      bars(h.scripted, "scripted ego", COLORS.r_dep, "counts", { width: null }),
+      bars(h.r157, "R157 driver's ego", COLORS.r_ind, "counts", { width: null }),
+    ], {
+      barmode: "group", bargap: 0.1,
+      title: { text: "Wagner's risk r_dep at the perception moment t_p", font: { size: 12 } },
+      legend: { x: 0.98, xanchor: "right", y: 0.98, orientation: "v",
+                bgcolor: "rgba(255,255,255,0.85)", font: { size: 10 } },
+      xaxis: { title: { text: "r_dep at t_p (0 … 1)" }, range: [0, 1] },
+      yaxis: { title: { text: "scenarios" } },
+    }, id);
+  }
+
+  function drawTop(view, id) {
+    const box = $("top-table");
+    if (!view.top.length) {
+      box.innerHTML = "<p class=\"note\">No scored scenario to rank.</p>";
+      return;
+    }
+    const head = ["#", "class", "btn", "a_req [m/s²]", "ttr_true [s] (manoeuvre)", "TTC [s]",
+                  "R157 driver"];
+    const body = view.top.map((r) => {
+      const r157 = r.r157_cc_collision === null ? "–" : r.r157_cc_collision
+        ? "collides at " + fmt(num(r.r157_cc_impact_speed)) + " m/s" : "avoids it";
+      return "<tr data-index=\"" + r.index + "\"><td><a href=\"?scenario=" + r.index + "\">" +
+        r.index + "</a></td><td><span class=\"swatch\" style=\"background:" +
+        (CLASS_COLORS[r["class"]] || "#999") + "\"></span>" + esc(r["class"]) + "</td><td>" +
+        esc(fmt(num(r.btn))) + "</td><td>" + esc(fmt(num(r.a_req))) + "</td><td>" +
+        esc(fmt(num(r.ttr_true)) + (r.ttr_manoeuvre ? " (" + r.ttr_manoeuvre + ")" : "")) +
+        "</td><td>" + esc(fmt(r.ttc === null ? Infinity : num(r.ttc))) + "</td><td>" +
+        esc(r157) + "</td></tr>";
+    });
+    box.innerHTML = "<h3>The riskiest " + view.top.length + " by btn (click to open)</h3>" +
+      "<table class=\"rank\"><tr>" + head.map((h) => "<th>" + esc(h) + "</th>").join("") +
+      "</tr>" + body.join("") + "</table>";
+    box.dataset.source = id;
+    for (const link of box.querySelectorAll("a")) {
+      link.addEventListener("click", (ev) => {
+        ev.preventDefault();
+        openScenario(state.catalogue, parseInt(link.textContent, 10));
+      });
     }
   }
 
@@ -528,21 +741,53 @@
         window.history.replaceState(null, "", url);
       }
       const sm = sc.summary;
+      const rec = sc.record;
+      const prof = sc.profiles;
       $("scenario-note").textContent = "Scenario " + sc.index + " of catalogue " +
-        sc.catalogue + " (" + sc.trajectory_source + ").";
+        sc.catalogue + " (" + sc.trajectory_source + ")" + (prof ? "." : "; Wagner's " +
+        "risk of the R157 driver's ego could not be computed: " + sc.profiles_error);
+      const s = (x) => fmt(x) + " s";
+      const driver = (name) => {
+        const hit = rec[name + "_collision"];
+        if (hit === null || hit === undefined) return "–";
+        const brake = rec[name + "_t_brake"];
+        return (hit ? "collides at " + fmt(rec[name + "_impact_speed"]) + " m/s"
+          : "avoids it, smallest gap " + fmt(rec[name + "_min_gap"]) + " m") +
+          (brake === undefined ? "" : brake === null ? ", never brakes"
+            : ", brakes from t = " + s(brake));
+      };
+      const label = CLASS_LABELS[rec["class"]] || "not scored" +
+        (rec.error ? ": " + rec.error : "");
       $("scenario-info").innerHTML = table([
-        ["risk r_dep · r_ind", esc(fmt(sm.risk) + " · " + fmt(sm.risk_ind) + " (max at t = " +
-                                   fmt(sm.t_of_max_risk) + " s)")],
-        ["min TTR · TTC · WTTC · THW", esc(fmt(sm.min_ttr) + " · " + fmt(sm.min_ttc) + " · " +
-                                           fmt(sm.min_wttc) + " · " + fmt(sm.min_thw) + " s")],
-        ["evasion of the min TTR", esc(sm.min_ttr_evasion === null ? "no collision"
-          : sm.min_ttr_evasion === "none" ? "unavoidable" : sm.min_ttr_evasion)],
+        ["class", "<span class=\"swatch\" style=\"background:" +
+          (CLASS_COLORS[rec["class"]] || "#999") + "\"></span>" + esc(label)],
+        ["btn · a_req", esc(fmt(rec.btn) + " · " + fmt(rec.a_req) + " m/s² (braking from " +
+                            "t_p + 0.75 s)")],
+        ["ttr_true (manoeuvre)", esc(s(rec.ttr_true) + " after t_p (" +
+          (rec.ttr_manoeuvre === null ? "no collision at constant speed"
+            : rec.ttr_manoeuvre === "none" ? "nothing avoids it" : rec.ttr_manoeuvre) + ")")],
+        ["t_p · crossing · TTC", esc("perceivable at t = " + s(rec.t_p) + ", crosses the " +
+                                     "marking at t = " + s(rec.t_cross) + ", TTC " +
+                                     s(rec.ttc))],
+        ["no reaction", esc(driver("none"))],
+        ["R157 careful driver", esc(driver("r157_cc"))],
+        ["RSS response", esc(driver("rss"))],
+        ["Wagner's r_dep", esc("at t_p " + fmt(rec.r_dep_tp) + " (R157 ego " +
+                               fmt(rec.r_dep_tp_r157) + "), at the crossing " +
+                               fmt(rec.r_dep_cross) + " (R157 ego " + fmt(rec.r_dep_cross_r157) +
+                               "), peak " + fmt(rec.risk_peak) + "; alarm (r_dep ≥ 0.5) " +
+                               (rec.alarm_time === null ? "never"
+                                 : s(rec.alarm_time) + " after t_p"))],
         ["parameters", esc(PARAMS.map((p) => p + " " + fmt(sc.params[p])).join(", "))],
-        ["seed", esc(sc.seed)],
       ]);
       const slider = $("time-slider");
       slider.max = String(sc.t.length - 1);
-      const start = Math.min(sc.t.length - 1, Math.max(0, sm.step_of_max_risk || 0));
+      // start at the perception moment (else the highest risk)
+      const tp = num(rec.t_p);
+      const atTp = typeof tp === "number" && isFinite(tp)
+        ? sc.t.findIndex((t) => t >= tp - 1e-9) : -1;
+      const start = Math.min(sc.t.length - 1,
+                             Math.max(0, atTp >= 0 ? atTp : sm.step_of_max_risk || 0));
       slider.value = String(start);
       $("slider-row").hidden = false;
       await drawScenario(start);
@@ -570,51 +815,84 @@
                     line: { color: "#9aa3ad", width: 1, dash: dash }, hoverinfo: "skip",
                     showlegend: false });
     }
-    const tracks = [["ego", sc.ego, COLORS.ego]].concat(
-      sc.objects.map((o) => [o.id, o, COLORS.cutter]));
-    for (const [name, tr, color] of tracks) {
-      traces.push({ type: "scatter", mode: "lines", name: name + " path", x: tr.x, y: tr.y,
-                    line: { color: color, width: 1, dash: "dot" }, showlegend: false,
-                    hoverinfo: "skip" });
+    const prof = sc.profiles;
+    const tracks = [["ego (scripted)", sc.ego, COLORS.ego, false]].concat(
+      sc.objects.map((o) => [o.id, o, COLORS.cutter, false]));
+    if (prof) {
+      // the R157 careful driver's reacted ego: the scripted one until it brakes
+      tracks.push(["ego (R157 driver)", Object.assign({ length: sc.ego.length,
+                                                        width: sc.ego.width }, prof.r157_ego),
+                   COLORS.r157, true]);
     }
-    for (const [name, tr, color] of tracks) {
+    for (const [name, tr, color, reacted] of tracks) {
+      traces.push({ type: "scatter", mode: "lines", name: name + " path", x: tr.x, y: tr.y,
+                    line: { color: color, width: reacted ? 1.5 : 1, dash: reacted ? "dash" : "dot" },
+                    showlegend: false, hoverinfo: "skip" });
+    }
+    for (const [name, tr, color, reacted] of tracks) {
       const b = box(tr.x[k], tr.y[k], tr.psi[k], tr.length, tr.width);
       traces.push({ type: "scatter", mode: "lines", name: name, x: b.x, y: b.y,
-                    fill: "toself", fillcolor: color, line: { color: color, width: 1 },
+                    fill: "toself", fillcolor: reacted ? "rgba(46,125,50,0.25)" : color,
+                    line: { color: color, width: reacted ? 2 : 1, dash: reacted ? "dash" : "solid" },
                     hovertemplate: name + " v %{customdata:.1f} m/s<extra></extra>",
                     customdata: b.x.map(() => tr.v[k]) });
     }
     const cx = sc.ego.x[k];
     await draw($("topdown-plot"), traces, {
-      title: { text: "Top-down view at t = " + fmt(sc.t[k]) + " s", font: { size: 12 } },
+      title: { text: "Top-down view at t = " + fmt(sc.t[k]) + " s" + (prof
+        ? " (dashed green: the ego of the R157 careful driver, braking from t = " +
+          fmt(prof.r157_t_brake) + " s)" : ""), font: { size: 12 } },
       xaxis: { title: { text: "x along the road [m]" }, range: [cx - 35, cx + 85] },
       yaxis: { title: { text: "y [m]" }, range: [-2 * lw, 2 * lw], scaleanchor: "x",
                scaleratio: 1 },
       margin: { l: 48, r: 12, t: 30, b: 40 }, showlegend: true,
+      legend: { orientation: "h", y: 1.0, x: 1, xanchor: "right", yanchor: "bottom",
+                font: { size: 10 } },
     }, source);
 
     const s = sc.series;
     const cap = (arr) => arr.map((v) => (v === null ? null : Math.min(v, 10)));
-    await draw($("series-plot"), [
-      { type: "scatter", mode: "lines", name: "risk r_dep", x: s.t, y: s.r_dep,
+    const traces2 = [
+      { type: "scatter", mode: "lines", name: "r_dep, scripted ego", x: s.t, y: s.r_dep,
         line: { color: COLORS.r_dep, width: 2.5 } },
-      { type: "scatter", mode: "lines", name: "risk r_ind", x: s.t, y: s.r_ind,
+      { type: "scatter", mode: "lines", name: "r_ind, scripted ego", x: s.t, y: s.r_ind,
         line: { color: COLORS.r_ind, width: 1.5, dash: "dot" } },
+    ];
+    if (prof) {
+      traces2.push({ type: "scatter", mode: "lines", name: "r_dep, R157 driver's ego",
+                     x: prof.t, y: prof.r_dep_r157,
+                     line: { color: COLORS.r157, width: 2.5, dash: "dash" } });
+    }
+    traces2.push(
       { type: "scatter", mode: "lines", name: "TTC", x: s.t, y: cap(s.ttc), yaxis: "y2",
-        line: { color: COLORS.ttc } },
+        line: { color: COLORS.ttc, width: 1 } },
       { type: "scatter", mode: "lines", name: "WTTC", x: s.t, y: cap(s.wttc), yaxis: "y2",
-        line: { color: COLORS.wttc } },
+        line: { color: COLORS.wttc, width: 1 } },
       { type: "scatter", mode: "lines", name: "THW", x: s.t, y: cap(s.thw), yaxis: "y2",
-        line: { color: COLORS.thw } },
-    ], {
-      title: { text: "Risk against TTC, WTTC and THW over time (the three capped at 10 s; " +
-                     "gaps: not defined)", font: { size: 12 } },
+        line: { color: COLORS.thw, width: 1 } });
+    // vertical lines: the slider's time, t_p, the crossing and the R157 braking start
+    const shapes = [{ type: "line", x0: s.t[k], x1: s.t[k], yref: "paper", y0: 0, y1: 1,
+                      line: { color: "#333", width: 1, dash: "dash" } }];
+    const annotations = [];
+    const marks = prof ? [["t_p", prof.t_p, "#000"], ["crossing", prof.t_cross, "#555"],
+                          ["R157 brakes", prof.r157_t_brake, COLORS.r157]] : [];
+    marks.forEach(([text, t, color], i) => {
+      if (t === null || t === undefined) return;
+      shapes.push({ type: "line", name: text, x0: t, x1: t, yref: "paper", y0: 0, y1: 1,
+                    line: { color: color, width: 1.5 } });
+      annotations.push({ text: text, x: t, xref: "x", yref: "paper", y: 1 - 0.09 * i,
+                         yanchor: "top", xanchor: "left", showarrow: false,
+                         font: { size: 10, color: color }, bgcolor: "rgba(255,255,255,0.8)" });
+    });
+    await draw($("series-plot"), traces2, {
+      title: { text: "Wagner's risk over time, scripted and R157 driver's ego, with TTC, WTTC " +
+                     "and THW (capped at 10 s; gaps: not defined)", font: { size: 12 } },
       xaxis: { title: { text: "t [s]" } },
       yaxis: { title: { text: "risk" }, range: [0, 1.02] },
       yaxis2: { title: { text: "TTC, WTTC, THW [s]" }, overlaying: "y", side: "right", range: [0, 10.2] },
-      margin: { l: 48, r: 48, t: 30, b: 42 },
-      shapes: [{ type: "line", x0: s.t[k], x1: s.t[k], yref: "paper", y0: 0, y1: 1,
-                 line: { color: "#333", width: 1, dash: "dash" } }],
+      margin: { l: 48, r: 48, t: 30, b: 80 },
+      legend: { orientation: "h", y: -0.2, x: 0, font: { size: 10 } },
+      shapes: shapes, annotations: annotations,
     }, source);
     if (!$("series-plot").dataset.clickable) {
       // a click in the time series moves the time slider there
@@ -820,7 +1098,7 @@
     try {
       if (initial.catalogue) {
         const base = "/dashboard/api/catalogues/" + encodeURIComponent(initial.catalogue);
-        prefetch(base + "/risk");
+        prefetch(base + "/criticality");
         prefetch(base + "/shift");
       }
       await loadLists();

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from app import domain
-from app.dashboard.aggregate import histogram, shared_edges, shares, thin_scatter
+from app.dashboard.aggregate import histogram, nice_edges, shared_edges, thin_scatter
 from app.dashboard.views import split_constraints
 from app.errors import InvalidInput
 from sampler.model import CutInGMM
@@ -105,14 +105,43 @@ def test_thin_scatter_properties(points: list[tuple[float, float]], budget: int)
     assert np.all(np.isfinite(x[keep])) and np.all(np.isfinite(y[keep]))
 
 
-# --------------------------------------------------------------------------- shares
-def test_shares_count_none_and_order() -> None:
-    out = shares(["brake", None, "brake", "steer_left", "none"], order=["steer_left"],
-                 none_label="no collision")
-    assert out["labels"] == ["steer_left", "brake", "no collision", "none"]
-    assert out["counts"] == [1, 2, 1, 1]
-    assert out["shares"] == pytest.approx([0.2, 0.4, 0.2, 0.2])
-    assert out["n"] == 5
+# --------------------------------------------------------------------------- nice edges
+@pytest.mark.parametrize("lo, hi, bins, expected", [
+    (0.0, 1.23, 40, [0.05 * k for k in range(26)]),       # width 0.05: 0 … 1.25
+    (0.0, 1.0, 20, [0.05 * k for k in range(21)]),
+    (0.0, 7.0, 40, [0.2 * k for k in range(36)]),          # 0.1 would need 70 bins
+    (0.0, 10.0, 4, [0.0, 2.5, 5.0, 7.5, 10.0]),
+    (-3.0, 3.0, 3, [-5.0, 0.0, 5.0]),                      # edges at multiples of the width
+    (2.0, 2.0, 40, [2.0, 3.0]),                            # degenerate: one bin of 1
+])
+def test_nice_edges_by_hand(lo: float, hi: float, bins: int, expected: list[float]) -> None:
+    assert nice_edges(lo, hi, bins).tolist() == pytest.approx(expected, abs=1e-12)
+
+
+def test_nice_edges_have_no_float_noise() -> None:
+    edges = nice_edges(0.0, 1.0, 40)  # width 0.025
+    assert [repr(float(e)) for e in edges[:5]] == ["0.0", "0.025", "0.05", "0.075", "0.1"]
+
+
+@given(st.floats(-1e6, 1e6), st.floats(0.0, 1e6), st.integers(1, 60))
+@settings(max_examples=200, deadline=None)
+def test_nice_edges_cover_the_range_with_at_most_max_bins(lo: float, width: float,
+                                                          bins: int) -> None:
+    hi = lo + width
+    e = nice_edges(lo, hi, bins)
+    assert 2 <= e.size <= bins + 1
+    assert e[0] <= lo and e[-1] >= hi
+    assert np.all(np.diff(e) > 0)
+    assert np.allclose(np.diff(e), e[1] - e[0], rtol=1e-6, atol=0)
+
+
+def test_nice_edges_refuse_bad_input() -> None:
+    with pytest.raises(ValueError):
+        nice_edges(1.0, 0.0)
+    with pytest.raises(ValueError):
+        nice_edges(0.0, math.inf)
+    with pytest.raises(ValueError):
+        nice_edges(0.0, 1.0, 0)
 
 
 def test_split_constraints() -> None:

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import math
 import socket
 from functools import lru_cache
 from pathlib import Path
@@ -71,6 +72,7 @@ def synthetic_rows(n: int, seed: int, chunk_size: int) -> list[dict[str, Any]]:
     min_ttr = np.round(rng.uniform(0.0, 3.0, n), 1)
     no_collision = rng.random(n) < 0.1
     evasion = rng.integers(0, len(EVASIONS) - 1, n)
+    crit = synthetic_criticality(n, rng)
     rows = []
     for i in range(n):
         params = {"p_y1": float(p_y1[i]), "p_t": float(p_t[i]), "p_a1": 0.0, "p_a2": 0.0,
@@ -85,8 +87,52 @@ def synthetic_rows(n: int, seed: int, chunk_size: int) -> list[dict[str, Any]]:
                    "step_of_max_risk": 50, "t_of_max_risk": 5.0}
         rows.append({"idx": i, "chunk_index": i // chunk_size, "seed": 1000 + i,
                      "params": params, "ttc": float(ttc[i]), "risk": r,
-                     "exposure_weight": 1e-3 / n, "summary": summary})
+                     "exposure_weight": 1e-3 / n, "summary": summary,
+                     **crit[i]})
     return rows
+
+
+def synthetic_criticality(n: int, rng: np.random.Generator) -> list[dict[str, Any]]:
+    """Criticality columns of n hand-made rows, consistent with the class rules of
+    docs/criticality.md: no conflict (btn 0, ttr_true inf), else btn from a gamma law;
+    btn >= 1.1 the careful driver collides, some of those are unavoidable; btn = inf
+    (contact before the careful driver's braking) for 1 %."""
+    decel = 0.774 * 9.81
+    out = []
+    for _ in range(n):
+        u = rng.random()
+        conflict = u >= 0.1
+        btn = float(rng.gamma(3.0, 0.15)) if conflict else 0.0
+        if conflict and u > 0.99:
+            btn = math.inf
+        r157_hit = conflict and btn >= 1.1
+        unavoidable = r157_hit and btn > 1.6
+        cls = ("no_conflict" if not conflict else "unavoidable" if unavoidable
+               else "unpreventable" if r157_hit else "preventable")
+        ttr = (math.inf if not conflict else 0.0 if unavoidable
+               else round(float(rng.uniform(0.0, 3.5)), 1))
+        rss_hit = conflict and btn >= 0.9
+        out.append({
+            "t_p": 3.4, "t_cross": 4.6, "ttr_true": ttr,
+            "ttr_manoeuvre": None if not conflict else "none" if unavoidable else "brake",
+            "a_req": btn * decel, "btn": btn, "class_": cls,
+            "none_collision": conflict,
+            "none_impact_speed": float(rng.uniform(1.0, 9.0)) if conflict else 0.0,
+            "none_min_gap": 0.0 if conflict else 4.0,
+            "r157_cc_collision": r157_hit,
+            "r157_cc_impact_speed": float(rng.uniform(0.5, 5.0)) if r157_hit else 0.0,
+            "r157_cc_min_gap": 0.0 if r157_hit else 2.0,
+            "r157_cc_t_brake": 4.15 if conflict else None,
+            "rss_collision": rss_hit,
+            "rss_impact_speed": float(rng.uniform(0.5, 4.0)) if rss_hit else 0.0,
+            "rss_min_gap": 0.0 if rss_hit else 2.5, "rss_t_brake": 3.9 if conflict else None,
+            "r_dep_tp": float(min(1.0, rng.beta(0.3, 6.0))), "r_ind_tp": 0.0,
+            "r_dep_cross": 0.5, "r_ind_cross": 0.4, "r_dep_tp_r157": 0.0,
+            "r_ind_tp_r157": 0.0, "r_dep_cross_r157": 0.2, "r_ind_cross_r157": 0.1,
+            "alarm_time": float(rng.uniform(0.2, 2.5)) if conflict else None,
+            "risk_peak": 1.0 if conflict else 0.1,
+        })
+    return out
 
 
 def store_synthetic_catalogue(db: Database, data_dir: Path, model_id: str, n: int,

@@ -119,6 +119,48 @@ def shot(page: Page, selector: str, name: str) -> None:
 
 
 PARAMS = ("p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap")
+#: the plots of view 3 (catalogue criticality)
+VIEW3_PLOTS = ("class-counts", "ttc-btn", "btn-hist", "ttr-hist", "impact-hist", "rdep-hist",
+               "alarm-hist")
+
+
+def plot_data(page: Page, div: str) -> list[dict[str, object]]:
+    """The traces plotly holds for a plot (what it drew from)."""
+    data: list[dict[str, object]] = page.evaluate(
+        "(id) => Array.from(document.getElementById(id).data || [])"
+        ".map((t) => ({x: t.x, y: t.y, name: t.name, customdata: t.customdata}))", div)
+    return data
+
+
+def check_view3(page: Page, base: str, cid: str) -> dict[str, object]:
+    """View 3 shows catalogue ``cid``: class bars equal the status's class counts, the
+    drawn scatter points are the view's, every histogram with data has bars, the
+    riskiest table lists the view's top rows."""
+    status = httpx.get(f"{base}/catalogues/{cid}").json()
+    view: dict[str, object] = httpx.get(
+        f"{base}/dashboard/api/catalogues/{cid}/criticality").json()
+    classes = plot_data(page, "class-counts")[0]
+    assert classes["customdata"] == ["no_conflict", "preventable", "unpreventable",
+                                     "unavoidable"]
+    assert classes["y"] == [status["classes"].get(c, 0) for c in classes["customdata"]]
+    # tick labels say what the classes mean (wrapped over lines: tspans without blanks)
+    ticks = page.locator("#class-counts .xaxislayer-above").text_content() or ""
+    for words in ("no conflict", "driver avoids it", "unavoidable", "(nothing"):
+        assert words in ticks, (words, ticks)
+    scatter = view["scatter"]
+    assert count(page, "#ttc-btn .scatterlayer .point") == scatter["n_shown"] > 0
+    for plot in ("btn-hist", "ttr-hist", "impact-hist", "rdep-hist", "alarm-hist"):
+        if page.locator(f"#{plot}").get_attribute("data-rendered") == "1":
+            assert count(page, f"#{plot} .barlayer .point") > 0, plot
+        else:  # an empty panel says why
+            assert len(page.locator(f"#{plot}").inner_text()) > 20, plot
+    assert page.locator("#btn-hist").get_attribute("data-rendered") == "1"
+    assert "a_req [m/s²]" in (page.locator("#btn-hist").text_content() or "")
+    rows = page.locator("#top-table tr[data-index]")
+    assert rows.count() == len(view["top"])
+    assert [int(rows.nth(i).get_attribute("data-index") or -1) for i in range(rows.count())] \
+        == [t["index"] for t in view["top"]]
+    return view
 
 
 # --------------------------------------------------------------------------- tests
@@ -141,7 +183,7 @@ def test_page_loads_without_errors_and_every_plot_has_data(server: Server, page:
     assert count(page, "#corner-plot .scatterlayer .point") > 6 * 200
     assert "no catalogue selected" in page.locator("#risk-note").inner_text().lower()
     # empty panels say what to do (issue 14 item 9)
-    for panel in ("risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"):
+    for panel in VIEW3_PLOTS:
         assert "draw a new sample" in page.locator(f"#{panel}").inner_text(), panel
     # pairwise axes carry units
     corner_text = page.locator("#corner-plot").text_content() or ""
@@ -162,30 +204,26 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     page.click("#draw-button")
     # the catalogue's plots, or a message saying why not
     page.wait_for_function(
-        "document.querySelector('#ttc-risk').dataset.source.startsWith('cat-') || "
+        "document.querySelector('#class-counts').dataset.source.startsWith('cat-') || "
         "!document.querySelector('#error').hidden")
     settle(page)
     assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
-    cid = page.locator("#ttc-risk").get_attribute("data-source")
+    cid = page.locator("#class-counts").get_attribute("data-source")
     assert cid is not None
     status = page.locator("#draw-status").inner_text()
     assert f"catalogue {cid} done (12 of 12 scenarios)" in status
     assert page.url.endswith(f"/dashboard/catalogues/{cid}")
     assert console.errors == []
     # every view of the catalogue now shows it
-    for plot in ("risk-hist", "ttc-risk", "ttr-hist", "evasion-shares"):
+    for plot in ("class-counts", "ttc-btn", "btn-hist"):
         assert page.locator(f"#{plot}").get_attribute("data-source") == cid
     assert page.locator("#shift-gap").get_attribute("data-version") != before
     for name in PARAMS:
         assert page.locator(f"#shift-{name}").get_attribute("data-source") == cid, name
         assert count(page, f"#shift-{name} .barlayer .trace") == 2, name
         assert count(page, f"#shift-{name} .barlayer .point") >= 5, name
-    view = httpx.get(f"{server.base}/dashboard/api/catalogues/{cid}/risk").json()
+    view = check_view3(page, server.base, cid)
     assert view["n_rows"] == 12
-    assert count(page, "#ttc-risk .scatterlayer .point") == view["scatter"]["n_shown"] > 0
-    assert count(page, "#risk-hist .barlayer .point") == 2 * 50  # r_dep and r_ind bins
-    assert count(page, "#ttr-hist .barlayer .point") == len(view["ttr_hist"]["counts"])
-    assert count(page, "#evasion-shares .barlayer .point") == len(view["evasion"]["labels"])
     info = page.locator("#catalogue-info").inner_text()
     assert "P(A)" in info and "effective sample size" in info and "acceptance" in info
     assert "12 · 5" in info  # n · seed
@@ -195,11 +233,11 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     exported = httpx.get(server.base + href, timeout=120)
     assert exported.status_code == 200 and len(exported.text.strip().splitlines()) == 1 + 12
     shot(page, "#view-shift", "2-constraint-shift-catalogue.png")
-    shot(page, "#view-risk", "3-catalogue-risk.png")
+    shot(page, "#view-risk", "3-catalogue-criticality.png")
 
     # click the drawn point farthest from any other (so no neighbour can take the click):
     # the scenario of that point opens (points are drawn in the order of the data)
-    points = page.locator("#ttc-risk .scatterlayer .point")
+    points = page.locator("#ttc-btn .scatterlayer .point")
     points.first.scroll_into_view_if_needed()
     centres = []
     for i in range(points.count()):
@@ -212,7 +250,9 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
                    default=math.inf)
 
     pick = max(range(len(centres)), key=isolation)
-    index = view["scatter"]["index"][pick]
+    # points are drawn one trace per class, in the order of the classes
+    drawn = [i for t in plot_data(page, "ttc-btn") for i in t["customdata"]]
+    index = drawn[pick]
     page.mouse.move(*centres[pick])
     page.mouse.click(*centres[pick])
     page.wait_for_function(
@@ -221,9 +261,28 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     settle(page)
     assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
     assert page.url.endswith(f"/dashboard/catalogues/{cid}?scenario={index}")
-    # risk r_dep, r_ind, TTC, WTTC and THW over time; lane lines, paths and two vehicles
-    assert count(page, "#series-plot .scatterlayer .trace") == 5
-    assert count(page, "#topdown-plot .scatterlayer .trace") == 4 + 2 + 2
+    # r_dep, r_ind (scripted ego), r_dep (R157 driver's ego), TTC, WTTC and THW over time;
+    # lane lines, three paths (ego, cutter, R157 driver's ego) and three boxes
+    sc = httpx.get(f"{server.base}/dashboard/api/catalogues/{cid}/scenarios/{index}",
+                   timeout=120).json()
+    assert sc["profiles"] is not None, sc["profiles_error"]
+    assert count(page, "#series-plot .scatterlayer .trace") == 6
+    assert count(page, "#topdown-plot .scatterlayer .trace") == 4 + 3 + 3
+    names = [t["name"] for t in plot_data(page, "series-plot")]
+    assert "r_dep, R157 driver's ego" in names
+    # vertical lines at t_p, the crossing and (when it brakes) the R157 braking start
+    shapes = page.evaluate("() => (document.getElementById('series-plot').layout.shapes || [])"
+                           ".map((s) => [s.name || '', s.x0])")
+    marks = {name: x for name, x in shapes if name}
+    assert marks["t_p"] == pytest.approx(sc["profiles"]["t_p"])
+    assert marks["crossing"] == pytest.approx(sc["profiles"]["t_cross"])
+    if sc["profiles"]["r157_t_brake"] is not None:
+        assert marks["R157 brakes"] == pytest.approx(sc["profiles"]["r157_t_brake"])
+    assert "t_p" in (page.locator("#series-plot").text_content() or "")
+    info = page.locator("#scenario-info").inner_text()
+    for words in ("class", "btn · a_req", "m/s²", "ttr_true", "R157 careful driver",
+                  "RSS response", "t_p"):
+        assert words in info, (words, info)
     assert f"Scenario {index} of catalogue {cid}" in page.locator("#scenario-note").inner_text()
     shot(page, "#view-scenario", "4-scenario.png")
     page.screenshot(path=str(ARTIFACTS / "0-whole-page.png"), full_page=True)
@@ -294,10 +353,10 @@ def test_a_10000_scenario_catalogue_is_drawn_from_bounded_data(server: Server,
     page.goto(f"{server.base}/dashboard/catalogues/{cid}")
     settle(page)
     assert console.errors == []
-    assert page.locator("#ttc-risk").get_attribute("data-source") == cid
-    drawn = count(page, "#ttc-risk .scatterlayer .point")
+    assert page.locator("#class-counts").get_attribute("data-source") == cid
+    drawn = count(page, "#ttc-btn .scatterlayer .point")
     assert 0 < drawn <= 2000
-    assert count(page, "#risk-hist .barlayer .point") == 2 * 50
+    check_view3(page, server.base, cid)
     assert "10000 scenarios stored" in page.locator("#risk-note").inner_text()
     shot(page, "#view-risk", "7-catalogue-10000.png")
 
@@ -326,12 +385,13 @@ def test_picking_a_model_and_a_catalogue_redraws_their_views(server: Server,
     assert f"model {other}" in page.locator("#fit-note").inner_text()
     assert count(page, "#fit-gap .scatterlayer .trace path.js-line") == 1
     page.select_option("#catalogue-select", cid)
-    page.wait_for_selector(f"#ttc-risk[data-source='{cid}']")
+    page.wait_for_selector(f"#class-counts[data-source='{cid}']")
     settle(page)
     # the catalogue brings its own model back
     assert page.locator("#model-select").input_value() == default
     assert page.locator("#fit-gap").get_attribute("data-source") == default
     assert page.locator("#shift-gap").get_attribute("data-source") == cid
-    assert count(page, "#ttc-risk .scatterlayer .point") == 300
+    view = check_view3(page, server.base, cid)
+    assert count(page, "#ttc-btn .scatterlayer .point") == view["scatter"]["n_shown"] > 200
     assert page.url.endswith(f"/dashboard/catalogues/{cid}")
     assert console.errors == []
