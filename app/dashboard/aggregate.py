@@ -186,18 +186,22 @@ def nice_edges(lo: float, hi: float, max_bins: int = 40) -> FloatArray:
     {1, 2, 2.5, 5} · 10^k that needs at most ``max_bins`` bins, edges at whole multiples of
     it (so 0 … 1.23 with 40 bins gives width 0.05, edges 0, 0.05, …, 1.25).
 
-    A degenerate range (lo == hi) gets one bin of width 1 starting at ``floor(lo)``; lo > hi
-    or a non-finite bound is an error.
+    A degenerate range (hi - lo at most 1e-6 of the values' magnitude, at least 1) gets
+    one bin from ``floor(lo)`` to ``floor(hi) + 1``; lo > hi or a non-finite bound is an
+    error.
     """
     if not 1 <= max_bins <= MAX_BINS:
         raise ValueError(f"max_bins must be in 1 ... {MAX_BINS}, got {max_bins}")
     if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
         raise ValueError(f"need finite lo <= hi, got {lo!r}, {hi!r}")
-    if hi == lo:
-        start = math.floor(lo)
-        return np.array([start, start + 1.0])
+    if hi - lo <= 1e-6 * max(1.0, abs(lo), abs(hi)):
+        # (nearly) one value: whole-number edges around it, not bins at float resolution
+        return np.array([math.floor(lo), math.floor(hi) + 1.0])
     exp = math.floor(math.log10((hi - lo) / max_bins)) - 1
-    while True:
+    # a step of 10^top is wider than the range: past it only a range across 0 with
+    # max_bins 1 is left (0 is always an edge), which gets plain edges
+    top = math.floor(math.log10(hi - lo)) + 1
+    while exp <= top:
         for m in NICE_STEPS:
             step = m * 10.0 ** exp
             first, last = math.floor(lo / step), math.ceil(hi / step)
@@ -208,3 +212,4 @@ def nice_edges(lo: float, hi: float, max_bins: int = 40) -> FloatArray:
                 digits = max(0, 2 - exp)
                 return np.round(np.arange(first, last + 1) * step, digits)
         exp += 1
+    return np.linspace(lo, hi, max_bins + 1)

@@ -454,7 +454,8 @@
       bargap: 0.05, showlegend: false,
       title: { text: spec.title, font: { size: 12 } },
       xaxis: { title: { text: spec.x } },
-      yaxis: { title: { text: "scenarios" } },
+      // head room above the tallest bar for the notes in the upper right corner
+      yaxis: { title: { text: "scenarios" }, range: [0, 1.2 * Math.max(1, ...hist.counts)] },
       annotations: spec.notes ? [note(spec.notes.join("<br>"))] : [],
     }, spec.layout || {}), source);
   }

@@ -113,6 +113,9 @@ def test_thin_scatter_properties(points: list[tuple[float, float]], budget: int)
     (0.0, 10.0, 4, [0.0, 2.5, 5.0, 7.5, 10.0]),
     (-3.0, 3.0, 3, [-5.0, 0.0, 5.0]),                      # edges at multiples of the width
     (2.0, 2.0, 40, [2.0, 3.0]),                            # degenerate: one bin of 1
+    (128.0, 128.00000001, 40, [128.0, 129.0]),             # nearly: no float-resolution bins
+    (0.99999999, 1.00000001, 40, [0.0, 2.0]),
+    (-1.0, 1.0, 1, [-1.0, 1.0]),                            # across 0 in one bin
 ])
 def test_nice_edges_by_hand(lo: float, hi: float, bins: int, expected: list[float]) -> None:
     assert nice_edges(lo, hi, bins).tolist() == pytest.approx(expected, abs=1e-12)
