@@ -92,7 +92,7 @@ def _page(base: str, cid: str, other: str) -> None:
                               ("another catalogue, its views not cached", other)):
             t0 = time.perf_counter()
             page.goto(f"{base}/dashboard/catalogues/{target}", wait_until="commit")
-            page.wait_for_selector(f"#evasion-shares[data-source='{target}']",
+            page.wait_for_selector(f"#alarm-hist[data-source='{target}']",
                                    timeout=120_000)
             risk_view = time.perf_counter() - t0
             page.wait_for_selector("body[data-ready='1']", timeout=120_000)
