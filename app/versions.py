@@ -8,9 +8,10 @@ from app import __version__
 
 __all__ = ["LIBRARIES", "versions"]
 
-#: the libraries whose numbers a result depends on
+#: the libraries whose numbers or files a result depends on (GET /version and every export
+#: manifest list the same ones)
 LIBRARIES = ("numpy", "scipy", "pandas", "scikit-learn", "emcee", "numba", "fastapi",
-             "sqlalchemy", "distributed")
+             "sqlalchemy", "distributed", "scenariogeneration")
 
 
 def versions(libraries: tuple[str, ...] = LIBRARIES) -> dict[str, str | None]:

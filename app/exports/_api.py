@@ -15,7 +15,7 @@ from app.exports._common import (
     check_flat_value,
     jsonable,
 )
-from app.versions import versions
+from app.versions import LIBRARIES, versions
 from datasets.cutin_model import PARAM_NAMES, ttc_from_gap_dv
 from riskcore.scenario import ConcreteScenario
 from sampler.record import SCORE_FIELDS
@@ -44,14 +44,9 @@ RESERVED_COLUMNS: tuple[str, ...] = ("index", "file")
 #: ``format`` field of every manifest ``build_manifest`` returns.
 MANIFEST_FORMAT = "scengen.catalogue-manifest/1"
 
-#: Packages whose versions go into every manifest (scengen itself first).
-VERSION_PACKAGES: tuple[str, ...] = (
-    "numpy",
-    "scipy",
-    "scikit-learn",
-    "emcee",
-    "scenariogeneration",
-)
+#: Packages whose versions go into every manifest: the service's one list
+#: (``app.versions.LIBRARIES``; scengen itself first).
+VERSION_PACKAGES: tuple[str, ...] = LIBRARIES
 
 
 def _scenario_id(scenario: ConcreteScenario, summary: Mapping[str, Any]) -> Any:

@@ -230,7 +230,8 @@ def test_manifest_has_provenance_versions_and_no_clock() -> None:
     assert m["constraints"] == ["ttc<3"]
     assert m["p_region"] == {"estimate": 0.0125, "ci": [0.01, 0.015]}
     assert m["catalogue_id"] == "cat-1"
-    assert set(m["versions"]) == {"scengen", "numpy", "scipy", "scikit-learn", "emcee",
+    assert set(m["versions"]) == {"scengen", "numpy", "scipy", "pandas", "scikit-learn",
+                                  "emcee", "numba", "fastapi", "sqlalchemy", "distributed",
                                   "scenariogeneration"}
     assert m["versions"]["numpy"] == np.__version__
     assert m["versions"]["scenariogeneration"] == importlib.metadata.version(
