@@ -307,16 +307,47 @@ def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
 
 
 @njit(cache=True)
+def r157_critical(ahead: bool, g: float, clos: float,
+                  ttc_crit: float) -> bool:  # pragma: no cover - jit
+    """The R157 careful driver's condition "a conflict is developing".
+
+    The cutter's centre is ahead (``ahead``) and the longitudinal gap ``g`` is already
+    closed (<= 0) or closing (closing speed ``clos`` > 0) with TTC = g / clos below
+    ``ttc_crit``. ``ttc_crit = +inf`` (the default setting): any closing gap, tested
+    without arithmetic on inf.
+    """
+    if not ahead:
+        return False
+    if g <= 0.0:
+        return True
+    if not clos > 0.0:
+        return False
+    if ttc_crit == np.inf:
+        return True
+    return g < ttc_crit * clos
+
+
+@njit(cache=True)
+def _r157_margin(g: float, clos: float, ttc_crit: float) -> float:  # pragma: no cover
+    """A function of time that turns negative when :func:`r157_critical` becomes true
+    (for a closing gap ahead): g - ttc_crit * clos, or -clos for ``ttc_crit = +inf``."""
+    if ttc_crit == np.inf:
+        return -clos
+    return g - ttc_crit * clos
+
+
+@njit(cache=True)
 def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
                         cv: FloatArray, es: FloatArray, ev: FloatArray, half_lengths: float,
                         t_p: float, ttc_crit: float, k_const: int = -1,
                         t_stop: float = np.inf) -> float:  # pragma: no cover - jit
-    """First time >= t_p at which the cut-in is critical for the scripted ego, NaN: never.
+    """First time >= t_p at which a conflict is developing for the scripted ego, NaN:
+    never (see :func:`r157_critical`).
 
-    Critical: the cutter's centre is ahead of the ego's and the longitudinal gap
-    g = cs - es - (L_c + L_e)/2 is <= 0 or closing with g < ttc_crit * closing speed
-    (TTC < ttc_crit). Between grid steps the root of f = g - ttc_crit * closing is
-    interpolated linearly (exact for constant speeds).
+    The cutter's centre is ahead of the ego's and the longitudinal gap
+    g = cs - es - (L_c + L_e)/2 is <= 0 or closing, with TTC < ttc_crit (+inf: any
+    closing gap). Between grid steps the root of :func:`_r157_margin` (g - ttc_crit *
+    closing, or -closing) is interpolated linearly (exact for speeds linear in time).
     """
     n = cs.shape[0]
     k0 = math.ceil((t_p - t0) / h - 1e-9)
@@ -328,17 +359,17 @@ def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
     clos = _interp(ev, t0, h, t_p) - _interp(cv, t0, h, t_p) * math.cos(
         _interp(cpsi, t0, h, t_p))
     g = x - s - half_lengths
-    if x > s and (g <= 0.0 or (clos > 0.0 and g < ttc_crit * clos)):
+    if r157_critical(x > s, g, clos, ttc_crit):
         return t_p
-    prev_f = g - ttc_crit * clos
+    prev_f = _r157_margin(g, clos, ttc_crit)
     for k in range(k0, n):
         t = t0 + k * h
         if t <= t_p:
             continue
         clos = ev[k] - cv[k] * math.cos(cpsi[k])
         g = cs[k] - es[k] - half_lengths
-        f = g - ttc_crit * clos
-        if cs[k] > es[k] and (g <= 0.0 or (clos > 0.0 and g < ttc_crit * clos)):
+        f = _r157_margin(g, clos, ttc_crit)
+        if r157_critical(cs[k] > es[k], g, clos, ttc_crit):
             if g > 0.0 and prev_f > 0.0 and f < prev_f:
                 return prev_t + (t - prev_t) * prev_f / (prev_f - f)
             return t
@@ -350,7 +381,10 @@ def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
         clos = ev[k] - cv[k] * math.cos(cpsi[k])
         g = cs[k] - es[k] - half_lengths
         if cs[k] > es[k] and clos > 0.0:
-            t_r = max(t_k + (g - ttc_crit * clos) / clos, t_p, t_k)
+            if ttc_crit == np.inf:
+                t_r = max(t_p, t_k)
+            else:
+                t_r = max(t_k + (g - ttc_crit * clos) / clos, t_p, t_k)
             if t_r <= t_stop:
                 return t_r
     return np.nan

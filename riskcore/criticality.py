@@ -20,10 +20,12 @@ point of its near edge moves as its centre does.
 Reference drivers (all from the same scripted motion until they brake):
 
 * ``none``: the scripted ego (constant speed for a generated cut-in);
-* ``r157_cc``: perceives the cut-in at ``t_p``; from then on it starts its reaction at the
-  first moment the cut-in is critical (TTC < ``critical_ttc`` with the centre-line
-  longitudinal gap, or the gap already closed), brakes ``reaction_time`` later with jerk
-  ``jerk`` up to ``decel_max`` and keeps braking to standstill;
+* ``r157_cc``: perceives the cut-in at ``t_p``; it starts its reaction at the first
+  moment >= ``t_p`` at which a conflict is developing: the cutter is ahead and the
+  centre-line longitudinal gap is closing (or already closed). ``critical_ttc`` (default
+  +inf: any closing gap) can narrow this to TTC < ``critical_ttc`` (2 s: the JRC-FSM
+  implementation's gate). It brakes ``reaction_time`` later with jerk ``jerk`` up to
+  ``decel_max`` and keeps braking to standstill;
 * ``rss``: Shalev-Shwartz et al. (2017) longitudinal response: when the longitudinal and
   the lateral RSS distances are both violated, it brakes after the response time ``rho``
   with the same jerk-limited braking.
@@ -82,6 +84,10 @@ class CriticalityError(RiskcoreError):
     """A scenario cannot be given a criticality record (the message says why)."""
 
 
+#: settings for which +inf is a meaning, not an error
+_MAY_BE_INF = frozenset({"critical_ttc"})
+
+
 @dataclass(frozen=True)
 class CriticalitySettings:
     """Parameters of the criticality record. Frozen; validated on construction.
@@ -99,7 +105,11 @@ class CriticalitySettings:
     decel_max : float
         Full deceleration, m/s² (0.774 g = 7.593).
     critical_ttc : float
-        The C&C driver reacts only to a developing conflict: TTC below this, s (2.0).
+        The C&C driver reacts only to a developing conflict: the cutter ahead and the
+        gap closing with TTC below this, s. Default +inf: any closing gap (UN R157's
+        cut-in case is a cutter slower than the ALKS vehicle, para. 5.2.5.2 (a));
+        2.0 is the gate of the JRC-FSM implementation (docs/criticality.md). The only
+        setting that may be +inf.
 
     RSS (Shalev-Shwartz, Shammah, Shashua 2017, "On a formal model of safe and scalable
     self-driving cars"; parameter values as in the comparison of Mattas et al. 2022):
@@ -140,7 +150,7 @@ class CriticalitySettings:
     reaction_time: float = 0.75
     jerk: float = 12.65
     decel_max: float = 0.774 * G
-    critical_ttc: float = 2.0
+    critical_ttc: float = math.inf
     rss_response_time: float = 0.75
     rss_accel_max: float = 3.0
     rss_brake_min: float = 6.0
@@ -158,8 +168,13 @@ class CriticalitySettings:
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise SettingsError(f"{f.name}: expected a number, got {value!r}")
+            if f.name in _MAY_BE_INF and value == math.inf:
+                object.__setattr__(self, f.name, math.inf)
+                continue
             if not math.isfinite(value) or value < 0:
-                raise SettingsError(f"{f.name}: must be a finite number >= 0, got {value!r}")
+                what = ("a number >= 0 or inf" if f.name in _MAY_BE_INF
+                        else "a finite number >= 0")
+                raise SettingsError(f"{f.name}: must be {what}, got {value!r}")
             object.__setattr__(self, f.name, float(value))
         for name in ("jerk", "decel_max", "rss_brake_min", "rss_brake_max",
                      "rss_lat_accel_max", "step", "wandering_zone"):

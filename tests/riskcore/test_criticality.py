@@ -89,16 +89,75 @@ def test_r157_driver_by_hand(gap_tp: float) -> None:
     assert c["class"] == ("preventable" if not collides else c["class"])
 
 
-def test_r157_waits_for_a_developing_conflict() -> None:
-    # TTC at t_p = 25 / 10 = 2.5 s: the careful driver reacts when TTC reaches 2 s,
-    # 0.5 s later, and brakes 0.75 s after that
+def test_r157_reacts_at_t_p_when_the_gap_is_closing() -> None:
+    # TTC at t_p = 25 / 10 = 2.5 s: the gap is closing, so the careful driver reacts at
+    # t_p (default critical_ttc = inf: any closing gap) and brakes 0.75 s later
     scen, t_p = lead_appears(25.0)
     c = evaluate_criticality(scen)
+    assert c["r157_cc_t_brake"] == pytest.approx(t_p + 0.75, abs=1e-9)
+    collides, _, gap = r157_by_hand(25.0 - 7.5, 10.0)
+    assert c["r157_cc_collision"] is collides is False
+    assert c["r157_cc_min_gap"] == pytest.approx(gap, abs=1e-3)
+    assert c["class"] == "preventable"
+
+
+def test_r157_with_the_jrc_gate_waits_for_ttc_2() -> None:
+    # critical_ttc = 2 (JRC-FSM): the same cut-in, reaction when TTC reaches 2 s (gap
+    # 20 m, 0.5 s after t_p), braking 0.75 s after that
+    scen, t_p = lead_appears(25.0)
+    c = evaluate_criticality(scen, settings=CriticalitySettings(critical_ttc=2.0))
     assert c["r157_cc_t_brake"] == pytest.approx(t_p + 0.5 + 0.75, abs=1e-9)
     collides, _, gap = r157_by_hand(20.0 - 7.5, 10.0)
     assert c["r157_cc_collision"] is collides is False
     assert c["r157_cc_min_gap"] == pytest.approx(gap, abs=1e-3)
-    assert c["class"] == "preventable"
+
+
+def test_the_wait_for_ttc_2_turns_a_preventable_cut_in_unpreventable() -> None:
+    # 35 m/s against 20 m/s, bumper gap 40 m at t_p (TTC 2.67 s). By hand, with braking
+    # starting at gap_b (the gap then) and closing speed 15 m/s:
+    #   reacting at t_p:        gap_b = 40 - 15 * 0.75 = 28.75 m -> no contact
+    #   reacting at TTC = 2 s:  gap_b = 30 - 11.25 = 18.75 m -> contact
+    dv = 15.0
+    scen, t_p = lead_appears(40.0, v_ego=35.0, v_lead=20.0)
+    now = evaluate_criticality(scen)
+    collides, speed, gap = r157_by_hand(40.0 - dv * 0.75, dv)
+    assert collides is False and gap > 1.0  # the hand computation's own verdict
+    assert now["r157_cc_t_brake"] == pytest.approx(t_p + 0.75, abs=1e-9)
+    assert now["r157_cc_collision"] is False and now["class"] == "preventable"
+    assert now["r157_cc_min_gap"] == pytest.approx(gap, abs=1e-3)
+    jrc = evaluate_criticality(scen, settings=CriticalitySettings(critical_ttc=2.0))
+    collides, speed, _ = r157_by_hand(30.0 - dv * 0.75, dv)
+    assert collides is True and speed > 1.0
+    t_ttc2 = t_p + (40.0 - 30.0) / dv
+    assert jrc["r157_cc_t_brake"] == pytest.approx(t_ttc2 + 0.75, abs=1e-9)
+    assert jrc["r157_cc_collision"] is True and jrc["class"] == "unpreventable"
+    assert jrc["r157_cc_impact_speed"] == pytest.approx(speed, abs=1e-6)
+    # the margin at t_p is the same under both: dv^2 / (2 gap_b) from t_p + 0.75 s
+    assert now["a_req"] == jrc["a_req"] == pytest.approx(dv**2 / (2.0 * 28.75), rel=1e-4)
+
+
+def test_r157_reacts_when_the_gap_starts_closing() -> None:
+    # the lead enters at the ego's speed (30 m/s, gap 10 m: no conflict yet) and drops to
+    # 20 m/s from t = 3.0 s (its speed linear between the 0.1 s samples): the reaction
+    # starts with the closing, within one 0.01 s step after 3.0 s, not at t_p
+    t = np.round(np.arange(0.0, 14.0 + 1e-9, 0.1), 10)
+    t_p = 1.0 + 0.1 * 0.375 / 2.0
+    gap3 = 10.0
+    x_lead = np.where(t <= 3.0, L + gap3 + 30.0 * t, L + gap3 + 90.0 + 20.0 * (t - 3.0))
+    v_lead = np.where(t <= 3.0, 30.0, 20.0)
+    y = np.where(t <= 1.0 + 1e-9, 2.0, 0.0)
+    z = np.zeros_like(t)
+    ego = Track("ego", L, 1.8, 30.0 * t, z, z, np.full_like(t, 30.0))
+    lead = Track("cutter", L, 1.8, x_lead, y, z, v_lead)
+    c = evaluate_criticality(ConcreteScenario(t=t, ego=ego, objects=(lead,)))
+    assert c["t_p"] == pytest.approx(t_p, abs=1e-12)
+    t_b = c["r157_cc_t_brake"]
+    assert isinstance(t_b, float) and 3.75 < t_b <= 3.76 + 1e-9
+    # by hand: gap 10 m at 3.0 s closing at 10 m/s; braking from t_b (gap 10 - 10 (t_b - 3))
+    collides, speed, _ = r157_by_hand(gap3 - 10.0 * (t_b - 3.0), 10.0)
+    assert collides is True
+    assert c["r157_cc_collision"] is True
+    assert c["r157_cc_impact_speed"] == pytest.approx(speed, abs=1e-6)
 
 
 def test_unavoidable_cut_in() -> None:
@@ -161,6 +220,15 @@ def test_settings_are_validated() -> None:
     with pytest.raises(SettingsError, match="unknown"):
         CriticalitySettings().replace(nope=1.0)
     assert CriticalitySettings().decel_max == pytest.approx(7.59294)
+    # critical_ttc: default inf (any closing gap); inf is refused for every other field
+    assert CriticalitySettings().critical_ttc == math.inf
+    assert CriticalitySettings(critical_ttc=2).critical_ttc == 2.0
+    with pytest.raises(SettingsError, match="critical_ttc"):
+        CriticalitySettings(critical_ttc=math.nan)
+    with pytest.raises(SettingsError, match="critical_ttc"):
+        CriticalitySettings(critical_ttc=-math.inf)
+    with pytest.raises(SettingsError, match="reaction_time"):
+        CriticalitySettings(reaction_time=math.inf)
 
 
 def test_profiles_mark_the_reaction() -> None:
@@ -222,8 +290,11 @@ def _reference(scen: ConcreteScenario, driver: str, s: CriticalitySettings,
         if braking_from == math.inf:
             gap = xc[i] - x - L
             closing = v - vc[i] * math.cos(pc[i])
+            # a conflict develops: the cutter ahead, the gap closed, or closing with TTC
+            # below critical_ttc (inf: any closing gap)
             if driver == "r157" and ti >= t_p and xc[i] > x and (
-                    gap <= 0 or (closing > 0 and gap < s.critical_ttc * closing)):
+                    gap <= 0 or (closing > 0 and (s.critical_ttc == math.inf
+                                                  or gap < s.critical_ttc * closing))):
                 braking_from = ti + s.reaction_time
             if driver == "rss" and xc[i] > x:
                 rho = s.rss_response_time
