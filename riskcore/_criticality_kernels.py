@@ -38,7 +38,7 @@ from riskcore import _kernels
 
 FloatArray = NDArray[np.float64]
 
-_BISECT = 48  # contact-time bisection steps: h / 2**48 < 1e-15 s for h = 0.01 s
+_BISECT = 48  # bisection steps: h / 2**48 < 1e-15 s for h = 0.01 s
 
 
 @njit(cache=True)
@@ -107,6 +107,23 @@ def brake_state(v_b: float, jerk: float, a_max: float,
 
 
 @njit(cache=True)
+def brake_time_to(v_b: float, jerk: float, a_max: float,
+                  v: float) -> float:  # pragma: no cover - jit
+    """Time after braking starts (see :func:`brake_state`) at which the speed has fallen
+    from ``v_b`` to ``max(v, 0)`` (0 when it is there already)."""
+    v = max(v, 0.0)
+    if v >= v_b:
+        return 0.0
+    if jerk == np.inf:
+        return (v_b - v) / a_max
+    t1 = a_max / jerk
+    v1 = v_b - 0.5 * jerk * t1 * t1
+    if v >= v1:  # within the ramp (also when it stops within the ramp)
+        return math.sqrt(2.0 * (v_b - v) / jerk)
+    return t1 + (v1 - v) / a_max
+
+
+@njit(cache=True)
 def _interp(arr: FloatArray, t0: float, h: float, t: float) -> float:  # pragma: no cover
     """Linear interpolation of a grid array at time t (clamped to the grid)."""
     n = arr.shape[0]
@@ -151,17 +168,6 @@ def _cutter_at(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
 
 
 @njit(cache=True)
-def _overlap_at(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
-                cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray,
-                t_b: float, jerk: float, a_max: float, ehl: float, ehw: float, chl: float,
-                chw: float) -> bool:  # pragma: no cover - jit
-    x, y, p, _ = _cutter_at(t, t0, h, cs, cd, cpsi, cv)
-    s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
-    meets, lo, hi = band_range(x, y, math.cos(p), math.sin(p), chl, chw, ehw)
-    return meets and lo < s + ehl and hi > s - ehl
-
-
-@njit(cache=True)
 def _lateral_clear(cd: float, c: float, s: float, chl: float, chw: float,
                    ehw: float) -> bool:  # pragma: no cover - jit
     """Cheap test: the cutter's box lies entirely outside the ego's band |y| <= ehw."""
@@ -169,20 +175,83 @@ def _lateral_clear(cd: float, c: float, s: float, chl: float, chw: float,
 
 
 @njit(cache=True)
+def _clearance(x: float, y: float, p: float, s: float, ehl: float, ehw: float, chl: float,
+               chw: float) -> tuple[bool, float, float, float]:  # pragma: no cover - jit
+    """The cutter's box (centre x, y, heading p) against the ego's at arc length s:
+    (it meets the ego's band beside or ahead of the ego, the clearance ahead of the ego's
+    front (< 0: the boxes overlap), cos p, sin p)."""
+    c = math.cos(p)
+    sn = math.sin(p)
+    if _lateral_clear(y, c, sn, chl, chw, ehw):
+        return False, np.nan, c, sn
+    meets, lo, hi = band_range(x, y, c, sn, chl, chw, ehw)
+    if not (meets and hi > s - ehl):
+        return False, np.nan, c, sn
+    return True, lo - (s + ehl), c, sn
+
+
+@njit(cache=True)
+def _penetration(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
+                 cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray,
+                 t_b: float, jerk: float, a_max: float, ehl: float, ehw: float, chl: float,
+                 chw: float) -> float:  # pragma: no cover - jit
+    """Clearance ahead of the ego's front at time t when the cutter's box meets the ego's
+    band beside or ahead of the ego (the boxes overlap exactly when it is < 0); NaN when it
+    does not (no overlap either)."""
+    x, y, p, _ = _cutter_at(t, t0, h, cs, cd, cpsi, cv)
+    s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
+    near, gap, _, _ = _clearance(x, y, p, s, ehl, ehw, chl, chw)
+    return gap if near else np.nan
+
+
+@njit(cache=True)
 def _contact(t_lo: float, t_hi: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
              cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray, t_b: float,
              jerk: float, a_max: float, ehl: float, ehw: float, chl: float,
              chw: float) -> tuple[float, float]:  # pragma: no cover - jit
-    """Bisection of the first overlap in (t_lo, t_hi]; (contact time, impact speed)."""
+    """The overlap's onset in (t_lo, t_hi] (no overlap at t_lo, overlap at t_hi), to the
+    resolution of the time's floating-point numbers; (contact time, impact speed).
+
+    A bracketing search on :func:`_penetration` (the clearance, continuous while the
+    cutter meets the band): the Illinois variant of regula falsi, a bisection step
+    whenever the clearance at the lower end is undefined or the bracket has not halved.
+    """
     a = t_lo
     b = t_hi
-    for _ in range(_BISECT):
+    fa = _penetration(a, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max, ehl, ehw, chl,
+                      chw)
+    fb = _penetration(b, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max, ehl, ehw, chl,
+                      chw)
+    side = 0
+    width = b - a
+    for it in range(4 * _BISECT):
+        if b - a <= 4e-16 * max(1.0, abs(b)):
+            break
+        secant = True
+        if it % 4 == 3:  # bisect when the last four steps did not halve the bracket
+            secant = b - a <= 0.5 * width
+            width = b - a
         m = 0.5 * (a + b)
-        if _overlap_at(m, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max, ehl, ehw, chl,
-                       chw):
+        if secant and not math.isnan(fa) and fa > fb:
+            sec = b - fb * (b - a) / (fb - fa)
+            if a < sec < b:
+                m = sec
+        if m <= a or m >= b:
+            break
+        fm = _penetration(m, t0, h, cs, cd, cpsi, cv, es, ev, t_b, jerk, a_max, ehl, ehw,
+                          chl, chw)
+        if fm < 0.0:  # overlap (NaN compares False)
             b = m
+            fb = fm
+            if side == -1:
+                fa *= 0.5
+            side = -1
         else:
             a = m
+            fa = fm
+            if side == 1:
+                fb *= 0.5
+            side = 1
     _, ve = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
     _, _, pc, vc = _cutter_at(b, t0, h, cs, cd, cpsi, cv)
     return b, math.hypot(ve - vc * math.cos(pc), vc * math.sin(pc))
@@ -208,8 +277,8 @@ def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
 
     Returns (contact time or NaN, relative impact speed in m/s (0 without contact),
     minimum clearance in m over times >= ``t_from`` until contact (+inf: the cutter never
-    is in the ego's band ahead; 0 with contact)). The contact time is refined by bisection
-    between the grid steps (ego states in closed form, cutter interpolated).
+    is in the ego's band ahead; 0 with contact)). The contact time is refined between the
+    grid steps by :func:`_contact` (ego states in closed form, cutter interpolated).
 
     ``k_const`` (>= 0): from grid step ``k_const`` on the cutter drives straight along the
     ego's heading (no lateral speed) at constant speed and the scripted ego at constant
@@ -222,19 +291,13 @@ def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
     min_gap = np.inf
     for k in range(last + 1):
         t = t0 + k * h
-        p = cpsi[k]
-        c = math.cos(p)
-        sn = math.sin(p)
-        if _lateral_clear(cd[k], c, sn, chl, chw, ehw):
-            continue
         if t > t_b:
             s, _ = ego_at(t, t0, h, es, ev, t_b, jerk, a_max)
         else:
             s = es[k]
-        meets, lo, hi = band_range(cs[k], cd[k], c, sn, chl, chw, ehw)
-        if not (meets and hi > s - ehl):
+        near, gap, c, sn = _clearance(cs[k], cd[k], cpsi[k], s, ehl, ehw, chl, chw)
+        if not near:
             continue
-        gap = lo - (s + ehl)
         if gap < 0.0:
             if k == 0:
                 _, ve = ego_at(t0, t0, h, es, ev, t_b, jerk, a_max)
@@ -246,8 +309,20 @@ def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
             min_gap = gap
     if k_const < 0:
         return np.nan, 0.0, min_gap
+    return _drive_tail(last, t0, h, cs, cd, cpsi, cv, es, ev, ehl, ehw, chl, chw, t_b, jerk,
+                       a_max, t_from, t_stop, min_gap)
+
+
+@njit(cache=True)
+def _drive_tail(k: int, t0: float, h: float, cs: FloatArray, cd: FloatArray,
+                cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray, ehl: float,
+                ehw: float, chl: float, chw: float, t_b: float, jerk: float, a_max: float,
+                t_from: float, t_stop: float,
+                min_gap: float) -> tuple[float, float, float]:  # pragma: no cover - jit
+    """:func:`drive` from grid step ``k`` on in closed form: the cutter straight along the
+    ego's heading at constant speed, the scripted ego at constant speed (``min_gap``: the
+    smallest clearance before ``k``)."""
     # closed-form tail from t_k: the cutter's band range moves at vx, the ego per ego_at
-    k = last
     t_k = t0 + k * h
     p = cpsi[k]
     meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
@@ -273,21 +348,9 @@ def drive(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
             if tc > t_stop:
                 return np.nan, 0.0, min(min_gap, gap_k) if t_k >= t_from else min_gap
             return tc, ev[k] - vx, 0.0
-    # time the braking ego's speed reaches vx (or it stops): bisection on the speed
-    a = t_lin_end
-    b = t_lin_end + 1.0
-    _, vb = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
-    while vb > vx and vb > 0.0:
-        b += 10.0
-        _, vb = ego_at(b, t0, h, es, ev, t_b, jerk, a_max)
-    for _ in range(_BISECT):
-        m = 0.5 * (a + b)
-        _, vm = ego_at(m, t0, h, es, ev, t_b, jerk, a_max)
-        if vm > vx and vm > 0.0:
-            a = m
-        else:
-            b = m
-    t_min = b
+    # the time the braking ego's speed reaches vx (or it stops), in closed form
+    _, v_b = _ego_scripted(es, ev, t0, h, t_b)
+    t_min = max(t_b + brake_time_to(v_b, jerk, a_max, vx), t_lin_end)
     g_min, _ = _tail_gap(t_min, t_k, gap_k, vx, s_k, t0, h, es, ev, t_b, jerk, a_max)
     if g_min >= 0.0:
         return np.nan, 0.0, min(min_gap, g_min) if t_min >= t_from else min_gap
@@ -376,17 +439,26 @@ def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
         prev_t = t
         prev_f = f
     if k_const >= 0:
-        k = n - 1
-        t_k = t0 + k * h
-        clos = ev[k] - cv[k] * math.cos(cpsi[k])
-        g = cs[k] - es[k] - half_lengths
-        if cs[k] > es[k] and clos > 0.0:
-            if ttc_crit == np.inf:
-                t_r = max(t_p, t_k)
-            else:
-                t_r = max(t_k + (g - ttc_crit * clos) / clos, t_p, t_k)
-            if t_r <= t_stop:
-                return t_r
+        return _r157_tail(n - 1, t0 + (n - 1) * h, cs, cpsi, cv, es, ev, half_lengths, t_p,
+                          ttc_crit, t_stop)
+    return np.nan
+
+
+@njit(cache=True)
+def _r157_tail(k: int, t_k: float, cs: FloatArray, cpsi: FloatArray, cv: FloatArray,
+               es: FloatArray, ev: FloatArray, half_lengths: float, t_p: float,
+               ttc_crit: float, t_stop: float) -> float:  # pragma: no cover - jit
+    """:func:`r157_reaction_start` after the last step ``k`` (time ``t_k``), all straight
+    at constant speeds: the gap is linear, TTC falls to ``ttc_crit`` in closed form."""
+    clos = ev[k] - cv[k] * math.cos(cpsi[k])
+    g = cs[k] - es[k] - half_lengths
+    if cs[k] > es[k] and clos > 0.0:
+        if ttc_crit == np.inf:
+            t_r = max(t_p, t_k)
+        else:
+            t_r = max(t_k + (g - ttc_crit * clos) / clos, t_p, t_k)
+        if t_r <= t_stop:
+            return t_r
     return np.nan
 
 
@@ -471,37 +543,321 @@ def required_decel(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: Fl
         t = t0 + k * h
         if t <= t_b:
             continue
-        p = cpsi[k]
-        c = math.cos(p)
-        sn = math.sin(p)
-        if _lateral_clear(cd[k], c, sn, chl, chw, ehw):
+        near, d, _, _ = _clearance(cs[k], cd[k], cpsi[k], s_b, ehl, ehw, chl, chw)
+        if not near:
             continue
-        meets, lo, hi = band_range(cs[k], cd[k], c, sn, chl, chw, ehw)
-        if not (meets and hi > s_b - ehl):
-            continue
-        d = lo - (s_b + ehl)
         if d <= 0.0:
             return np.inf
-        tau = t - t_b
-        run = v_b * tau
-        if run <= d:
-            continue
-        a = 2.0 * (run - d) / (tau * tau) if run <= 2.0 * d else v_b * v_b / (2.0 * d)
-        if a > need:
-            need = a
+        need = max(need, _decel_for(d, v_b, t - t_b))
     if k_const >= 0:
-        k = last
-        p = cpsi[k]
-        meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
-        t_k = t0 + k * h
-        if meets and hi > s_b - ehl:
-            vx = cv[k] * math.cos(p)
-            tau_k = max(t_k - t_b, 0.0)
-            d0 = lo - (s_b + ehl) - vx * (t_k - t_b)
-            if v_b > vx and d0 > 0.0:
-                tau_star = 2.0 * d0 / (v_b - vx)
-                if tau_star >= tau_k:
-                    need = max(need, (v_b - vx) ** 2 / (2.0 * d0))
+        need = max(need, _decel_tail(last, t0 + last * h, cs, cd, cpsi, cv, ehl, ehw, chl,
+                                     chw, s_b, v_b, t_b))
+    return need
+
+
+@njit(cache=True)
+def _decel_tail(k: int, t_k: float, cs: FloatArray, cd: FloatArray, cpsi: FloatArray,
+                cv: FloatArray, ehl: float, ehw: float, chl: float, chw: float, s_b: float,
+                v_b: float, t_b: float) -> float:  # pragma: no cover - jit
+    """:func:`required_decel` after the last step ``k`` (time ``t_k``), the cutter
+    straight at constant speed: the clearance is D0 + vx tau, its supremum in closed form
+    (braking from speed ``v_b`` at ``s_b``, time ``t_b``)."""
+    p = cpsi[k]
+    meets, lo, hi = band_range(cs[k], cd[k], math.cos(p), math.sin(p), chl, chw, ehw)
+    if meets and hi > s_b - ehl:
+        vx = cv[k] * math.cos(p)
+        tau_k = max(t_k - t_b, 0.0)
+        d0 = lo - (s_b + ehl) - vx * (t_k - t_b)
+        if v_b > vx and d0 > 0.0:
+            tau_star = 2.0 * d0 / (v_b - vx)
+            if tau_star >= tau_k:
+                return (v_b - vx) ** 2 / (2.0 * d0)
+    return 0.0
+
+
+# --------------------------------------------------------------------------- pruned
+# The same drivers on the same fine grid t_i = t0 + i h, h = D / r, for motions given as
+# samples every D (the cutter and the scripted ego linear between samples, which is what
+# the fine grid of such a scenario holds). A cheap bound per sample interval proves most
+# intervals free of the event looked for; only the others are stepped through at h.
+# Interval j (times [t0 + j D, t0 + (j + 1) D]) owns the grid points j r .. j r + r - 1
+# (the last interval its end point too).
+
+_MARGIN = 1e-9  # m (or m/s): the bounds skip an interval only by more than this
+
+
+@njit(cache=True)
+def _grid_index(i: int, r: int, n_s: int) -> tuple[int, float]:  # pragma: no cover - jit
+    """Sample interval and fraction of fine grid point i (the end point: last interval)."""
+    k = i // r
+    if k >= n_s - 1:
+        return n_s - 2, 1.0
+    return k, (i - k * r) / r
+
+
+@njit(cache=True)
+def _lin(a: FloatArray, k: int, f: float) -> float:  # pragma: no cover - jit
+    return a[k] * (1.0 - f) + a[k + 1] * f
+
+
+@njit(cache=True)
+def _extents(cpsi: FloatArray, j: int, chl: float,
+             chw: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """Upper bounds of the cutter box's half-extents along and across the ego's heading
+    over interval j: |cos| <= 1 and |sin p| <= min(|p|, 1), p linear in the interval."""
+    sp = min(max(abs(cpsi[j]), abs(cpsi[j + 1])), 1.0)
+    return chl + chw * sp, chw + chl * sp
+
+
+@njit(cache=True)
+def _laterally_clear_interval(cd: FloatArray, j: int, lat: float,
+                              ehw: float) -> bool:  # pragma: no cover - jit
+    """The cutter's box stays outside the ego's band over interval j (cd linear)."""
+    a = cd[j]
+    b = cd[j + 1]
+    d_min = 0.0 if a * b <= 0.0 else min(abs(a), abs(b))
+    return d_min - lat > ehw + _MARGIN
+
+
+@njit(cache=True)
+def drive_pruned(t0: float, d_s: float, r: int, cs: FloatArray, cd: FloatArray,
+                 cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray,
+                 ehl: float, ehw: float, chl: float, chw: float, t_b: float, jerk: float,
+                 a_max: float, i_start: int, closed_tail: bool,
+                 t_stop: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """:func:`drive` (contact time or NaN, impact speed) from fine grid point ``i_start``
+    on, for arrays sampled every ``d_s`` (see the section's comment); ``closed_tail``: the
+    closed-form tail of :func:`drive` after the last sample (its ``k_const``).
+
+    An interval is skipped when the cutter's box, bounded by the extents of
+    :func:`_extents` around its centre, stays outside the ego's band or entirely ahead of
+    the ego's front at the interval's end or behind its rear at the start (the ego never
+    moves backwards). The grid points of the other intervals are checked as in
+    :func:`drive`, the contact refined by the same :func:`_contact`.
+    """
+    h = d_s / r
+    n_s = cs.shape[0]
+    i_end = (n_s - 1) * r
+    radius = math.hypot(chl, chw)
+    rate = np.empty(0)  # see below: computed when first needed
+    for j in range(i_start // r, n_s - 1):
+        lon, lat = _extents(cpsi, j, chl, chw)
+        if _laterally_clear_interval(cd, j, lat, ehw):
+            continue
+        t_j = t0 + j * d_s
+        if not t_j + d_s > t_b:  # scripted throughout (also t_b NaN): linear
+            s_lo = es[j]
+            g_a = cs[j] - es[j]
+            g_b = cs[j + 1] - es[j + 1]
+        else:  # braking from within or before: speeds at most v_up from t_j on
+            s_lo, v_lo = ego_at(t_j, t0, d_s, es, ev, t_b, jerk, a_max)
+            v_up = v_lo if t_j >= t_b else max(ev[j], ev[j + 1])
+            g_a = cs[j] - s_lo
+            g_b = cs[j + 1] - s_lo - v_up * d_s
+            if t_j >= t_b and g_a - radius - ehl > _MARGIN:
+                # the cutter entirely ahead of the braking ego and never slower than it
+                # from here on (rate: the slowest advance of its centre): no contact
+                if rate.shape[0] == 0:
+                    rate = np.empty(n_s)
+                    rate[n_s - 1] = (cv[n_s - 1] * math.cos(cpsi[n_s - 1]) if closed_tail
+                                     else np.inf)
+                    for q in range(n_s - 2, -1, -1):
+                        rate[q] = min(rate[q + 1], (cs[q + 1] - cs[q]) / d_s)
+                if rate[j] >= v_lo:
+                    return np.nan, 0.0
+        if min(g_a, g_b) - lon - ehl > _MARGIN:  # ahead of the ego's front throughout
+            continue
+        if max(cs[j], cs[j + 1]) + lon < s_lo - ehl - _MARGIN:  # behind its rear
+            continue
+        i_hi = j * r + r - 1 if j < n_s - 2 else i_end
+        for i in range(max(j * r, i_start), i_hi + 1):
+            k, f = _grid_index(i, r, n_s)
+            t = t0 + i * h
+            if t > t_b:
+                s, _ = ego_at(t, t0, d_s, es, ev, t_b, jerk, a_max)
+            else:
+                s = _lin(es, k, f)
+            near, gap, c, sn = _clearance(_lin(cs, k, f), _lin(cd, k, f), _lin(cpsi, k, f),
+                                          s, ehl, ehw, chl, chw)
+            if near and gap < 0.0:
+                if i == i_start:
+                    _, ve = ego_at(t, t0, d_s, es, ev, t_b, jerk, a_max)
+                    vc = _lin(cv, k, f)
+                    return t, math.hypot(ve - vc * c, vc * sn)
+                return _contact(t - h, t, t0, d_s, cs, cd, cpsi, cv, es, ev, t_b, jerk,
+                                a_max, ehl, ehw, chl, chw)
+    if not closed_tail:
+        return np.nan, 0.0
+    tc, rel, _ = _drive_tail(n_s - 1, t0, d_s, cs, cd, cpsi, cv, es, ev, ehl, ehw, chl,
+                             chw, t_b, jerk, a_max, t0, t_stop, np.inf)
+    return tc, rel
+
+
+@njit(cache=True)
+def r157_reaction_start_pruned(t0: float, d_s: float, r: int, cs: FloatArray,
+                               cpsi: FloatArray, cv: FloatArray, es: FloatArray,
+                               ev: FloatArray, half_lengths: float, t_p: float,
+                               ttc_crit: float, closed_tail: bool,
+                               t_stop: float) -> float:  # pragma: no cover - jit
+    """:func:`r157_reaction_start` on the fine grid of arrays sampled every ``d_s``.
+
+    An interval is skipped when no grid point in it can be critical: the cutter is not
+    ahead at either end (cs - es is linear), or the gap stays > 0 and an upper bound of
+    the closing speed (the ego's largest speed minus a lower bound of the cutter's speed
+    along the ego's heading) is < 0, or, for a finite ``ttc_crit``, the smallest gap
+    exceeds ``ttc_crit`` times that bound.
+    """
+    h = d_s / r
+    n_s = cs.shape[0]
+    i_end = (n_s - 1) * r
+    x = _interp(cs, t0, d_s, t_p)
+    s = _interp(es, t0, d_s, t_p)
+    clos = _interp(ev, t0, d_s, t_p) - _interp(cv, t0, d_s, t_p) * math.cos(
+        _interp(cpsi, t0, d_s, t_p))
+    g = x - s - half_lengths
+    if r157_critical(x > s, g, clos, ttc_crit):
+        return t_p
+    i0 = max(math.ceil((t_p - t0) / h - 1e-9), 0)
+    prev_t = t_p
+    prev_f = _r157_margin(g, clos, ttc_crit)
+    prev_i = -1  # the fine grid point prev_t belongs to (-1: t_p itself)
+    for j in range(i0 // r, n_s - 1):
+        a = cs[j] - es[j]
+        b = cs[j + 1] - es[j + 1]
+        if a < -_MARGIN and b < -_MARGIN:
+            continue
+        g_min = min(a, b) - half_lengths
+        if g_min > _MARGIN:
+            pm = min(max(abs(cpsi[j]), abs(cpsi[j + 1])), math.pi)
+            cmin = math.cos(pm)
+            along = cmin * (min(cv[j], cv[j + 1]) if cmin >= 0.0 else max(cv[j], cv[j + 1]))
+            clos_max = max(ev[j], ev[j + 1]) - along
+            if clos_max < -_MARGIN:
+                continue
+            if ttc_crit < np.inf and g_min - ttc_crit * max(clos_max, 0.0) > _MARGIN:
+                continue
+        i_hi = j * r + r - 1 if j < n_s - 2 else i_end
+        for i in range(max(j * r, i0), i_hi + 1):
+            t = t0 + i * h
+            if t <= t_p:
+                continue
+            if prev_i != i - 1 and t - h > t_p:
+                # the previous grid point lies in a skipped interval: its value
+                kp, fp = _grid_index(i - 1, r, n_s)
+                prev_t = t - h
+                prev_f = _r157_margin(_lin(cs, kp, fp) - _lin(es, kp, fp) - half_lengths,
+                                      _lin(ev, kp, fp) - _lin(cv, kp, fp)
+                                      * math.cos(_lin(cpsi, kp, fp)), ttc_crit)
+            k, f = _grid_index(i, r, n_s)
+            xs = _lin(cs, k, f)
+            se = _lin(es, k, f)
+            clos = _lin(ev, k, f) - _lin(cv, k, f) * math.cos(_lin(cpsi, k, f))
+            g = xs - se - half_lengths
+            fv = _r157_margin(g, clos, ttc_crit)
+            if r157_critical(xs > se, g, clos, ttc_crit):
+                if g > 0.0 and prev_f > 0.0 and fv < prev_f:
+                    return prev_t + (t - prev_t) * prev_f / (prev_f - fv)
+                return t
+            prev_t = t
+            prev_f = fv
+            prev_i = i
+    if closed_tail:
+        return _r157_tail(n_s - 1, t0 + (n_s - 1) * d_s, cs, cpsi, cv, es, ev, half_lengths,
+                          t_p, ttc_crit, t_stop)
+    return np.nan
+
+
+@njit(cache=True)
+def _decel_for(d: float, v_b: float, tau: float) -> float:  # pragma: no cover - jit
+    """Constant deceleration from speed v_b that covers at most d (> 0) in tau: see
+    :func:`required_decel`."""
+    run = v_b * tau
+    if run <= d:
+        return 0.0
+    return 2.0 * (run - d) / (tau * tau) if run <= 2.0 * d else v_b * v_b / (2.0 * d)
+
+
+@njit(cache=True)
+def _decel_bound(c0: float, slope: float, v_b: float, tau_a: float,
+                 tau_b: float) -> float:  # pragma: no cover - jit
+    """Largest :func:`_decel_for` over tau in [tau_a, tau_b] (tau_b > 0) for the clearance
+    c0 + slope tau; +inf when that clearance is not > 0 throughout.
+
+    The deceleration is 0 while v_b tau <= d, 2 (v_b tau - d) / tau^2 while
+    v_b tau <= 2 d (one stationary point, at tau = 2 c0 / (v_b - slope)) and v_b^2 / (2 d)
+    beyond (monotone in tau); it is continuous, so its largest value is at an end, at
+    that stationary point or where v_b tau = 2 d (tau = 2 c0 / (v_b - 2 slope)).
+    """
+    lo = max(tau_a, 1e-12)
+    d_a = c0 + slope * lo
+    d_b = c0 + slope * tau_b
+    if d_a <= _MARGIN or d_b <= _MARGIN:
+        return np.inf
+    best = max(_decel_for(d_a, v_b, lo), _decel_for(d_b, v_b, tau_b))
+    for den in (v_b - slope, v_b - 2.0 * slope):
+        if den != 0.0:
+            tau = 2.0 * c0 / den
+            if lo < tau < tau_b:
+                best = max(best, _decel_for(c0 + slope * tau, v_b, tau))
+    return best
+
+
+@njit(cache=True)
+def required_decel_pruned(t0: float, d_s: float, r: int, cs: FloatArray, cd: FloatArray,
+                          cpsi: FloatArray, cv: FloatArray, es: FloatArray, ev: FloatArray,
+                          ehl: float, ehw: float, chl: float, chw: float, t_b: float,
+                          closed_tail: bool) -> float:  # pragma: no cover - jit
+    """:func:`required_decel` on the fine grid of arrays sampled every ``d_s``.
+
+    The deceleration needed for a clearance d at tau after t_b falls with d and does not
+    fall with tau, so over an interval it is at most its value for the smallest possible
+    clearance (the cutter's centre minus its extent bound) at the interval's end. The
+    intervals are stepped through in the order of that bound, largest first, until the
+    bound cannot beat the maximum found (a bound of +inf: the clearance may be gone).
+    """
+    h = d_s / r
+    n_s = cs.shape[0]
+    i_end = (n_s - 1) * r
+    s_b, v_b = _ego_scripted(es, ev, t0, d_s, t_b)
+    front = s_b + ehl
+    i0 = max(math.floor((t_b - t0) / h) - 1, 0)
+    m = n_s - 1
+    bound = np.full(m, -1.0)
+    for j in range(i0 // r, m):
+        t_hi = t0 + (j + 1) * d_s
+        if t_hi <= t_b:
+            continue
+        lon, lat = _extents(cpsi, j, chl, chw)
+        if _laterally_clear_interval(cd, j, lat, ehw):
+            continue
+        if max(cs[j], cs[j + 1]) + lon < s_b - ehl - _MARGIN:
+            continue
+        # clearance >= L(tau) = c0 + slope * tau (centre linear, extent bounded)
+        slope = (cs[j + 1] - cs[j]) / d_s
+        c0 = cs[j] - lon - front - slope * (t0 + j * d_s - t_b)
+        bound[j] = _decel_bound(c0, slope, v_b, max(t0 + j * d_s - t_b, 0.0), t_hi - t_b)
+    need = 0.0
+    while True:
+        j = int(np.argmax(bound))
+        if bound[j] < 0.0 or bound[j] <= need:
+            break
+        bound[j] = -1.0
+        i_hi = j * r + r - 1 if j < m - 1 else i_end
+        for i in range(max(j * r, i0), i_hi + 1):
+            t = t0 + i * h
+            if t <= t_b:
+                continue
+            k, f = _grid_index(i, r, n_s)
+            near, d, _, _ = _clearance(_lin(cs, k, f), _lin(cd, k, f), _lin(cpsi, k, f), s_b,
+                                       ehl, ehw, chl, chw)
+            if not near:
+                continue
+            if d <= 0.0:
+                return np.inf
+            need = max(need, _decel_for(d, v_b, t - t_b))
+    if closed_tail:
+        need = max(need, _decel_tail(n_s - 1, t0 + (n_s - 1) * d_s, cs, cd, cpsi, cv, ehl,
+                                     ehw, chl, chw, s_b, v_b, t_b))
     return need
 
 

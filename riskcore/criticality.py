@@ -132,7 +132,7 @@ class CriticalitySettings:
 
     step : float
         Time step of the closed-loop simulations, s (0.01); contact times are refined by
-        bisection between steps.
+        a bracketing root search between steps.
     tail : float
         The simulations continue past the scenario's end (both vehicles at constant
         velocity) for this long, s (10), plus the time to close the gap if it is closing,

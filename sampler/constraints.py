@@ -299,7 +299,12 @@ class _Quantities:
                 before, after = plateau_speeds(col["p_a1"], col["p_a2"], col["p_a3"], col["p_v0"])
                 c[name] = np.minimum(before, after)
             elif name in CRITICALITY_QUANTITIES:
-                c.update(criticality_quantities(self.p, self.lane_width))
+                # the TTR scan costs more than the drivers: only when ttr_true is asked for
+                q = criticality_quantities(self.p, self.lane_width,
+                                           with_ttr=name == "ttr_true")
+                if name != "ttr_true":
+                    del q["ttr_true"]
+                c.update(q)
             elif name in DERIVED:
                 kin = crossing_kinematics(self.p, self.lane_width / 2.0)
                 c["t_cross"] = kin.t_cross

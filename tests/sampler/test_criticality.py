@@ -6,9 +6,11 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 from datasets.cutin_model import PARAM_NAMES
-from riskcore.criticality import evaluate_criticality
+from riskcore.criticality import CriticalitySettings, evaluate_criticality
 from sampler import (
     BuilderError,
     CutInGMM,
@@ -19,6 +21,11 @@ from sampler import (
     sample,
 )
 from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
+from tests.riskcore.driver_reference import (
+    clear_outcome,
+    generated_cut_ins,
+    reference_drive,
+)
 from tests.sampler.factories import synthetic_parameter_table
 
 _MAP = {"t_p": "t_p", "a_req": "a_req", "btn": "btn", "ttr_true": "ttr_true",
@@ -107,3 +114,91 @@ def test_sampling_critical_but_preventable() -> None:
         rec = evaluate_criticality(build_scenario(dict(zip(PARAM_NAMES, row, strict=True)),
                                                   lane_width=lw)).to_record()
         assert 0.2 - 1e-3 < rec["btn"] < 1.0 + 1e-3  # type: ignore[operator]
+
+
+# --------------------------------------------------------------------------- fast path
+_QUANTITIES = ("t_p", "a_req", "btn", "r157_collision", "r157_impact_speed",
+               "none_collision")
+
+
+def _assert_same(fast: dict[str, np.ndarray], grid: dict[str, np.ndarray]) -> None:
+    """The pruned kernels check the same grid points as the grid path: equal results up
+    to floating-point rounding (the contact time is a root found to ~1e-15 s)."""
+    for name in _QUANTITIES:
+        a, b = fast[name], grid[name]
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=name)
+        np.testing.assert_array_equal(np.isinf(a), np.isinf(b), err_msg=name)
+        ok = np.isfinite(a) & np.isfinite(b)
+        np.testing.assert_allclose(a[ok], b[ok], rtol=1e-9, atol=1e-9, err_msg=name)
+
+
+@pytest.mark.parametrize("critical_ttc", [math.inf, 2.0])
+def test_fast_path_equals_the_grid_path(critical_ttc: float) -> None:
+    rows = _closing_rows(400, seed=11)
+    # a quick cut-in close ahead and much slower: contact before braking can start
+    rows[:40, 0] = np.where(rows[:40, 0] > 0, 0.25, -0.25)
+    rows[:40, 1] = 1.5
+    rows[:40, 6] = 22.0
+    rows[:40, 7] = np.linspace(0.5, 8.0, 40)
+    s = CriticalitySettings(critical_ttc=critical_ttc)
+    fast = criticality_quantities(rows, settings=s, with_ttr=False)
+    grid = criticality_quantities(rows, settings=s, with_ttr=False, baseline=True)
+    _assert_same(fast, grid)
+    # the comparison covers every outcome the drivers can have
+    assert np.nansum(fast["none_collision"]) >= 100
+    assert np.nansum(fast["r157_collision"]) >= 5
+    assert np.nansum(fast["none_collision"] == 0) >= 20
+    assert np.isinf(fast["a_req"]).sum() >= 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(p_y1=st.floats(0.01, 0.12), side=st.sampled_from([-1.0, 1.0]),
+       p_t=st.floats(1.0, 4.0), p_a1=st.floats(-3.0, 1.5), p_a2=st.floats(-1.0, 4.0),
+       p_a3=st.floats(0.0, 4.0), p_v0=st.floats(8.0, 40.0), dv=st.floats(-4.0, 20.0),
+       gap=st.floats(0.5, 60.0), critical_ttc=st.sampled_from([math.inf, 2.0, 0.5]))
+def test_fast_path_equals_the_grid_path_on_random_rows(
+        p_y1: float, side: float, p_t: float, p_a1: float, p_a2: float, p_a3: float,
+        p_v0: float, dv: float, gap: float, critical_ttc: float) -> None:
+    row = np.array([[side * p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap]])
+    s = CriticalitySettings(critical_ttc=critical_ttc)
+    _assert_same(criticality_quantities(row, settings=s, with_ttr=False),
+                 criticality_quantities(row, settings=s, with_ttr=False, baseline=True))
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(params=generated_cut_ins())
+def test_fast_path_agrees_with_the_slow_reference(params: dict[str, float]) -> None:
+    # the R157 and constant-speed drivers of the fast path against the plain 1 ms loop on
+    # the built scenario, collision for collision
+    try:
+        scen = build_scenario(params)
+    except BuilderError:
+        assume(False)
+        return
+    rec = evaluate_criticality(scen).to_record()
+    assume(clear_outcome(rec, "none") and clear_outcome(rec, "r157_cc"))
+    q = criticality_quantities(np.array([[params[n] for n in PARAM_NAMES]]), with_ttr=False)
+    s = CriticalitySettings()
+    for driver, key in (("r157", "r157_collision"), ("none", "none_collision")):
+        ref_hit, ref_speed = reference_drive(scen, driver, s)
+        assert bool(q[key][0]) is ref_hit, (driver, rec)
+        if driver == "r157" and ref_hit:
+            assert q["r157_impact_speed"][0] == pytest.approx(ref_speed, abs=0.05)
+
+
+def test_step_must_divide_the_sample_step() -> None:
+    with pytest.raises(ValueError, match=r"settings\.step"):
+        criticality_quantities(_closing_rows(2, seed=1),
+                               settings=CriticalitySettings(step=0.03))
+
+
+def test_constraints_on_btn_and_ttr_true_together() -> None:
+    # btn is evaluated without the TTR scan; ttr_true asked for afterwards still gets it
+    rows = _closing_rows(200, seed=6)
+    q = criticality_quantities(rows)
+    bounds = Region.from_constraints([]).contains(rows)
+    for cons in (["btn>0.1", "ttr_true<4"], ["ttr_true<4", "btn>0.1"]):
+        inside = Region.from_constraints(cons).contains(rows)
+        expect = bounds & (q["btn"] > 0.1) & (q["ttr_true"] < 4)
+        np.testing.assert_array_equal(inside, expect)
+        assert 5 <= inside.sum() < bounds.sum()
