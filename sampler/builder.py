@@ -8,9 +8,12 @@ Duration (adaptive by default): a scenario lasts until its conflict is resolved 
 scripted ego (:func:`riskcore.criticality.conflict_resolution`: contact; the cutter done
 with its lane change and acceleration pulse and the gap no longer shrinking; or the
 cutter left behind), plus the risk horizon (``horizon``, 3 s, riskcore's Table II
-default), rounded up to whole steps. A requested ``duration`` may be longer, never
-shorter than the resolution: no criticality figure may come from a cut-off. The
-provenance records ``t_resolved`` and ``resolution``.
+default), rounded up to whole steps, and at least until the cutter's lane change and
+acceleration pulse are over (a reacting reference driver meets the cutter later than the
+scripted ego: its figures must not come from a cut-off either). A requested
+``duration`` may be longer, never shorter than the resolution: no criticality figure may
+come from a cut-off. The provenance records ``t_resolved`` and ``resolution``. A
+manoeuvre lasting longer than a scenario may (3600 s) is refused.
 
 Geometry (road frame: x along the road, y to the left, positions are vehicle centres):
 
@@ -181,13 +184,19 @@ def build_scenario(
     # after t_settle nothing changes speed or heading: the resolution is exact from there
     pulse_end = p.p_a2 + p.p_a3 if p.p_a3 > 0 else 0.0
     t_settle = lead_in + max(2.0 * p.p_t, pulse_end, 0.0)
+    if t_settle > MAX_DURATION:
+        raise BuilderError(
+            f"params: the cutter's lane change and acceleration pulse last until "
+            f"{t_settle:.1f} s; scenarios are at most {MAX_DURATION:.0f} s")
     n_settle = math.ceil(t_settle / dt - 1e-9) + 1
     t_pre = _time_grid(n_settle, dt)
     ego_pre, cut_pre = geometry.tracks(t_pre)
     t_res, how = conflict_resolution(t_pre, ego_pre, cut_pre)
     need = t_res - 1e-9 * max(1.0, t_res)
     if duration is None:
-        duration = max(t_res + DEFAULT_HORIZON, lead_in + dt)
+        # also until the cutter's motion has settled: a reacting ego (the criticality
+        # record's reference drivers) meets the cutter later than the scripted one does
+        duration = max(t_res + DEFAULT_HORIZON, n_settle * dt, lead_in + dt)
         n_steps = math.ceil(duration / dt - 1e-9)
     else:
         n_steps = round(duration / dt)

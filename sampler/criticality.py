@@ -44,6 +44,7 @@ from riskcore.criticality import CriticalitySettings
 from riskcore.evasion import MANOEUVRES
 from riskcore.settings import RiskSettings
 from sampler._exceptions import SamplerError
+from sampler.builder import MAX_DURATION
 
 __all__ = ["CRITICALITY_QUANTITIES", "criticality_quantities"]
 
@@ -64,6 +65,7 @@ CRITICALITY_QUANTITIES: dict[str, tuple[str, str]] = {
 _LEAD_IN = 2.5  # the builder's defaults
 _DT = 0.1
 _SIZE = (4.5, 1.8)
+_MAX_DURATION = MAX_DURATION
 
 
 @numba.njit(cache=True)
@@ -103,6 +105,8 @@ def _cutter_samples(row: FloatArray, lane_width: float, wz: float, tail: float,
     ehl = 0.5 * _SIZE[0]
     pulse_end = p_a2 + p_a3 if p_a3 > 0.0 else 0.0
     t_settle = _LEAD_IN + max(2.0 * p_t, pulse_end, 0.0)
+    if t_settle > _MAX_DURATION:  # the builder refuses it
+        return bad
     # integrate on 0.01 s substeps from tau = -lead_in over the lateral motion and beyond:
     # samples every _DT up to t_settle + 0.1, then constant velocity (as the frames do)
     k_set = math.ceil(t_settle / _DT - 1e-9) + 1
@@ -437,8 +441,9 @@ def criticality_quantities(params: FloatArray, lane_width: float = DEFAULT_LANE_
     rs = risk_settings or RiskSettings()
     ratio = round(_DT / s.step)
     if ratio < 1 or abs(ratio * s.step - _DT) > 1e-12:
-        raise ValueError(f"settings.step: must divide {_DT} s for the sampler-level "
-                         f"quantities, got {s.step}")
+        raise SamplerError(f"settings.step: must divide {_DT} s for the sampler-level "
+                           f"quantities, got {s.step}", field="settings.step",
+                           problem="does not divide the sample step", value=s.step)
     n = arr.shape[0]
     man_a = np.zeros((n, len(MANOEUVRES)))
     man_w = np.zeros((n, len(MANOEUVRES)))

@@ -202,3 +202,32 @@ def test_constraints_on_btn_and_ttr_true_together() -> None:
         expect = bounds & (q["btn"] > 0.1) & (q["ttr_true"] < 4)
         np.testing.assert_array_equal(inside, expect)
         assert 5 <= inside.sum() < bounds.sum()
+
+
+def test_a_pulse_that_outlasts_the_scripted_contact_is_in_the_scenario() -> None:
+    # the cutter brakes (-0.743 m/s^2) from 5.9 s to 16.6 s after the lead-in, long after
+    # the scripted ego hits it (8.5 s): the careful driver, braking from t_p + 0.75 s,
+    # meets the still-braking cutter, so the scenario must run until the pulse is over
+    # (19.07 s) or a_req comes from a cut-off (0.57 m/s^2 with the cutter's speed held
+    # from 11.5 s on, instead of 0.69)
+    row = [0.023, 3.557, -0.743, 5.926, 10.641, 22.37, 2.458, 6.714]
+    scen = build_scenario(dict(zip(PARAM_NAMES, row, strict=True)), lane_width=3.5)
+    assert scen.provenance["resolution"] == "contact"
+    assert scen.provenance["t_resolved"] < 9.0 < 2.5 + 5.926 + 10.641 <= scen.t[-1]
+    rec = evaluate_criticality(scen).to_record()
+    q = criticality_quantities(np.array([row]), 3.5, with_ttr=False)
+    assert rec["a_req"] == pytest.approx(q["a_req"][0], rel=1e-5)
+    assert rec["a_req"] > 0.68  # type: ignore[operator]
+    assert q["r157_collision"][0] == float(bool(rec["r157_cc_collision"]))
+
+
+def test_a_manoeuvre_longer_than_a_scenario_may_be_is_not_a_cut_in() -> None:
+    # a 24,000 s acceleration pulse: the builder refuses it (at most 3600 s), the sampler
+    # level gives NaN without allocating its samples
+    row = [0.273, 0.841, 0.542, -7.95, 24048.7, 23.0, 11.7, 29.3]
+    with pytest.raises(BuilderError, match="at most"):
+        build_scenario(dict(zip(PARAM_NAMES, row, strict=True)))
+    q = criticality_quantities(np.array([row, [0.273, 0.841, 0.0, 0.0, 1e300, 23.0, 11.7,
+                                                 29.3]]))
+    for name in CRITICALITY_QUANTITIES:
+        assert np.isnan(q[name]).all(), name
