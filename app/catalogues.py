@@ -21,6 +21,7 @@ from app.errors import Conflict, InvalidInput, ServiceError
 from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
+from app.rates import catalogue_rates
 from riskcore.scenario import ConcreteScenario
 from sampler.record import SCORE_FIELDS, ScenarioRecord
 
@@ -125,6 +126,8 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "scenarios_done": done,
         "progress": min(1.0, done / row.n) if row.n else 1.0,
         "p_region": row.p_region,
+        # issue 12: rates per hour / 10^6 km with both intervals, and the weights' sum
+        "rates": catalogue_rates(row.p_region, stats.get("exposure_weight")),
         "summary": stats,
         "classes": classes,
         "error": row.error,

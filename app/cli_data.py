@@ -7,6 +7,7 @@ line with exit code 2. Long work shows a progress bar on stderr.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -41,7 +42,20 @@ def _extract(args: argparse.Namespace) -> int:
     write_table(res.table, args.output)
     print(f"{len(res.table)} cut-ins extracted, {len(res.skipped)} skipped; "
           f"wrote {args.output}")
+    if res.exposure is not None:  # highD: 'scengen fit TABLE' reads it from beside the table
+        from sampler.exposure import highd_exposure
+
+        exp = highd_exposure(res.exposure, len(res.table))
+        side = exposure_path(args.output)
+        side.write_text(json.dumps(exp.to_dict(), indent=1) + "\n", encoding="utf-8")
+        print(f"exposure: {exp.hours:.4g} vehicle-hours, {exp.km:.4g} vehicle-km; wrote {side}")
     return 0
+
+
+def exposure_path(table: str | Path) -> Path:
+    """Where a table's exposure is kept: ``TABLE.exposure.json`` beside it."""
+    p = Path(table)
+    return p.with_name(p.name + ".exposure.json")
 
 
 def _synth(args: argparse.Namespace) -> int:

@@ -126,6 +126,7 @@ def _fit(args: argparse.Namespace) -> int:
                      random_state=args.seed, lane_width=args.lane_width)
     if args.bootstrap < 0 or args.bootstrap == 1:
         raise ValueError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
+    from app.cli_data import exposure_path
     from sampler.exposure import Exposure, cutin_rate, tno_exposure
 
     exposure = None
@@ -134,6 +135,9 @@ def _fit(args: argparse.Namespace) -> int:
                             km=args.exposure_km, source="given on the command line")
     elif args.dataset is None:
         exposure = tno_exposure(len(table))
+    elif exposure_path(args.dataset).is_file():  # written by 'scengen data extract' (highD)
+        exposure = Exposure.from_dict({**json.loads(exposure_path(args.dataset).read_text(
+            encoding="utf-8")), "n_events": len(table)})
     model.fit(table, source=source)
     if exposure is not None:
         model.exposure_ = exposure.to_dict()

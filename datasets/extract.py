@@ -62,6 +62,9 @@ class ExtractionResult:
 
     table: pd.DataFrame
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    #: highD: the recordings' exposure per vehicle (``HighDRecording.driven``, summed):
+    #: ``vehicle_hours``, ``vehicle_km``, ``recordings``, ``duration_hours``; else None
+    exposure: dict[str, Any] | None = None
 
 
 def _to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
@@ -249,17 +252,27 @@ def extract_cutins(
         frame = ec.read_egocentric(p)
         return extract_egocentric_report(frame, source=p.name, progress=progress)
     if fmt == "highd":
+        from datasets import highd_columns as hc
         from datasets.highd import find_recordings, read_highd
 
         tables: list[pd.DataFrame] = []
         skipped: list[tuple[str, str]] = []
+        seconds = metres = duration = 0.0
+        names = []
         for prefix in find_recordings(p):
             rec = read_highd(prefix, progress=progress)
             res = extract_highd_report(rec, progress=progress)
             tables.append(res.table)
             skipped.extend(res.skipped)
+            s, m = rec.driven()
+            seconds += s
+            metres += m
+            duration += float(rec.recording_meta[hc.DURATION].iloc[0])
+            names.append(rec.name)
         table = pd.concat(tables, ignore_index=True) if tables else empty_table()
-        return ExtractionResult(table, skipped)
+        exposure = {"vehicle_hours": seconds / 3600.0, "vehicle_km": metres / 1000.0,
+                    "recordings": names, "duration_hours": duration / 3600.0}
+        return ExtractionResult(table, skipped, exposure)
     raise FormatError(f"format: expected 'highd' or 'egocentric', got {fmt!r}")
 
 

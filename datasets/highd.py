@@ -87,6 +87,18 @@ class HighDRecording:
         """Frames per second (highD: 25)."""
         return float(self.recording_meta[hc.FRAME_RATE].iloc[0])
 
+    def driven(self) -> tuple[float, float]:
+        """The recording's exposure per vehicle, summed over its tracked vehicles: seconds
+        each was tracked on the section (``numFrames / frameRate``) and metres it drove
+        there (``traveledDistance``), from ``tracksMeta``. These are vehicle-seconds and
+        vehicle-metres: every cut-in in front of any tracked vehicle was observable in
+        them (highD's own ``totalDrivenTime`` / ``totalDrivenDistance`` of
+        ``recordingMeta`` are the same sums, rounded)."""
+        seconds = float(self.tracks_meta[hc.NUM_FRAMES].to_numpy(dtype=np.float64).sum())
+        metres = float(np.abs(self.tracks_meta[hc.TRAVELED_DISTANCE]
+                              .to_numpy(dtype=np.float64)).sum())
+        return seconds / self.frame_rate, metres
+
     @property
     def is_synthetic(self) -> bool:
         """True for recordings written by :mod:`datasets.synth`."""

@@ -15,9 +15,15 @@ Sources of exposure:
   to (208 of 297: the conversion left 89 out as implausible, see the data's PROVENANCE.md):
   the rate is that of cut-ins of the kind the model describes, a lower bound of the rate
   of all cut-ins (297 / 63 h).
-* highD recordings: ``totalDrivenTime`` (s) and ``totalDrivenDistance`` (m) of every
-  recording's ``recordingMeta``, summed: vehicle-hours and vehicle-km driven past the
-  drone, in which every cut-in in front of any vehicle was recorded.
+* highD recordings: per tracked vehicle, the time it was on the recorded section
+  (``numFrames / frameRate`` of ``tracksMeta``) and the distance it drove there
+  (``traveledDistance``), summed over the vehicles of every recording: vehicle-hours and
+  vehicle-km. That is the exposure of the extracted cut-ins: a cut-in is counted for the
+  vehicle it cuts in front of (the ego), and every tracked vehicle could be an ego for the
+  time and distance it was tracked. (Road-km or recording hours would count the section
+  once however many vehicles drove it, and would not compare with a per-vehicle figure
+  such as the TNO data's hours driven.) highD's ``totalDrivenTime`` /
+  ``totalDrivenDistance`` in ``recordingMeta`` are the same sums, rounded.
 
 Intervals of a rate (``region_rates``):
 
@@ -30,7 +36,7 @@ The count's own exact (Garwood) Poisson interval is reported with ``lambda``.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -40,7 +46,7 @@ from scipy import stats
 from sampler._exceptions import ModelError
 
 __all__ = ["TNO_HOURS", "Exposure", "cutin_rate", "highd_exposure", "region_rates",
-           "region_report", "report_text", "tno_exposure"]
+           "region_report", "report_text", "tno_exposure", "uncertainty_report"]
 
 #: hours of driving of the TNO cut-in data (de Gelder et al. 2021, N_HOUR in uncertainty.py)
 TNO_HOURS = 63.0
@@ -99,23 +105,20 @@ def tno_exposure(n_events: int) -> Exposure:
     return Exposure(n_events=int(n_events), hours=TNO_HOURS, km=None, source=TNO_SOURCE)
 
 
-def highd_exposure(recording_metas: Iterable[Any], n_events: int) -> Exposure:
-    """Exposure of highD recordings from their ``recordingMeta`` tables (DataFrames with
-    ``totalDrivenTime`` in s and ``totalDrivenDistance`` in m)."""
-    from datasets import highd_columns as hc
-
-    seconds = metres = 0.0
-    names = 0
-    for meta in recording_metas:
-        seconds += float(np.sum(meta[hc.TOTAL_DRIVEN_TIME].to_numpy(dtype=np.float64)))
-        metres += float(np.sum(meta[hc.TOTAL_DRIVEN_DISTANCE].to_numpy(dtype=np.float64)))
-        names += 1
-    if names == 0:
-        raise ModelError("exposure: no highD recording given")
-    return Exposure(n_events=int(n_events), hours=seconds / 3600.0 if seconds > 0 else None,
-                    km=metres / 1000.0 if metres > 0 else None,
-                    source=f"highD recordingMeta of {names} recording(s): totalDrivenTime, "
-                           "totalDrivenDistance (vehicle-hours, vehicle-km)")
+def highd_exposure(driven: Mapping[str, Any], n_events: int) -> Exposure:
+    """Exposure of highD recordings: ``driven`` is the extraction's exposure
+    (``datasets.extract.ExtractionResult.exposure``: ``vehicle_hours``, ``vehicle_km`` summed
+    over the tracked vehicles of every recording, ``recordings``)."""
+    try:
+        hours, km = float(driven["vehicle_hours"]), float(driven["vehicle_km"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"exposure: expected vehicle_hours and vehicle_km ({exc})") from None
+    names = list(driven.get("recordings") or [])
+    return Exposure(n_events=int(n_events), hours=hours if hours > 0 else None,
+                    km=km if km > 0 else None,
+                    source=f"highD tracksMeta of {len(names)} recording(s) "
+                           f"({', '.join(map(str, names[:10]))}): per vehicle numFrames / "
+                           "frameRate and traveledDistance, summed (vehicle-hours, vehicle-km)")
 
 
 def _poisson_ci(n: int, confidence: float) -> tuple[float, float]:
@@ -173,7 +176,9 @@ def region_rates(exposure: Exposure, p_region: Mapping[str, Any] | Any,
     for unit, amount in _units(exposure):
         lam = exposure.n_events / amount
         entry: dict[str, Any] = {"estimate": lam * est, "mc_ci": [lam * lo, lam * hi],
-                                 "model_ci": None}
+                                 "model_ci": None,
+                                 "model_lower_resolved": None if model is None
+                                 else bool(model.get("lower_resolved", True))}
         if reps is not None and reps.size:
             q = np.quantile(reps / amount, [a / 2, 1 - a / 2])
             entry["model_ci"] = [float(q[0]), float(q[1])]
@@ -181,57 +186,93 @@ def region_rates(exposure: Exposure, p_region: Mapping[str, Any] | Any,
     return out
 
 
-def region_report(model: Any, sample_set: Any, seed: int = 0, n_plain: int = 8192,
-                  confidence: float = 0.95) -> dict[str, Any]:
+def uncertainty_report(model: Any, p_region: Any, region: Any, seed: int = 0,
+                       n_samples: int | None = None, n_plain: int = 8192,
+                       confidence: float = 0.95) -> dict[str, Any]:
     """P(A) with its "Monte Carlo" interval, the "model" interval (when the model has
-    bootstrap replicates) and the rates (when it has an exposure), for a sample set drawn
-    from the model: what the CLI and the API show beside P(A)."""
-    from sampler.bootstrap import model_interval
+    bootstrap replicates: ``sampler.bootstrap.pooled_interval``) and the rates (when it has
+    an exposure) of a region whose P(A) under the model is known: what the CLI, the API
+    and a catalogue's status show beside P(A).
 
-    p = sample_set.p_region
+    Parameters
+    ----------
+    p_region : sampler.probability.PRegion of the region under the fitted model
+    region : sampler.constraints.Region
+    n_samples : samples the region was drawn with (then each sample's exposure weight in
+        each unit is given, ``weight_per_sample``: they sum to the rate)
+    """
+    from sampler.bootstrap import pooled_interval
+
+    p = p_region
     out: dict[str, Any] = {"p_region": {"estimate": p.estimate, "mc_ci": [p.ci_low, p.ci_high],
                                         "model_ci": None, "cov": p.cov,
                                         "method": p.method}}
     model_iv = None
     if getattr(model, "bootstrap_", None):
-        names = list(model.features_)
-        z_in = model.to_z(sample_set.params[names].to_numpy(dtype=np.float64))
-        rng = np.random.default_rng(seed)
-        z_plain = model.sample_z(int(n_plain), rng)
-        in_b = sample_set.region.in_bounds(model.params_matrix(model.from_z(z_plain)))
-        model_iv = model_interval(model, z_in, p.p_joint, z_plain, in_b, confidence)
+        # rare when the region needed subset simulation under the fitted model
+        model_iv = pooled_interval(model, region, seed, rare=p.method == "subset",
+                                   n_plain=n_plain, confidence=confidence)
         out["p_region"]["model_ci"] = model_iv["ci"]
         out["model_interval"] = {k: v for k, v in model_iv.items() if k != "replicates"}
+        out["model_interval"]["replicates_quantiles"] = _quantiles(model_iv["replicates"])
     exp = getattr(model, "exposure_", None)
     if exp:
         rates = region_rates(Exposure.from_dict(exp), p, model_iv, seed=seed,
                              confidence=confidence)
-        n = max(1, len(sample_set))
-        for unit in ("per_hour", "per_1e6_km"):
-            if unit in rates:  # each sample's exposure weight in this unit: they sum to it
-                rates[unit]["weight_per_sample"] = rates[unit]["estimate"] / n
+        if n_samples:
+            for unit in ("per_hour", "per_1e6_km"):
+                if unit in rates:  # each sample's exposure weight in this unit: they sum to it
+                    rates[unit]["weight_per_sample"] = rates[unit]["estimate"] / n_samples
         out["rates"] = rates
     return out
 
 
+def _quantiles(values: Any) -> dict[str, float]:
+    """Percentiles 0, 2.5, 10, 50, 90, 97.5, 100 of the replicates' P(A) (finite ones)."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    qs = (0.0, 2.5, 10.0, 50.0, 90.0, 97.5, 100.0)
+    if not v.size:
+        return {}
+    return {f"p{q:g}": float(x) for q, x in zip(qs, np.percentile(v, qs), strict=True)}
+
+
+def region_report(model: Any, sample_set: Any, seed: int = 0, n_plain: int = 8192,
+                  confidence: float = 0.95) -> dict[str, Any]:
+    """``uncertainty_report`` of a sample set drawn from the model (its region, P(A) and
+    size)."""
+    return uncertainty_report(model, sample_set.p_region, sample_set.region, seed,
+                              n_samples=max(1, len(sample_set)), n_plain=n_plain,
+                              confidence=confidence)
+
+
 def report_text(report: Mapping[str, Any]) -> str:
     """One line per figure: P(A) and the rates with both intervals."""
-    def iv(v: Any) -> str:
-        return "n/a" if v is None else f"[{v[0]:.3g}, {v[1]:.3g}]"
+    mi = report.get("model_interval") or {}
+    resolved = mi.get("lower_resolved", True)
+
+    def iv(v: Any, model: bool = False) -> str:
+        if v is None:
+            return "n/a"
+        low = f"{v[0]:.3g}" if resolved or not model else "lower end not resolved"
+        return f"[{low}, {v[1]:.3g}]"
 
     p = report["p_region"]
-    lines = [f"P(A) {p['estimate']:.3g}  Monte Carlo {iv(p['mc_ci'])}  model {iv(p['model_ci'])}"]
+    lines = [f"P(A) {p['estimate']:.3g}  Monte Carlo {iv(p['mc_ci'])}  "
+             f"model {iv(p['model_ci'], True)}"]
     rates = report.get("rates")
     if rates:
         for unit, label in (("per_hour", "per hour"), ("per_1e6_km", "per 10^6 km")):
             if unit in rates:
                 r = rates[unit]
                 lines.append(f"rate {label} {r['estimate']:.3g}  Monte Carlo {iv(r['mc_ci'])}"
-                             f"  model {iv(r['model_ci'])}")
+                             f"  model {iv(r['model_ci'], True)}")
         e = rates["exposure"]
         lines.append(f"exposure: {e['n_events']} cut-ins in "
                      + " and ".join(x for x in (
                          f"{e['hours']:.4g} h" if e["hours"] else "",
                          f"{e['km']:.4g} km" if e["km"] else "") if x)
                      + f" ({e['source']})")
+    if mi.get("note"):
+        lines.append("model interval: " + str(mi["note"]))
     return "\n".join(lines)

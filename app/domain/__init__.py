@@ -39,6 +39,7 @@ from app.domain.sampling import (
     add_region_report,
     estimate_region,
     parse_constraints,
+    region_uncertainty,
     sample,
 )
 from datasets.cutin_model import PARAM_NAMES
@@ -64,6 +65,7 @@ __all__ = [
     "options_hash",
     "parse_constraints",
     "parse_scenario",
+    "region_uncertainty",
     "risk_report",
     "sample",
     "scenario_risk_series",

@@ -20,6 +20,7 @@ from app.errors import InvalidInput
 from datasets.embedded import DEFAULT_EVENTS_PATH, default_parameter_table
 from datasets.errors import DatasetError
 from datasets.extract import extract_cutins
+from sampler.exposure import highd_exposure
 
 __all__ = ["DATASET_KINDS", "dataset_from_files", "embedded_parameter_table",
            "embedded_source_hash", "options_hash", "table_hash"]
@@ -88,4 +89,6 @@ def dataset_from_files(kind: str, paths: Sequence[Path]) -> tuple[pd.DataFrame, 
     skipped = [{"event_id": e, "reason": r} for e, r in result.skipped]
     report = {"n_cutins": len(result.table), "n_skipped": len(skipped),
               "skipped": skipped[:200], "files": [p.name for p in paths]}
+    if result.exposure is not None:  # highD: vehicle-hours and vehicle-km (issue 12)
+        report["exposure"] = highd_exposure(result.exposure, len(result.table)).to_dict()
     return result.table, report

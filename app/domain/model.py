@@ -18,7 +18,7 @@ from datasets.cutin_model import PARAM_NAMES
 from datasets.embedded import SOURCE as EMBEDDED_SOURCE
 from sampler import CutInGMM, SamplerError
 from sampler.bootstrap import bootstrap_fit
-from sampler.exposure import tno_exposure
+from sampler.exposure import Exposure, tno_exposure
 
 __all__ = ["FittedModel", "describe_model", "fit_model", "load_model", "marginal_density",
            "model_components", "model_draws", "model_features", "model_lane_width"]
@@ -35,8 +35,11 @@ class FittedModel:
 
 
 def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
-              source: str | None = None) -> FittedModel:
-    """Fit the cut-in GMM on a parameter table with the sampler's options."""
+              source: str | None = None,
+              exposure: Mapping[str, Any] | None = None) -> FittedModel:
+    """Fit the cut-in GMM on a parameter table with the sampler's options. ``exposure``:
+    the dataset's (``sampler.exposure.Exposure`` as a dict), carried into the model; the
+    embedded TNO table gets its 63 hours."""
     kwargs = dict(options)
     n_boot = kwargs.pop("n_bootstrap", 100)  # issue 12: the model interval's refits
     if isinstance(n_boot, bool) or not isinstance(n_boot, int) or n_boot == 1 or n_boot < 0:
@@ -54,7 +57,9 @@ def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
             bootstrap_fit(model, table, n_boot, seed=int(model.random_state))
     except ValueError as exc:
         raise InvalidInput(f"fitting the model failed: {exc}", field="body.options") from None
-    if "source" in table.columns and (table["source"] == EMBEDDED_SOURCE).all():
+    if exposure is not None:
+        model.exposure_ = Exposure.from_dict({**exposure, "n_events": len(table)}).to_dict()
+    elif "source" in table.columns and (table["source"] == EMBEDDED_SOURCE).all():
         model.exposure_ = tno_exposure(len(table)).to_dict()  # 63 h (de Gelder et al. 2021)
     return describe(model)
 

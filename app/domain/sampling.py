@@ -23,11 +23,13 @@ from sampler import (
     parse_constraint,
 )
 from sampler import sample as sampler_sample
-from sampler.exposure import region_report
+from sampler.constraints import Region
+from sampler.exposure import region_report, uncertainty_report
 from sampler.problem import Problem
 from sampler.sampleset import SampleSet
 
-__all__ = ["SampleResult", "estimate_region", "parse_constraints", "sample"]
+__all__ = ["SampleResult", "estimate_region", "parse_constraints", "region_uncertainty",
+           "sample"]
 
 
 def parse_constraints(texts: Sequence[str], field: str = "body.constraints") -> list[Constraint]:
@@ -130,11 +132,8 @@ def add_region_report(model: CutInGMM, result: SampleResult, seed: int) -> None:
     when the model has bootstrap refits or an exposure."""
     if result.sample_set is None or not (model.bootstrap_ or model.exposure_):
         return
-    report = region_report(model, result.sample_set, seed=seed)
-    result.p_region["model_ci"] = report["p_region"]["model_ci"]
-    result.p_region["mc_ci"] = report["p_region"]["mc_ci"]
-    if "rates" in report:
-        result.p_region["rates"] = jsonconv.encode(report["rates"])
+    result.p_region.update(_uncertainty_fields(region_report(model, result.sample_set,
+                                                             seed=seed)))
 
 
 def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
@@ -144,3 +143,32 @@ def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
         return region_dict(estimate_p_region(model, list(constraints), seed))
     except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
         raise _sampling_error(exc) from None
+
+
+def _uncertainty_fields(report: dict[str, Any]) -> dict[str, Any]:
+    """The keys a P(A) dict gets from ``uncertainty_report``: ``mc_ci``, ``model_ci``,
+    ``model_interval`` and ``rates`` (JSON-encoded)."""
+    out: dict[str, Any] = {"mc_ci": report["p_region"]["mc_ci"],
+                           "model_ci": report["p_region"]["model_ci"]}
+    for key in ("model_interval", "rates"):
+        if key in report:
+            out[key] = report[key]
+    encoded: dict[str, Any] = jsonconv.encode(out)
+    return encoded
+
+
+def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
+                       p_region: dict[str, Any], seed: int,
+                       n_samples: int | None = None) -> dict[str, Any]:
+    """``p_region`` (a ``region_dict``) with the "model" interval beside the Monte Carlo one
+    and the rates per hour / per 10^6 km with both, when the model has bootstrap replicates
+    and an exposure (``sampler.exposure.uncertainty_report``); unchanged otherwise."""
+    if not (model.bootstrap_ or model.exposure_):
+        return p_region
+    region = Region.from_constraints(list(constraints), lane_width=model.lane_width_)
+    try:
+        report = uncertainty_report(model, region_of(p_region), region, seed,
+                                    n_samples=n_samples)
+    except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
+        raise _sampling_error(exc) from None
+    return {**p_region, **_uncertainty_fields(report)}

@@ -56,11 +56,14 @@ def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
 
 
 def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
-    """P(A) of the catalogue's region: one estimate from the catalogue's seed."""
+    """P(A) of the catalogue's region: one estimate from the catalogue's seed, with the
+    "model" interval and the rates when the model has replicates and an exposure."""
     model = domain.load_model(spec.model_json)
     constraints = domain.parse_constraints(spec.constraints)
+    seed = region_seed(spec.seed)
+    p_region = domain.estimate_region(model, constraints, seed)
     encoded: dict[str, Any] = jsonconv.encode(
-        domain.estimate_region(model, constraints, region_seed(spec.seed)))
+        domain.region_uncertainty(model, constraints, p_region, seed, n_samples=spec.n))
     return encoded
 
 

@@ -16,6 +16,7 @@ from app import jsonconv
 from app.db import repository as repo
 from app.deps import ContextDep, JobsDep, SessionDep
 from app.limits import INDEX_MAX
+from app.rates import RegionRates
 from app.schemas import ApiModel, SamplingRequest
 from sampler.record import ScenarioRecord
 
@@ -85,7 +86,11 @@ class CatalogueStatus(ApiModel):
     scenarios_done: int = Field(description="scenarios stored plus, while the job runs, "
                                 "those its workers report computed in unfinished chunks")
     progress: float = Field(description="scenarios_done / n, 0 … 1 (moves per scenario)")
-    p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate")
+    p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate; "
+                                            "mc_ci and model_ci: its two intervals")
+    rates: RegionRates | None = Field(default=None, description="cut-ins of the region per "
+                                      "hour / per 10^6 km with both intervals (when the "
+                                      "model has an exposure)")
     summary: dict[str, dict[str, float]]
     classes: dict[str, int] = Field(default_factory=dict, description="scenarios per "
                                     "criticality class (docs/criticality.md)")

@@ -22,8 +22,10 @@ from app.db.models import DatasetRow
 from app.deps import ContextDep, SessionDep
 from app.errors import InvalidInput, PayloadTooLarge
 from app.limits import INDEX_MAX
+from app.rates import ExposureInfo
 from app.schemas import ApiModel
 from datasets.plausibility import implausible
+from sampler.exposure import tno_exposure
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 
@@ -39,6 +41,10 @@ class DatasetInfo(ApiModel):
     n_cutins: int
     data_hash: str = Field(description="sha256 of the parameter table")
     report: dict[str, Any] = Field(description="counts, events left out and why, source")
+    exposure: ExposureInfo | None = Field(
+        default=None, description="driving in which the cut-ins were recorded (highD: "
+        "vehicle-hours and vehicle-km summed over the tracked vehicles; the embedded TNO "
+        "data: 63 hours); models fitted on the dataset carry it")
     created_at: str
 
 
@@ -56,9 +62,12 @@ class ParameterPage(ApiModel):
 
 
 def dataset_view(row: DatasetRow) -> DatasetInfo:
+    exposure = (row.report or {}).get("exposure")
+    if exposure is None and row.embedded:
+        exposure = tno_exposure(row.n_cutins).to_dict()
     return DatasetInfo(id=row.id, name=row.name, kind=row.kind, embedded=row.embedded,
                        n_cutins=row.n_cutins, data_hash=row.data_hash,
-                       report=jsonconv.encode(row.report),
+                       report=jsonconv.encode(row.report), exposure=exposure,
                        created_at=row.created_at.isoformat())
 
 

@@ -89,7 +89,9 @@ def fit(body: FitRequest, ctx: ContextDep) -> ModelDetail:
     except OSError as exc:
         raise InvalidInput(f"dataset {body.dataset!r} has no readable table: {exc}",
                                   field="body.dataset") from None
-    fitted = domain.fit_model(table, body.options, source=dataset.id)
+    exposure = (dataset.report or {}).get("exposure")  # highD uploads: vehicle-h, vehicle-km
+    fitted = domain.fit_model(table, body.options, source=dataset.id,
+                              exposure=jsonconv.decode(exposure) if exposure else None)
     row = ServiceContext.model_row(repo.new_id("mdl"), dataset.id, fitted, body.options)
     with ctx.db.session() as s:
         s.add(row)

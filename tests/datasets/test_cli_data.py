@@ -47,6 +47,27 @@ def test_extract_highd_hand_file(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert main(["data", "extract", "--format", "highd",
                  str(tmp_path / "07_tracks.csv"), "-o", str(out), "-q"]) == 0
     assert len(read_table(out)) == 1
+    # the exposure beside the table: two vehicles tracked 300 frames each at 25 Hz
+    assert "vehicle-hours" in capsys.readouterr().out
+    side = json.loads((tmp_path / "t.parquet.exposure.json").read_text())
+    assert side["hours"] == pytest.approx(600 / 25 / 3600, rel=1e-12)
+    assert side["n_events"] == 1 and side["km"] > 0.3588  # vehicle 2 alone: 358.8 m
+
+
+def test_fit_reads_the_exposure_beside_the_table(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.sampler.factories import synthetic_parameter_table
+
+    table = tmp_path / "t.parquet"
+    synthetic_parameter_table(120, seed=3).to_parquet(table, index=False)
+    (tmp_path / "t.parquet.exposure.json").write_text(json.dumps(
+        {"n_events": 7, "hours": 2.5, "km": 250.0, "source": "highD test"}))
+    model = tmp_path / "m.json"
+    assert main(["fit", str(table), "-o", str(model), "--k-max", "1", "--n-init", "1",
+                 "--bootstrap", "0"]) == 0
+    assert "48 cut-ins per hour" in capsys.readouterr().out  # 120 rows / 2.5 h
+    exp = json.loads(model.read_text())["exposure"]
+    assert exp == {"n_events": 120, "hours": 2.5, "km": 250.0, "source": "highD test"}
 
 
 def test_convert_tno_and_fit_surfaces(tmp_path: Path,

@@ -13,7 +13,7 @@ from scipy import stats
 
 from app.cli import main
 from sampler import ModelError
-from sampler.bootstrap import bootstrap_fit, model_interval
+from sampler.bootstrap import bootstrap_fit, pooled_interval
 from sampler.constraints import Region
 from sampler.exposure import (
     Exposure,
@@ -31,11 +31,10 @@ from tests.sampler.factories import base_params, synthetic_parameter_table
 TRUE_W = np.array([0.6, 0.4])
 TRUE_MU = np.array([[30.0, -1.0], [16.0, 2.0]])
 TRUE_SD = np.array([[6.0, 1.5], [4.0, 1.0]])
-CUT = 9.0  # region gap < 9 m
 
 
-def _true_p() -> float:
-    return float(sum(w * stats.norm.cdf((CUT - m[0]) / s[0])
+def _true_p(cut: float) -> float:
+    return float(sum(w * stats.norm.cdf((cut - m[0]) / s[0])
                      for w, m, s in zip(TRUE_W, TRUE_MU, TRUE_SD, strict=True)))
 
 
@@ -46,32 +45,65 @@ def _draw_table(n: int, rng: np.random.Generator) -> pd.DataFrame:
     return pd.DataFrame({"gap": x[:, 0], "dv": x[:, 1]})
 
 
+@pytest.mark.slow
 def test_bootstrap_interval_covers_the_true_probability() -> None:
-    """Data sets of 250 rows from a known 2-component GMM; P(gap < 9) under it is known in
-    closed form (~1.2 %, in the tail of one component); the model interval (60 refits,
-    95 %) must cover it in most repetitions."""
-    p_true = _true_p()
-    assert 0.005 < p_true < 0.03
+    """Data sets of 250 rows from a known 2-component GMM; P(gap < c) under it is known in
+    closed form: c = 9 m (1.6 %, in the tail of one component) and c = 3 m (2.3e-4: about
+    0.06 of the 250 rows fall there, so the data hold no event; P(A) by subset simulation).
+    The model interval (40 refits, 95 %) must cover the truth in most repetitions and must
+    not collapse (the first version's reweighting gave a lower end of ~1e-30 for rare
+    criticality regions)."""
     fixed = {k: v for k, v in base_params().items() if k not in ("gap", "dv")}
-    covered, width = [], []
-    for rep in range(25):
+    covered: dict[float, list[bool]] = {9.0: [], 3.0: []}
+    width: dict[float, list[float]] = {9.0: [], 3.0: []}
+    assert 0.01 < _true_p(9.0) < 0.03 and 1e-4 < _true_p(3.0) < 5e-4
+    for rep in range(20):
         rng = np.random.default_rng(1000 + rep)
         table = _draw_table(250, rng)
         model = CutInGMM(features=["gap", "dv"], transforms={"gap": "identity"},
                          k_range=(2, 2), n_init=2, n_report_samples=200, cv_folds=2,
                          fixed=fixed).fit(table)
-        bootstrap_fit(model, table, 60, seed=rep)
-        z = model.sample_z(40_000, rng)
-        inside = model.from_z(z)[:, 0] < CUT
-        p_joint = float(inside.mean())
-        iv = model_interval(model, z[inside], p_joint, z[:4096], np.ones(4096, dtype=bool))
-        lo, hi = iv["ci"]
-        covered.append(lo <= p_true <= hi)
-        width.append(hi / lo)
+        bootstrap_fit(model, table, 40, seed=rep)
+        for cut, rare in ((9.0, False), (3.0, True)):
+            region = Region.from_constraints([f"gap<{cut}"], physical_bounds=False)
+            iv = pooled_interval(model, region, rep, rare=rare)
+            lo, hi = iv["ci"]
+            covered[cut].append(lo <= _true_p(cut) <= hi)
+            width[cut].append(hi / lo)
+            assert iv["lower_resolved"] and iv["upper_resolved"], iv
     # nominal 95 %; percentile bootstrap intervals of tail probabilities from 250 rows
-    # undercover a little, so the bar is 80 % (measured: see the commit)
-    assert np.mean(covered) >= 0.8
-    assert np.median(width) > 1.2  # a real interval, not a point
+    # undercover a little (measured: 85 % at both levels over 40 other seeds), so the bar
+    # is 75 %
+    for cut in covered:
+        assert np.mean(covered[cut]) >= 0.75, (cut, covered[cut])
+        assert np.median(width[cut]) > 1.5  # a real interval, not a point
+    assert np.median(width[3.0]) < 1e3  # and not a collapse to 0
+
+
+def test_pooled_interval_reweights_exactly_when_the_replicates_agree() -> None:
+    """Hand-made case: every replicate equals the fitted mixture, so every weight
+    p_b / q is 1 and each replicate's P(A) is the pooled estimate itself (a single value;
+    the interval is a point), with the full effective sample size."""
+    table = _draw_table(300, np.random.default_rng(5))
+    fixed = {k: v for k, v in base_params().items() if k not in ("gap", "dv")}
+    model = CutInGMM(features=["gap", "dv"], transforms={"gap": "identity"},
+                     k_range=(2, 2), n_init=1, n_report_samples=200, cv_folds=2,
+                     fixed=fixed).fit(table)
+    b = 5
+    model.bootstrap_ = {"n_boot": b, "weights": [model.weights_.tolist()] * b,
+                        "means": [model.means_.tolist()] * b,
+                        "covariances": [model.covariances_.tolist()] * b}
+    region = Region.from_constraints(["gap<12"], physical_bounds=False)
+    iv = pooled_interval(model, region, 0, rare=False, n_samples=500)
+    reps = np.asarray(iv["replicates"])
+    assert np.allclose(reps, reps[0], rtol=1e-12)
+    assert iv["ess"]["min"] == pytest.approx(iv["n_samples"], rel=1e-9)
+    # and the value is the model's P(gap < 12) (closed form under the fitted mixture)
+    z_cut = (12.0 - model.transforms_[0].loc) / model.transforms_[0].scale
+    exact = sum(w * stats.norm.cdf((z_cut - m[0]) / math.sqrt(c[0, 0])) for w, m, c in
+                zip(model.weights_, model.means_, model.covariances_, strict=True))
+    assert reps[0] == pytest.approx(exact, rel=0.15)
+    assert pooled_interval(model, region, 0, rare=False, n_samples=500) == iv  # seeded
 
 
 def test_bootstrap_is_deterministic_and_independent_of_jobs() -> None:
@@ -130,10 +162,50 @@ def test_exposure_validation_and_sources() -> None:
     with pytest.raises(ModelError, match=r"exposure\.hours"):
         Exposure(n_events=3, hours=-1.0, km=None, source="x")
     assert tno_exposure(208).hours == 63.0 and tno_exposure(208).km is None
-    metas = [pd.DataFrame({"totalDrivenTime": [7200.0], "totalDrivenDistance": [150_000.0]}),
-             pd.DataFrame({"totalDrivenTime": [3600.0], "totalDrivenDistance": [90_000.0]})]
-    e = highd_exposure(metas, n_events=12)
-    assert e.hours == pytest.approx(3.0) and e.km == pytest.approx(240.0)
+    e = highd_exposure({"vehicle_hours": 3.0, "vehicle_km": 240.0, "recordings": ["01"]},
+                       n_events=12)
+    assert e.hours == 3.0 and e.km == 240.0 and "vehicle-hours" in e.source
+    with pytest.raises(ModelError, match="vehicle_hours"):
+        highd_exposure({"hours": 3.0}, n_events=12)
+
+
+def test_highd_exposure_is_the_tracked_vehicles_time_and_distance(tmp_path: Path) -> None:
+    """Per-vehicle exposure of a highD recording (hand-made with the test factory, 25 Hz):
+    vehicle 1 tracked 250 frames at 30 m/s, vehicle 2 100 frames at 20 m/s, so
+    (250 + 100) / 25 = 14 vehicle-seconds and 30 * 249 / 25 + 20 * 99 / 25 = 378 vehicle-m
+    (positions at frames 1 ... n: n - 1 steps driven)."""
+    from datasets.extract import extract_cutins
+    from datasets.highd import write_highd
+    from tests.datasets.highd_factory import make_recording, straight
+
+    rec = make_recording([straight(1, 2, 5, 10.0, 30.0, n=250),
+                          straight(2, 1, 3, 40.0, 20.0, n=100)])
+    write_highd(rec, tmp_path)
+    res = extract_cutins(tmp_path, "highd")
+    assert res.exposure is not None and res.exposure["recordings"] == ["07"]
+    assert res.exposure["vehicle_hours"] == pytest.approx(14.0 / 3600.0, rel=1e-12)
+    assert res.exposure["vehicle_km"] == pytest.approx(0.378, rel=1e-9)
+    exp = highd_exposure(res.exposure, n_events=len(res.table))
+    assert exp.hours == pytest.approx(14.0 / 3600.0) and exp.km == pytest.approx(0.378)
+
+
+def test_highd_exposure_agrees_with_the_recordings_own_totals(tmp_path: Path) -> None:
+    """A synthetic highD recording writes highD's recordingMeta totals (totalDrivenTime,
+    totalDrivenDistance; rounded to 0.01): the per-vehicle sums agree with them."""
+    from datasets.extract import extract_cutins
+    from datasets.highd import write_highd
+    from datasets.synth import generate_recording
+
+    rec = generate_recording(3, minutes=1.0, vehicles=60, frame_rate=5.0).recording
+    write_highd(rec, tmp_path)
+    res = extract_cutins(tmp_path, "highd")
+    assert res.exposure is not None
+    meta = rec.recording_meta.iloc[0]
+    assert res.exposure["vehicle_hours"] * 3600 == pytest.approx(
+        meta["totalDrivenTime"], abs=0.01)
+    assert res.exposure["vehicle_km"] * 1000 == pytest.approx(
+        meta["totalDrivenDistance"], abs=0.01)
+    assert res.exposure["duration_hours"] == pytest.approx(1.0 / 60.0)
 
 
 def test_region_report_weights_sum_to_the_rate() -> None:

@@ -50,6 +50,31 @@ def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> Non
     assert catalogue["finished_at"] is not None
 
 
+def test_status_rates_with_both_intervals_and_weights_summing_to_the_rate(
+        catalogue: dict[str, Any]) -> None:
+    """issue 12: the default (TNO) model has 63 h of exposure and bootstrap refits, so a
+    catalogue's status gives its region's cut-ins per hour with the Monte Carlo and the
+    model interval, and its stored exposure weights (P(A) / n each) times the rate of all
+    cut-ins (208 / 63 h) add up to that rate."""
+    p = catalogue["p_region"]
+    rates = catalogue["rates"]
+    lam = 208 / 63.0  # hand-computed: the embedded table's rows over the source's hours
+    assert rates["exposure"]["n_events"] == 208 and rates["exposure"]["hours"] == 63.0
+    hour = rates["per_hour"]
+    assert hour["estimate"] == pytest.approx(lam * p["estimate"], rel=1e-12)
+    assert hour["mc_ci"] == pytest.approx([lam * p["ci"][0], lam * p["ci"][1]], rel=1e-12)
+    assert p["mc_ci"] == pytest.approx(p["ci"], rel=1e-12)
+    lo, hi = p["model_ci"]
+    assert 0 < lo < p["estimate"] < hi  # the fit's interval: wider than the estimator's
+    assert hi / lo > (p["ci"][1] / p["ci"][0])
+    assert hour["model_ci"][0] < hour["estimate"] < hour["model_ci"][1]
+    assert rates["per_1e6_km"] is None  # the TNO source gives no distance
+    w = rates["from_weights"]
+    assert w["sum_weights"] == pytest.approx(p["estimate"], rel=1e-9)
+    assert w["per_hour"] == pytest.approx(hour["estimate"], rel=1e-9)
+    assert p["model_interval"]["n_boot"] >= 2 and p["model_interval"]["lower_resolved"]
+
+
 def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> None:
     cid = catalogue["id"]
     all_rows = client.get(f"/catalogues/{cid}/scenarios",

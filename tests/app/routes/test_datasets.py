@@ -103,6 +103,50 @@ def test_upload_a_highd_recording(client: Any, tmp_path: Path) -> None:
     body = r.json()
     assert body["kind"] == "highd" and body["n_cutins"] > 0
     assert sorted(body["report"]["files"]) == sorted(p.name for p in paths)
+    # issue 12: the exposure per vehicle, summed over the tracked vehicles (tracksMeta),
+    # agrees with the recording's own totals (recordingMeta, rounded to 0.01)
+    exp = body["exposure"]
+    meta = rec.recording_meta.iloc[0]
+    assert exp["n_events"] == body["n_cutins"]
+    assert exp["hours"] * 3600 == pytest.approx(meta["totalDrivenTime"], abs=0.01)
+    assert exp["km"] * 1000 == pytest.approx(meta["totalDrivenDistance"], abs=0.01)
+    assert client.get(f"/datasets/{body['id']}").json()["exposure"] == exp
+
+
+def test_a_model_fitted_on_a_highd_upload_gives_rates_per_km(client: Any,
+                                                             tmp_path: Path) -> None:
+    """The dataset's exposure is carried into a model fitted on it: P(A) then comes with
+    cut-ins per hour and per 10^6 km (hand: n / vehicle-km * 1e6 * P(A))."""
+    from datasets.highd import write_highd
+    from datasets.synth import generate_recording
+
+    # 12 cut-ins in 0.73 MB (the test client's upload limit is 1 MB)
+    rec = generate_recording(7, minutes=3.0, vehicles=300, frame_rate=1.5).recording
+    files = [("files", (path.name, path.read_bytes(), "text/csv"))
+             for path in write_highd(rec, tmp_path)]
+    up = client.post("/datasets", data={"kind": "highd"}, files=files)
+    assert up.status_code == 201, up.text
+    exp = up.json()["exposure"]
+    assert exp["n_events"] >= 10
+    fit = client.post("/models", json={"dataset": up.json()["id"], "options": {
+        "features": ["gap", "dv"], "k_range": [1, 1], "n_init": 1, "cv_folds": 2,
+        "n_report_samples": 500, "n_bootstrap": 0}})
+    assert fit.status_code == 201, fit.text
+    r = client.post("/scenarios", json={"model": fit.json()["id"], "n": 2, "seed": 1,
+                                         "constraints": ["gap>5"], "score": False})
+    assert r.status_code == 200, r.text
+    p = r.json()["p_region"]
+    assert p["rates"]["exposure"]["km"] == exp["km"]
+    assert p["rates"]["per_1e6_km"]["estimate"] == pytest.approx(
+        exp["n_events"] / exp["km"] * 1e6 * p["estimate"], rel=1e-12)
+    assert p["rates"]["per_hour"]["estimate"] == pytest.approx(
+        exp["n_events"] / exp["hours"] * p["estimate"], rel=1e-12)
+    assert p["model_ci"] is None  # no bootstrap refits asked for
+
+
+def test_the_embedded_dataset_has_the_tno_exposure(client: Any) -> None:
+    body = client.get("/datasets/tno-cutin").json()
+    assert body["exposure"]["hours"] == 63.0 and body["exposure"]["km"] is None
 
 
 def test_bad_uploads_store_nothing(client: Any, tmp_path: Path) -> None:
