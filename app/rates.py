@@ -16,8 +16,8 @@ from pydantic import Field
 from app import jsonconv
 from app.schemas import ApiModel
 
-__all__ = ["ExposureInfo", "ModelInterval", "RateEntry", "RegionRates", "UncertainP",
-           "catalogue_rates"]
+__all__ = ["ExposureInfo", "ModelComparison", "ModelInterval", "RateEntry", "RegionRates",
+           "RegionReport", "UncertainP", "catalogue_rates"]
 
 #: the rate units: key -> the words the page and the CLI use
 UNITS = {"per_hour": "per hour", "per_1e6_km": "per 10^6 km"}
@@ -78,6 +78,8 @@ class ModelInterval(ApiModel):
     replicates_quantiles: dict[str, float] = Field(
         default_factory=dict, description="percentiles p0, p2.5, p10, p50, p90, p97.5, p100 of "
         "the replicates' P(A)")
+    replicates: list[float | None] = Field(default_factory=list,
+                                           description="each replicate's P(A)")
 
 
 class UncertainP(ApiModel):
@@ -88,6 +90,59 @@ class UncertainP(ApiModel):
     model_ci: list[float] | None
     method: str | None = None
     model_interval: ModelInterval | None = None
+
+
+class RegionReport(ApiModel):
+    """A region under one model: P(A) with both intervals and the rates."""
+
+    model: str
+    constraints: list[str]
+    seed: int
+    p_region: UncertainP
+    rates: RegionRates | None = Field(description="null: the model has no exposure")
+    exposure: ExposureInfo | None
+
+
+class Histogram(ApiModel):
+    edges: list[float]
+    counts: list[int]
+    density: list[float]
+    n: int
+    n_finite: int
+    below: int
+    above: int
+    n_nonfinite: int
+
+
+class SideHistograms(ApiModel):
+    unconstrained: Histogram = Field(description="draws inside the physical bounds")
+    constrained: Histogram = Field(description="samples inside the region")
+
+
+class ParameterComparison(ApiModel):
+    name: str
+    label: str
+    models: list[SideHistograms] = Field(description="model a, then model b (shared edges)")
+
+
+class ModelSide(ApiModel):
+    id: str
+    dataset: str
+    n_components: int
+    features: list[str]
+    exposure: ExposureInfo | None
+    p_region: UncertainP
+    rates: RegionRates | None
+
+
+class ModelComparison(ApiModel):
+    """Two fitted models side by side for one region."""
+
+    constraints: list[str]
+    n: int = Field(description="samples of each model inside the region")
+    seed: int
+    models: list[ModelSide] = Field(description="a, then b")
+    parameters: list[ParameterComparison]
 
 
 def catalogue_rates(p_region: dict[str, Any] | None,

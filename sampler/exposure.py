@@ -213,7 +213,7 @@ def uncertainty_report(model: Any, p_region: Any, region: Any, seed: int = 0,
         model_iv = pooled_interval(model, region, seed, rare=p.method == "subset",
                                    n_plain=n_plain, confidence=confidence)
         out["p_region"]["model_ci"] = model_iv["ci"]
-        out["model_interval"] = {k: v for k, v in model_iv.items() if k != "replicates"}
+        out["model_interval"] = dict(model_iv)
         out["model_interval"]["replicates_quantiles"] = _quantiles(model_iv["replicates"])
     exp = getattr(model, "exposure_", None)
     if exp:

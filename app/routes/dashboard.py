@@ -16,7 +16,8 @@ from fastapi import APIRouter, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
-from app.dashboard import views
+from app import jsonconv
+from app.dashboard import rates_views, views
 from app.dashboard.schemas import (
     CatalogueCriticalityView,
     ModelFitView,
@@ -27,6 +28,7 @@ from app.db import repository as repo
 from app.deps import ContextDep
 from app.errors import NotFound, ServiceError
 from app.limits import INDEX_MAX
+from app.rates import RegionReport
 from app.schemas import SEED_MAX
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
@@ -35,6 +37,7 @@ STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 #: the page's own files (anything else under /dashboard/static is a 404)
 STATIC_FILES = {
     "dashboard.js": "text/javascript; charset=utf-8",
+    "dashboard_rates.js": "text/javascript; charset=utf-8",
     "dashboard.css": "text/css; charset=utf-8",
 }
 
@@ -129,6 +132,20 @@ def model_shift(
     seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
 ) -> ShiftView:
     return ShiftView.model_validate(views.shift_preview(ctx, model_id, constraints, n, seed))
+
+
+@router.get("/api/models/{model_id}/rates", response_model=RegionReport,
+            summary="How often and how sure: P(A) of a region with its Monte Carlo and model "
+            "intervals, the bootstrap replicates, and cut-ins per hour / per 10^6 km")
+def model_rates(
+    model_id: str,
+    ctx: ContextDep,
+    constraints: Annotated[str, Query(max_length=500,
+                                      description="e.g. 'ttc<3; btn>0.7'")] = "ttc<3",
+    seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
+) -> RegionReport:
+    return RegionReport.model_validate(
+        jsonconv.encode(rates_views.region_rates(ctx, model_id, constraints, seed)))
 
 
 @router.get("/api/catalogues/{catalogue_id}/shift", response_model=ShiftView,

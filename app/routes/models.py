@@ -2,19 +2,22 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Query
 from pydantic import BaseModel, ConfigDict, Field
 
 from app import domain, jsonconv
 from app.context import ServiceContext
+from app.dashboard import rates_views
+from app.dashboard.views import PREVIEW_N_LIMIT
 from app.db import repository as repo
 from app.db.models import ModelRow
 from app.deps import ContextDep, SessionDep
 from app.errors import InvalidInput
 from app.limits import check_model_options
-from app.schemas import ApiModel
+from app.rates import ModelComparison
+from app.schemas import SEED_MAX, ApiModel
 
 router = APIRouter(prefix="/models", tags=["models"])
 
@@ -67,6 +70,23 @@ def model_view(row: ModelRow, components: list[dict[str, Any]]) -> ModelDetail:
             summary="List fitted models (the default model first)")
 def list_models(session: SessionDep) -> ModelList:
     return ModelList.model_validate({"models": [_info(r) for r in repo.list_models(session)]})
+
+
+@router.get("/compare", response_model=ModelComparison,
+            summary="Two fitted models side by side: marginals with and without a "
+            "constraint, P(A) with both intervals and the rates of the same region")
+def compare(
+    ctx: ContextDep,
+    a: Annotated[str, Query(max_length=64, description="a model id ('default' too)")],
+    b: Annotated[str, Query(max_length=64, description="another model id")],
+    constraint: Annotated[str, Query(max_length=500, description="the region, e.g. "
+                                     "'ttc<3' or 'ttc<3; v_ego>=20'")] = "ttc<3",
+    n: Annotated[int, Query(ge=1, le=PREVIEW_N_LIMIT,
+                            description="samples of each model in the region")] = 400,
+    seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
+) -> ModelComparison:
+    return ModelComparison.model_validate(jsonconv.encode(
+        rates_views.compare_models(ctx, a, b, constraint, n, seed)))
 
 
 @router.get("/{model_id}", response_model=ModelDetail,

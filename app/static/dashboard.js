@@ -1132,5 +1132,7 @@
   }
 
   window.addEventListener("popstate", () => window.location.reload());
+  // shared with dashboard_rates.js (sections 5 and 6)
+  window.scengen = { api, fmt, esc, table, draw, clearPlot, reportError, centres, COLORS };
   init();
 })();

@@ -395,3 +395,33 @@ def test_picking_a_model_and_a_catalogue_redraws_their_views(server: Server,
     assert count(page, "#ttc-btn .scatterlayer .point") == view["scatter"]["n_shown"] > 200
     assert page.url.endswith(f"/dashboard/catalogues/{cid}")
     assert console.errors == []
+
+
+def test_rates_and_two_models_side_by_side(server: Server, page: Page) -> None:
+    """Sections 5 and 6 (issue 12): P(A) of the typed region with its Monte Carlo and
+    model intervals and the rates per hour (the embedded data's 63 h), the bootstrap
+    replicates drawn; two models' marginals with and without the constraint and their
+    P(A) and rates side by side."""
+    r = httpx.post(f"{server.base}/models", timeout=300, json={
+        "dataset": "tno-cutin", "options": {"k_range": [1, 1], "n_init": 1, "cv_folds": 2,
+                                            "n_report_samples": 1000, "n_bootstrap": 20}})
+    assert r.status_code == 201, r.text
+    console = Console(page)
+    page.goto(f"{server.base}/dashboard")
+    settle(page)
+    page.wait_for_selector("#rates-note[data-state='done']")
+    table = page.locator("#rates-table").inner_text()
+    assert "rate per hour of driving" in table and "Monte Carlo 95 %" in table, table
+    assert "model 95 %" in table and "P(A)" in table
+    assert "63 h" in page.locator("#rates-note").inner_text()
+    assert count(page, "#rates-replicates .barlayer .point") >= 3  # refits' histogram
+    assert count(page, "#rates-bars .scatterlayer .point") >= 2  # both intervals
+    page.wait_for_selector("#compare-note[data-state='done']")
+    compare = page.locator("#compare-table").inner_text()
+    assert "A · rate per hour of driving" in compare and "B · P(A)" in compare, compare
+    for name in PARAMS:
+        # A and B, each unconstrained and constrained
+        assert count(page, f"#compare-{name} .scatterlayer .trace") == 4, name
+    assert console.errors == []
+    shot(page, "#view-rates", "8-rates.png")
+    shot(page, "#view-compare", "9-side-by-side.png")
