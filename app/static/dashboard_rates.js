@@ -117,6 +117,7 @@
       $("rates-table").innerHTML = html;
       await drawReplicates(view);
       await drawRateBars(view, cat);
+      await loadTails(view.model);
       note.dataset.state = "done";
     } catch (e) {
       if (version !== ratesVersion) return;
@@ -200,6 +201,50 @@
       legend: { orientation: "h", x: 0, y: -0.3, font: { size: 10 } },
       margin: { l: 10, r: 12, t: 36, b: 80 },
     }, view.model);
+  }
+
+  // tail calibration of the model's fit report (k-fold held out)
+  async function loadTails(model) {
+    const div = $("tails-plot");
+    const detail = await S.api("/models/" + encodeURIComponent(model));
+    const tc = (detail.fit_report || {}).tail_calibration;
+    const rows = (tc && tc.rows) || [];
+    if (!rows.length) {
+      $("tails-note").textContent = "This model's fit report has no tail calibration.";
+      $("tails-table").innerHTML = "";
+      S.clearPlot(div, "No tail calibration in the fit report.");
+      return;
+    }
+    $("tails-note").textContent = "For thresholds at the data's 2, 5, 10 and 25 % quantiles " +
+      "of TTC, THW and gap: the probability of falling below each under models fitted " +
+      "without a fold, against the share of that fold's held-out cut-ins that did (pooled " +
+      "over the folds, exact 95 % interval). Below the data's smallest values (TTC < " +
+      S.fmt(Math.min(...rows.filter((r) => r.quantity === "ttc").map((r) => r.threshold)), 3) +
+      " s) there is nothing to check against: P(A) there is the model's extrapolation.";
+    $("tails-table").innerHTML = grid(["quantity < threshold", "model", "held out [95 %]", ""],
+      rows.map((r) => [r.quantity + " < " + S.fmt(r.threshold, 3), S.fmt(r.model_p, 3),
+                       S.fmt(r.heldout_share, 3) + " [" + S.fmt(r.heldout_ci95[0], 2) + ", " +
+                       S.fmt(r.heldout_ci95[1], 2) + "]", r.inside_ci ? "" : "outside"]));
+    const colors = { ttc: GREEN, thw: ORANGE, gap: BLUE };
+    const traces = ["ttc", "thw", "gap"].map((q) => {
+      const rs = rows.filter((r) => r.quantity === q);
+      return { type: "scatter", mode: "markers", name: q, x: rs.map((r) => r.model_p),
+               y: rs.map((r) => r.heldout_share), marker: { color: colors[q], size: 8 },
+               error_y: { type: "data", symmetric: false,
+                          array: rs.map((r) => r.heldout_ci95[1] - r.heldout_share),
+                          arrayminus: rs.map((r) => r.heldout_share - r.heldout_ci95[0]),
+                          color: colors[q] } };
+    });
+    const top = Math.max(...rows.map((r) => Math.max(r.model_p, r.heldout_ci95[1]))) * 1.1;
+    traces.push({ type: "scatter", mode: "lines", name: "equal", x: [0, top], y: [0, top],
+                  line: { color: "#999", dash: "dot", width: 1 }, hoverinfo: "skip" });
+    await S.draw(div, traces, {
+      title: { text: "Held-out share against the model's probability", font: { size: 12 } },
+      xaxis: { title: { text: "model P(q < threshold)" }, range: [0, top] },
+      yaxis: { title: { text: "held-out share" }, range: [0, top] },
+      legend: { orientation: "h", x: 0, y: -0.25, font: { size: 10 } },
+      margin: { l: 48, r: 12, t: 30, b: 80 },
+    }, model);
   }
 
   // ---------------------------------------------------------------- section 6

@@ -416,6 +416,10 @@ def test_rates_and_two_models_side_by_side(server: Server, page: Page) -> None:
     assert "63 h" in page.locator("#rates-note").inner_text()
     assert count(page, "#rates-replicates .barlayer .point") >= 3  # refits' histogram
     assert count(page, "#rates-bars .scatterlayer .point") >= 2  # both intervals
+    # the tail calibration of the fit report: TTC, THW and gap thresholds
+    tails = page.locator("#tails-table").inner_text()
+    assert "ttc <" in tails and "thw <" in tails and "gap <" in tails, tails
+    assert count(page, "#tails-plot .scatterlayer .point") >= 9
     page.wait_for_selector("#compare-note[data-state='done']")
     compare = page.locator("#compare-table").inner_text()
     assert "A · rate per hour of driving" in compare and "B · P(A)" in compare, compare
