@@ -36,6 +36,12 @@ the built scenario; evaluated last, on the rows that pass every other constraint
     r157_impact_speed m/s   its relative impact speed (0 without contact)
     none_collision    -     1 if the ego at constant speed hits the cutter, else 0
 
+Model quantities (``sampler.extrapolation``; need the model, which ``sample`` and
+``estimate_p_region`` bind to the region: ``Region.bind``)::
+
+    density_pct       -     share of the model's physical cut-ins less probable than this
+                            one (0: beyond every reference draw; caps extrapolation)
+
 Short form (CLI): ``ttc<3``, ``v_ego>=20``, ``lat_offset > -0.5`` — a name, one of the
 operators ``< <= > >=`` and a finite number, parsed by a regular expression (never eval).
 """
@@ -50,7 +56,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
 from sampler._exceptions import ConstraintError
@@ -85,6 +91,7 @@ class _Quantity:
     doc: str
     kinematic: bool  # needs the crossing kinematics (costly: evaluated late, on survivors)
     criticality: bool = False  # a closed-loop simulation (costliest: evaluated last)
+    model: bool = False  # needs the model (Region.bind): its density
 
 
 #: Derived quantities: name -> unit, meaning, whether the kinematics are needed.
@@ -105,6 +112,8 @@ DERIVED: dict[str, _Quantity] = {
     "max_lat_speed": _Quantity("m/s", "largest lateral speed during the lane change", True),
     **{name: _Quantity(unit, doc, True, True)
        for name, (unit, doc) in CRITICALITY_QUANTITIES.items()},
+    "density_pct": _Quantity("-", "share of the model's physical cut-ins less probable than "
+                             "this one (sampler.extrapolation)", False, model=True),
 }
 
 #: Every name a constraint may use.
@@ -276,9 +285,10 @@ def _params_matrix(params: ArrayLike | Mapping[str, ArrayLike]) -> FloatArray:
 class _Quantities:
     """Lazy, cached evaluation of parameters and derived quantities for rows of a matrix."""
 
-    def __init__(self, params: FloatArray, lane_width: float) -> None:
+    def __init__(self, params: FloatArray, lane_width: float, model: Any = None) -> None:
         self.p = params
         self.lane_width = lane_width
+        self.model = model
         self._cache: dict[str, FloatArray] = {}
 
     def __getitem__(self, name: str) -> FloatArray:
@@ -305,6 +315,13 @@ class _Quantities:
                 if name != "ttr_true":
                     del q["ttr_true"]
                 c.update(q)
+            elif name == "density_pct":
+                if self.model is None:
+                    raise ConstraintError("density_pct needs the model: use sample() or "
+                                          "estimate_p_region(), or Region.bind(model)")
+                from sampler.extrapolation import density_percentile
+
+                c[name] = density_percentile(self.model, self.p)
             elif name in DERIVED:
                 kin = crossing_kinematics(self.p, self.lane_width / 2.0)
                 c["t_cross"] = kin.t_cross
@@ -327,7 +344,8 @@ class _Quantities:
 
 
 def derive(params: ArrayLike | Mapping[str, ArrayLike], names: Iterable[str] | None = None,
-           *, lane_width: float = DEFAULT_LANE_WIDTH) -> dict[str, FloatArray]:
+           *, lane_width: float = DEFAULT_LANE_WIDTH, model: Any = None
+           ) -> dict[str, FloatArray]:
     """Evaluate derived quantities for many parameter vectors.
 
     Parameters
@@ -338,14 +356,18 @@ def derive(params: ArrayLike | Mapping[str, ArrayLike], names: Iterable[str] | N
         Which quantities (parameters or ``DERIVED`` names); default all of ``DERIVED``.
     lane_width : float
         Lane width in m.
+    model : CutInGMM, optional
+        Needed for the model quantities (``density_pct``); without it they are left out of
+        the default names and an error when asked for.
 
     Returns
     -------
     dict of name -> ndarray of shape (n,)
     """
     arr = _params_matrix(params)
-    q = _Quantities(arr, float(lane_width))
-    wanted = list(DERIVED) if names is None else list(names)
+    q = _Quantities(arr, float(lane_width), model)
+    wanted = ([k for k, v in DERIVED.items() if model is not None or not v.model]
+              if names is None else list(names))
     return {name: np.array(q[name], dtype=np.float64) for name in wanted}
 
 
@@ -362,6 +384,33 @@ class Region(BaseModel):
     lane_width: float = Field(default=DEFAULT_LANE_WIDTH, gt=0, le=10,
                               description="lane width in m")
     physical_bounds: bool = True
+    _model: Any = PrivateAttr(default=None)  # for the model quantities (bind)
+
+    def bind(self, model: Any) -> Region:
+        """This region with ``model`` for its model quantities (``density_pct``); a region
+        already bound keeps its model."""
+        if self._model is not None:
+            return self
+        out = self.model_copy()
+        out._model = model
+        return out
+
+    def _key(self) -> tuple[Any, ...]:
+        return (self.constraints, self.lane_width, self.physical_bounds)
+
+    def __eq__(self, other: object) -> bool:
+        """Same constraints, lane width and bounds (the bound model is not compared)."""
+        if not isinstance(other, Region):
+            return NotImplemented
+        return self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def quantities(self, params: ArrayLike | Mapping[str, ArrayLike],
+                   names: Iterable[str]) -> dict[str, FloatArray]:
+        """``derive`` with the region's lane width and bound model."""
+        return derive(params, names, lane_width=self.lane_width, model=self._model)
 
     @classmethod
     def from_constraints(cls, constraints: Iterable[Any] = (), *,
@@ -390,7 +439,7 @@ class Region(BaseModel):
 
     def _mask(self, arr: FloatArray, constraints: Sequence[Constraint]) -> BoolArray:
         mask: BoolArray = np.asarray(np.isfinite(arr).all(axis=1), dtype=bool)
-        q = _Quantities(arr, self.lane_width)
+        q = _Quantities(arr, self.lane_width, self._model)
         for c in constraints:
             if c.tier == 0:
                 mask &= c.mask(q[c.name])
@@ -400,7 +449,7 @@ class Region(BaseModel):
             idx = np.flatnonzero(mask)
             if not costly or not idx.size:
                 continue
-            q2 = _Quantities(arr[idx], self.lane_width)
+            q2 = _Quantities(arr[idx], self.lane_width, self._model)
             sub = np.ones(idx.size, dtype=bool)
             for c in costly:
                 sub &= c.mask(q2[c.name])
@@ -425,5 +474,5 @@ class Region(BaseModel):
     def violations(self, params: ArrayLike | Mapping[str, ArrayLike]) -> dict[str, BoolArray]:
         """For every constraint and bound (by its short form), the rows that violate it."""
         arr = _params_matrix(params)
-        q = _Quantities(arr, self.lane_width)
+        q = _Quantities(arr, self.lane_width, self._model)
         return {str(c): ~c.mask(q[c.name]) for c in self.all_constraints}

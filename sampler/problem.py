@@ -39,9 +39,10 @@ class Problem:
     def __init__(self, model: CutInGMM, region: Region, use_envelope: bool = True) -> None:
         model._check_fitted()
         self.model = model
-        self.region = region
+        self.region = region.bind(model)  # the model quantities use the model (if unbound)
         self.n_evals = 0
-        self.envelope: HalfSpace | None = find_envelope(model, region) if use_envelope else None
+        self.envelope: HalfSpace | None = (find_envelope(model, self.region) if use_envelope
+                                           else None)
 
     def draw_z(self, n: int, rng: np.random.Generator) -> FloatArray:
         """``n`` exact draws of the proposal: the model restricted to the envelope, or the

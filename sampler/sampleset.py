@@ -32,7 +32,7 @@ from riskcore.scenario import ConcreteScenario
 from sampler._exceptions import SamplerError
 from sampler._threads import single_threaded
 from sampler.builder import build_scenario
-from sampler.constraints import DERIVED, Region, derive
+from sampler.constraints import DERIVED, Region
 from sampler.model import CutInGMM
 from sampler.probability import PRegion, PRegionEstimator
 from sampler.problem import Problem, ProgressFn, Sampler
@@ -185,12 +185,12 @@ class SampleSet:
 def _region(model: CutInGMM, constraints: Any, lane_width: float | None,
             physical_bounds: bool) -> Region:
     if isinstance(constraints, Region):
-        return constraints
+        return constraints.bind(model)
     if constraints is None:
         constraints = ()
     width = model.lane_width_ if lane_width is None else lane_width
     return Region.from_constraints(constraints, lane_width=width,
-                                   physical_bounds=physical_bounds)
+                                   physical_bounds=physical_bounds).bind(model)
 
 
 def _seed(seed: int | None) -> int:
@@ -287,8 +287,8 @@ def sample(
     for j, f in enumerate(model.features_):
         if f not in PARAM_NAMES:
             params[f] = x[:, j]
-    derived = pd.DataFrame(derive(params[list(PARAM_NAMES)].to_numpy(), list(DERIVED),
-                                  lane_width=region.lane_width))
+    derived = pd.DataFrame(region.quantities(params[list(PARAM_NAMES)].to_numpy(),
+                                             list(DERIVED)))
     if not region.contains(params[list(PARAM_NAMES)].to_numpy()).all():  # pragma: no cover
         raise SamplerError("internal error: a sample violates its region")
     diag = dict(drawn.diagnostics)

@@ -51,7 +51,7 @@ import numpy as np
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError, SamplerError
-from sampler.constraints import Region, derive
+from sampler.constraints import Region
 from sampler.model import CutInGMM
 from sampler.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
 
@@ -274,11 +274,11 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         raise SamplerError("subset simulation needs at least one constraint (the region is "
                            "the whole model)")
     names = sorted({c.name for c in cons})
-    lane = region.lane_width
+    region = region.bind(model)  # its model quantities (density_pct) use the model
 
     def quantities(z: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
         params = model.params_matrix(model.from_z(z))
-        return params, derive(params, names, lane_width=lane)
+        return params, region.quantities(params, names)
 
     _, q0 = quantities(model.sample_z(int(n_scale), rng))
     scale = {name: _margin_scale(q0[name]) for name in names}

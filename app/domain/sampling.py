@@ -165,7 +165,7 @@ def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
     and an exposure (``sampler.exposure.uncertainty_report``); unchanged otherwise."""
     if not (model.bootstrap_ or model.exposure_):
         return p_region
-    region = Region.from_constraints(list(constraints), lane_width=model.lane_width_)
+    region = Region.from_constraints(list(constraints), lane_width=model.lane_width_).bind(model)
     try:
         report = uncertainty_report(model, region_of(p_region), region, seed,
                                     n_samples=n_samples)
