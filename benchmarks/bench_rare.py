@@ -1,33 +1,38 @@
-"""Rare-event benchmark: the acceleration factor of subset simulation and the project's
-samplers over naive Monte Carlo, on the model fitted to the embedded TNO cut-ins.
+"""Rare-event benchmark: the acceleration factor of subset simulation, subset-is and the
+sampler's ``auto`` path over naive Monte Carlo, on the model fitted to the embedded TNO
+cut-ins, for regions of the simulated criticality (issue 12 item 5). Asserts nothing.
 
-For regions at P(A) of about 1e-3, 1e-4 and 1e-5 it prints, all in one run:
+Brute-force references, computed in the same run (one pass each, shared by the regions):
 
-* the brute-force reference: naive Monte Carlo with ``N_ref = max(1e6, 300 / p)`` plain
-  model draws (capped by ``--max-ref``), P(A and B) = hits / N_ref and its exact 95 %
+* ``naive``: ``--naive`` plain model draws; every draw inside the physical bounds gets its
+  criticality quantities; P(A and B) = hits / draws with its exact (Clopper-Pearson) 95 %
   interval;
-* per method, over ``--reps`` seeded repetitions: the mean estimate, the measured CoV
-  (standard deviation over the repetitions / the reference), the mean number of
-  limit-state evaluations (region memberships; for subset simulation its limit-state
-  evaluations), and the acceleration = evaluations naive Monte Carlo needs for the same
-  CoV, ``(1 - p) / (p CoV^2)``, divided by the evaluations used;
-* whether each repetition's estimate lies inside 2 reported CoV of the reference.
+* ``envelope`` (regions with ``ttc<3``): ``--envelope`` exact draws of the model restricted
+  to the half-space envelope S of ``ttc<3`` (``sampler.envelope``, P(S) exact); the draws
+  inside ``ttc<3`` get their criticality quantities; P(A and B) = P(S) hits / draws, the
+  interval P(S) times the exact one. Still naive Monte Carlo (stratified by an exactly
+  known set), so it is unbiased with an exact interval, far cheaper for these regions.
 
-Methods: ``subset`` (subset simulation, ``sampler.subset``), ``auto`` (the sampler's
-default path: rejection from the half-space envelope when the region has one, subset
-simulation when the pilot finds too few hits, importance sampling otherwise) and
-``mcmc`` (the pilot plus an MCMC run: P(A) from the pilot's hits or importance sampling).
+Per method and region, over ``--reps`` seeded repetitions: the mean estimate; ``CoV``,
+the spread of the repetitions (standard deviation / mean); ``CoV ref``, the root mean
+square error against the reference / the reference (it includes the reference's own
+error, so it bounds what a finite reference can show); the mean reported CoV; the mean
+number of criticality evaluations (every row simulated: the subset levels, the adaptation
+and the importance draws; for ``auto`` also the pilot and P(A)); the acceleration = the
+naive draws needed for the same CoV, ``(1 - p) / (p CoV^2)``, divided by the evaluations
+used (``accel``: from ``CoV``; ``accel ref``: from ``CoV ref``); the share of repetitions
+within 2 reported CoV of the reference; whether the mean lies inside the reference's
+interval, and the share of single estimates that do.
 
-Regions: ``thw`` (kinematic, no half-space envelope: the fair comparison with naive MC),
-``ttc`` (has an envelope) and, when the constraint language has the simulated criticality
-(``btn``, issue 11), ``btn`` thresholds. Thresholds were chosen by a pilot scan to give the
-wanted P(A) orders on this model.
+Methods: ``subset`` (plain subset simulation, 2,000 points per level), ``subset-is``
+(``sampler.rare`` defaults), ``auto`` (``sample(model, constraints, 100, seed)``: its
+P(A and B); evaluations counted through ``Region.contains`` and the limit states).
 
-Targets (issue 12): acceleration >= 100 at 1e-4 and >= 1000 at 1e-5, estimates inside the
-brute-force interval.
+Targets (issue 12): acceleration >= 100 at 1e-4 and >= 1000 at 1e-5, estimates inside
+the brute-force interval.
 
-Usage: ``.venv/bin/python benchmarks/bench_rare.py [--reps 20] [--max-ref 2e7]
-[--families thw,ttc]``
+Usage: ``.venv/bin/python benchmarks/bench_rare.py [--reps 20] [--naive 3e6]
+[--envelope 4e6] [--methods subset,subset-is,auto] [--regions 0,1,2]``
 """
 
 from __future__ import annotations
@@ -40,153 +45,199 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-#: family -> [(constraint, target order of P(A))]
-REGIONS: dict[str, list[tuple[str, float]]] = {
-    "thw": [("thw<0.19", 1e-3), ("thw<0.13", 1e-4), ("thw<0.115", 1e-5)],
-    "ttc": [("ttc<3", 1e-3), ("ttc<2.1", 1e-4), ("ttc<1.4", 1e-5)],
-    "btn": [("btn>0.1", 1e-3), ("btn>0.3", 1e-4), ("btn>0.5", 1e-5)],
-}
+import numpy as np
+
+#: (constraints, target order of P(A and B), reference pass)
+REGIONS: list[tuple[list[str], float, str]] = [
+    (["btn>0.15"], 1e-3, "naive"),
+    (["btn>0.3"], 1e-4, "naive"),
+    (["ttr_true<2.8"], 1e-4, "naive"),
+    (["ttc<3", "btn>0.3"], 1e-4, "envelope"),
+    (["ttc<3", "btn>0.4"], 1e-5, "envelope"),
+    (["ttc<3", "ttr_true<2"], 1e-5, "envelope"),
+    (["ttc<3", "btn>0.5"], 1e-5, "envelope"),
+    (["ttc<3", "btn>0.7", "btn<1"], 1e-7, "envelope"),
+]
 
 _COUNT = {"rows": 0}
 
 
-def _count_contains() -> None:
-    """Count every region-membership evaluation (the limit state of rejection / MCMC)."""
-    from sampler.constraints import Region
+def _count_evaluations() -> None:
+    """Count every row whose criticality quantities are simulated (the costly limit
+    state, whichever path evaluates it)."""
+    import sampler.constraints as sc
 
-    original = Region.contains
+    original = sc.criticality_quantities
 
-    def contains(self: Any, params: Any) -> Any:
-        out = original(self, params)
-        _COUNT["rows"] += int(np.asarray(out).shape[0])
-        return out
+    def counted(params: Any, *args: Any, **kwargs: Any) -> Any:
+        _COUNT["rows"] += int(np.asarray(params).shape[0])
+        return original(params, *args, **kwargs)
 
-    Region.contains = contains  # type: ignore[method-assign]
+    sc.criticality_quantities = counted  # type: ignore[assignment]
 
 
-def _reference(model: Any, region: Any, p_guess: float, max_ref: float,
-               seed: int) -> tuple[float, float, float, int]:
+def _references(model: Any, n_naive: int, n_env: int, seed: int) -> dict[str, Any]:
+    """The two brute-force passes: per pass the draws, P(S) and the rows' quantities."""
+    from sampler.constraints import Region, derive
+    from sampler.criticality import criticality_quantities
+    from sampler.problem import Problem
+
+    lw = model.lane_width_
+    out: dict[str, Any] = {}
+    rng = np.random.default_rng(seed)
+    t = time.perf_counter()
+    bounds = Region.from_constraints([], lane_width=lw)
+    rows: list[np.ndarray] = []
+    done = 0
+    while done < n_naive:
+        x = model.params_matrix(model.sample(min(1 << 18, n_naive - done), rng))
+        done += x.shape[0]
+        rows.append(x[bounds.in_bounds(x)])
+    x = np.concatenate(rows)
+    q = criticality_quantities(x, lw)
+    q["ttc"] = derive(x, ["ttc"], lane_width=lw)["ttc"]
+    out["naive"] = {"draws": n_naive, "mass": 1.0, "q": q, "params": x,
+                    "seconds": time.perf_counter() - t}
+    t = time.perf_counter()
+    problem = Problem(model, Region.from_constraints(["ttc<3"], lane_width=lw))
+    assert problem.envelope is not None
+    rows = []
+    done = 0
+    while done < n_env:
+        z = problem.draw_z(min(1 << 18, n_env - done), rng)
+        done += z.shape[0]
+        xx = problem.params(z)
+        rows.append(xx[problem.region.contains(xx)])
+    x = np.concatenate(rows)
+    q = criticality_quantities(x, lw)
+    q["ttc"] = derive(x, ["ttc"], lane_width=lw)["ttc"]
+    out["envelope"] = {"draws": n_env, "mass": problem.envelope.mass, "q": q, "params": x,
+                       "seconds": time.perf_counter() - t}
+    return out
+
+
+def _reference(refs: dict[str, Any], constraints: list[str], kind: str,
+               lane_width: float) -> tuple[float, float, float, int, int]:
+    from sampler.constraints import parse_constraint
     from sampler.intervals import clopper_pearson
 
-    n_ref = int(min(max_ref, max(1e6, 300.0 / p_guess)))
-    if n_ref * p_guess < 30:  # fewer than ~30 expected hits: no usable brute force
-        return math.nan, math.nan, math.nan, 0
-    rng = np.random.default_rng(seed)
-    hits = done = 0
-    while done < n_ref:
-        b = min(1 << 20, n_ref - done)
-        x = model.params_matrix(model.sample(b, rng))
-        hits += int(region.contains(x).sum())
-        done += b
-    lo, hi = clopper_pearson(hits, n_ref)
-    return hits / n_ref, lo, hi, n_ref
+    r = refs[kind]
+    inside = np.ones(r["params"].shape[0], dtype=bool)
+    for text in constraints:
+        c = parse_constraint(text)
+        inside &= c.mask(r["q"][c.name])
+    k = int(inside.sum())
+    lo, hi = clopper_pearson(k, r["draws"])
+    m = r["mass"]
+    return m * k / r["draws"], m * lo, m * hi, k, r["draws"]
 
 
-def _run(model: Any, constraint: str, method: str, seed: int) -> tuple[float, float, int]:
-    """One repetition: (P(A and B), reported CoV, evaluations)."""
+def _run(model: Any, constraints: list[str], method: str, seed: int
+         ) -> tuple[float, float, int]:
+    """One repetition: (P(A and B), reported CoV, criticality evaluations)."""
     from sampler.constraints import Region
     from sampler.problem import Problem
+    from sampler.rare import SubsetISSampler
     from sampler.sampleset import sample
     from sampler.subset import SubsetSampler
 
-    if method == "subset":
-        region = Region.from_constraints([constraint], lane_width=model.lane_width_)
-        problem = Problem(model, region, use_envelope=False)
-        res = SubsetSampler().run(problem, 1, np.random.default_rng(seed))
-        return res.probability, res.cov_upper, res.n_evaluations
     _COUNT["rows"] = 0
-    ss = sample(model, [constraint], 200, seed=seed, method=method)
+    rng = np.random.default_rng(seed)
+    if method in ("subset", "subset-is"):
+        region = Region.from_constraints(constraints, lane_width=model.lane_width_)
+        problem = Problem(model, region, use_envelope=False)
+        if method == "subset":
+            res: Any = SubsetSampler().run(problem, 1, rng)
+            return res.probability, res.cov_upper, _COUNT["rows"]
+        res = SubsetISSampler().run(problem, rng)
+        return res.probability, res.cov, _COUNT["rows"]
+    ss = sample(model, constraints, 100, seed=seed, method=method)
     p = ss.p_region
-    evals = _COUNT["rows"] if p.method != "subset" else p.n_draws + _COUNT["rows"]
-    return p.p_joint, (p.cov if p.cov is not None else math.nan), evals
+    return p.p_joint, (p.cov if p.cov is not None else math.nan), _COUNT["rows"]
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--reps", type=int, default=20)
-    parser.add_argument("--max-ref", type=float, default=2e7,
-                        help="largest brute-force reference (kinematic regions)")
-    parser.add_argument("--max-ref-crit", type=float, default=1e6,
-                        help="largest brute-force reference for the simulated criticality")
-    parser.add_argument("--families", default="thw,ttc,btn")
-    parser.add_argument("--methods", default="subset,auto,mcmc")
+    parser.add_argument("--naive", type=float, default=3e6, help="plain model draws")
+    parser.add_argument("--envelope", type=float, default=4e6,
+                        help="draws of the model restricted to the ttc<3 envelope")
+    parser.add_argument("--methods", default="subset,subset-is,auto")
+    parser.add_argument("--regions", default=",".join(str(i) for i in range(len(REGIONS))))
     args = parser.parse_args()
 
     from datasets.embedded import default_parameter_table
     from sampler import CutInGMM
-    from sampler.constraints import QUANTITY_NAMES, Region
 
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} "
-          f"(uptime: {' '.join(f'{x:.2f}' for x in os.getloadavg())})")
+    def load() -> str:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+    print(f"machine: {os.cpu_count()} cores, load average {load()}", flush=True)
     model = CutInGMM(random_state=0).fit(default_parameter_table(), source="embedded")
-    print(f"model: TNO cut-ins, K = {model.n_components_}")
-    _count_contains()
-    families = [f for f in args.families.split(",") if f]
-    rows = []
-    for fam in families:
-        first = REGIONS[fam][0][0]
-        name = first.split("<")[0].split(">")[0]
-        if name not in QUANTITY_NAMES:
-            print(f"family {fam}: quantity {name!r} not in the constraint language yet: "
-                  "skipped")
+    print(f"model: TNO cut-ins, K = {model.n_components_}", flush=True)
+    t = time.perf_counter()
+    refs = _references(model, int(args.naive), int(args.envelope), 12345)
+    print(f"references: {int(args.naive):,} naive draws ({refs['naive']['seconds']:.0f} s), "
+          f"{int(args.envelope):,} envelope draws, P(S) = {refs['envelope']['mass']:.4g} "
+          f"({refs['envelope']['seconds']:.0f} s); load {load()}", flush=True)
+    _count_evaluations()
+    table = []
+    for i in (int(s) for s in args.regions.split(",") if s):
+        constraints, _order, kind = REGIONS[i]
+        name = " & ".join(constraints)
+        p_ref, lo, hi, k, n_ref = _reference(refs, constraints, kind, model.lane_width_)
+        print(f"\n{name}: reference P(A and B) = {p_ref:.3g} [{lo:.3g}, {hi:.3g}] "
+              f"({k} hits of {n_ref:,} {kind} draws)", flush=True)
+        if k == 0:
+            print("  no hit: reference unusable")
             continue
-        for constraint, p_guess in REGIONS[fam]:
-            region = Region.from_constraints([constraint], lane_width=model.lane_width_)
+        print(f"  {'method':9s} {'mean P':>10s} {'CoV':>6s} {'CoV ref':>7s} {'CoV rep':>7s} "
+              f"{'evals':>8s} {'accel':>8s} {'accel ref':>9s} {'in 2CoV':>7s} "
+              f"{'mean in CI':>10s} {'in CI':>6s} {'s/rep':>6s}")
+        for method in args.methods.split(","):
+            est, cov, ev = [], [], []
             t = time.perf_counter()
-            cap = args.max_ref_crit if fam == "btn" else args.max_ref
-            p_ref, lo, hi, n_ref = _reference(model, region, p_guess, cap, 12345)
-            t_ref = time.perf_counter() - t
-            if n_ref:
-                print(f"\n{constraint}: reference P(A and B) = {p_ref:.3g} "
-                      f"[{lo:.3g}, {hi:.3g}] from {n_ref:.3g} naive draws ({t_ref:.0f} s)",
-                      flush=True)
-            else:
-                print(f"\n{constraint}: brute force unaffordable (P ~ {p_guess:g}, cap "
-                      f"{cap:g} draws): reference = mean of the subset repetitions, CoV = "
-                      "their spread", flush=True)
-            if n_ref and p_ref == 0:
-                print("  no hit: reference unusable; raise --max-ref")
+            reps = args.reps if method != "auto" else max(2, args.reps // 4)
+            for rep in range(reps):
+                try:
+                    p, c, e = _run(model, constraints, method, 1000 + rep)
+                except Exception as exc:  # report and go on: a benchmark, not a test
+                    print(f"  {method:9s} failed: {str(exc).splitlines()[0][:120]}")
+                    break
+                est.append(p)
+                cov.append(c)
+                ev.append(e)
+            if len(est) < 2:
                 continue
-            print(f"  {'method':8s} {'mean P':>10s} {'CoV meas':>9s} {'CoV rep':>8s} "
-                  f"{'evals':>9s} {'naive eq':>10s} {'accel':>8s} {'in 2CoV':>8s} "
-                  f"{'in ref CI':>9s} {'s/rep':>6s}")
-            for method in args.methods.split(","):
-                est, cov, ev = [], [], []
-                t = time.perf_counter()
-                for rep in range(args.reps):
-                    try:
-                        p, c, e = _run(model, constraint, method, 1000 + rep)
-                    except Exception as exc:  # report and go on: a benchmark, not a test
-                        print(f"  {method:8s} failed: {str(exc).splitlines()[0][:120]}")
-                        break
-                    est.append(p)
-                    cov.append(c)
-                    ev.append(e)
-                if len(est) < 2:
-                    continue
-                dt = (time.perf_counter() - t) / len(est)
-                e_arr, c_arr = np.array(est), np.array(cov)
-                if not n_ref:  # no brute force: the first method's mean is the reference
-                    p_ref = p_ref if math.isfinite(p_ref) else float(e_arr.mean())
-                    lo = hi = math.nan
-                cov_meas = float(np.sqrt(np.mean((e_arr - p_ref) ** 2)) / p_ref)
-                evals = float(np.mean(ev))
-                naive = (1 - p_ref) / (p_ref * max(cov_meas, 1e-12) ** 2)
-                accel = naive / evals
-                in2 = float(np.mean(np.abs(e_arr - p_ref) <= 2 * c_arr * p_ref))
-                in_ci = float(np.mean((e_arr >= lo) & (e_arr <= hi)))
-                print(f"  {method:8s} {e_arr.mean():10.3g} {cov_meas:9.3f} "
-                      f"{np.nanmean(c_arr):8.3f} {evals:9.0f} {naive:10.3g} {accel:8.1f} "
-                      f"{in2:8.2f} {in_ci:9.2f} {dt:6.2f}", flush=True)
-                rows.append((constraint, method, p_ref, e_arr.mean(), cov_meas, evals, accel))
-    print(f"\nload average at the end: {os.getloadavg()[0]:.2f}")
-    print("CoV meas: root mean square error over the repetitions / reference; CoV rep: the "
-          "method's own reported CoV (subset: the conservative bound); naive eq: naive "
-          "evaluations for CoV meas; accel = naive eq / evals.")
+            dt = (time.perf_counter() - t) / len(est)
+            e_arr, c_arr = np.array(est), np.array(cov)
+            mean = float(e_arr.mean())
+            cov_spread = float(e_arr.std(ddof=1) / mean)
+            cov_ref = float(np.sqrt(np.mean((e_arr - p_ref) ** 2)) / p_ref)
+            evals = float(np.mean(ev))
+            accel = (1 - mean) / (mean * max(cov_spread, 1e-12) ** 2) / evals
+            accel_ref = (1 - p_ref) / (p_ref * max(cov_ref, 1e-12) ** 2) / evals
+            in2 = float(np.mean(np.abs(e_arr - p_ref) <= 2 * c_arr * e_arr))
+            mean_in = "yes" if lo <= mean <= hi else "no"
+            in_ci = float(np.mean((e_arr >= lo) & (e_arr <= hi)))
+            print(f"  {method:9s} {mean:10.3g} {cov_spread:6.3f} {cov_ref:7.3f} "
+                  f"{np.nanmean(c_arr):7.3f} {evals:8.0f} {accel:8.0f} {accel_ref:9.0f} "
+                  f"{in2:7.2f} {mean_in:>10s} {in_ci:6.2f} {dt:6.2f}", flush=True)
+            table.append((name, p_ref, lo, hi, method, mean, cov_spread, cov_ref,
+                          float(np.nanmean(c_arr)), evals, accel, accel_ref, mean_in,
+                          len(est)))
+    print(f"\nload average at the end: {load()}")
+    print("\n| region | P(A and B) brute force [95 %] | method | mean P | CoV | CoV ref "
+          "| CoV rep | evaluations | accel | accel ref | mean in CI | reps |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for (name, p_ref, lo, hi, method, mean, cs, cr, cp, evals, accel, accel_ref, mean_in,
+         n) in table:
+        print(f"| {name} | {p_ref:.3g} [{lo:.3g}, {hi:.3g}] | {method} | {mean:.3g} | "
+              f"{cs:.3f} | {cr:.3f} | {cp:.3f} | {evals:,.0f} | {accel:,.0f} | "
+              f"{accel_ref:,.0f} | {mean_in} | {n} |")
     return 0
 
 

@@ -18,6 +18,9 @@ Estimators of ``P(A and B)``:
   regions when S is tight (ttc < 1 on the TNO model: P(A) ~ 1e-6, P(A | S) ~ 0.05).
 * ``subset`` — subset simulation (``sampler.subset``) when the sampler was ``subset``:
   its estimate, a log-normal interval from its conservative CoV bound.
+* ``subset-is`` — subset levels then importance sampling (``sampler.rare``) when that
+  sampler made the samples (``auto`` for rare regions): its estimate, a log-normal
+  interval from its CoV (sample standard error).
 * ``is`` — importance sampling with a defensive mixture (Hesterberg 1995) for rare regions
   (in practice P(A) < 1e-4, where the pilot's ~1e6 draws hit fewer than 100 times):
   proposal ``q = alpha p + (1 - alpha) g`` in z-space, ``g`` a Gaussian mixture (K <= 3 by
@@ -61,7 +64,7 @@ class PRegion:
     ci_low: float
     ci_high: float
     confidence: float
-    method: str  # "mc", "envelope", "is" or "subset"
+    method: str  # "mc", "envelope", "is", "subset" or "subset-is"
     n_draws: int  # draws behind the estimate (model draws for mc, proposal draws for is)
     n_hits: int  # of those, inside the region
     p_bounds: float  # P(B), the model's mass inside the physical bounds
@@ -102,6 +105,10 @@ class PRegionEstimator:
         Stop the plain-MC pilot once this many draws fell inside the region ...
     pilot_max : int
         ... or after this many draws.
+    pilot_max_costly : int
+        The same cap when the region has a criticality constraint (closed-loop
+        simulations, ~1e4-1e5 rows/s): a rare such region goes to subset-is instead of
+        spending 10^6 simulations on the pilot.
     mc_min_hits : int
         Fewer plain-MC hits than this switch P(A) to importance sampling.
     n_is : int
@@ -123,6 +130,7 @@ class PRegionEstimator:
     """
 
     def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
+                 pilot_max_costly: int = 1 << 13,
                  mc_min_hits: int = 100, n_is: int = 1 << 15, defensive: float = 0.1,
                  inflate: float = 1.5, n_bounds: int = 1 << 15,
                  search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
@@ -130,6 +138,7 @@ class PRegionEstimator:
                  confidence: float = 0.95) -> None:
         self.pilot_hits = int(pilot_hits)
         self.pilot_max = int(pilot_max)
+        self.pilot_max_costly = int(pilot_max_costly)
         self.mc_min_hits = int(mc_min_hits)
         self.n_is = int(n_is)
         self.defensive = float(defensive)
@@ -166,8 +175,10 @@ class PRegionEstimator:
         hits: list[FloatArray] = []
         n_hits = n_draws = 0
         batch = 1 << 14
-        while n_hits < self.pilot_hits and n_draws < self.pilot_max:
-            b = min(batch, self.pilot_max - n_draws)
+        costly = any(c.tier == 2 for c in problem.region.constraints)  # closed-loop runs
+        cap = self.pilot_max_costly if costly else self.pilot_max
+        while n_hits < self.pilot_hits and n_draws < cap:
+            b = min(batch, cap - n_draws)
             z = problem.draw_z(b, rng)
             inside = z[problem.inside(z)]
             hits.append(inside)
@@ -175,7 +186,7 @@ class PRegionEstimator:
             n_draws += b
             batch = min(batch * 2, 1 << 18)
             if progress is not None:
-                progress("pilot", n_draws, self.pilot_max)
+                progress("pilot", n_draws, cap)
         pilot = Pilot(n_draws=n_draws, hits=np.concatenate(hits, axis=0))
         if pilot.n_hits < need:
             self.search(problem, rng, pilot, need)
@@ -230,9 +241,11 @@ class PRegionEstimator:
 
     def from_subset(self, problem: Problem, result: Any,
                     bounds: tuple[float, float, float]) -> PRegion:
-        """P(A) from a subset simulation (``sampler.subset.SubsetResult``).
+        """P(A) from a subset simulation (``sampler.subset.SubsetResult``, method
+        ``subset``) or subset-is (``sampler.rare.RareResult``, method ``subset-is``).
 
-        Interval: log-normal with the conservative ``cov_upper`` (levels fully correlated),
+        Interval: log-normal with ``cov_upper`` (subset: the conservative bound, levels
+        fully correlated; subset-is: the importance sampler's CoV),
         ``p exp(+-z sqrt(log(1 + cov_upper^2)))``, combined with P(B)'s interval."""
         p_b, lo_b, hi_b = bounds
         joint = float(result.probability)
@@ -240,7 +253,8 @@ class PRegionEstimator:
         s = math.sqrt(math.log1p(float(result.cov_upper) ** 2))
         out = PRegion(estimate=min(1.0, joint / p_b), ci_low=joint * math.exp(-zc * s) / hi_b,
                       ci_high=min(1.0, joint * math.exp(zc * s) / lo_b),
-                      confidence=self.confidence, method="subset",
+                      confidence=self.confidence,
+                      method=str(getattr(result, "method", "subset")),
                       n_draws=int(result.n_evaluations), n_hits=int(result.z.shape[0]),
                       p_bounds=p_b, p_bounds_ci=(lo_b, hi_b), p_joint=joint,
                       cov=float(result.cov_upper))

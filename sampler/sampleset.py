@@ -36,6 +36,7 @@ from sampler.constraints import DERIVED, Region
 from sampler.model import CutInGMM
 from sampler.probability import PRegion, PRegionEstimator
 from sampler.problem import Problem, ProgressFn, Sampler
+from sampler.rare import SubsetISSampler
 from sampler.samplers import AutoSampler, make_sampler
 from sampler.subset import SubsetSampler
 
@@ -132,6 +133,13 @@ class SampleSet:
             parts.append(f"subset simulation: {sub['levels']} levels of {sub['n_per_level']}, "
                          f"{sub['n_evaluations']} evaluations, CoV {sub['cov']:.2f} "
                          f"(independent levels) ... {sub['cov_upper']:.2f} (bound)")
+        elif self.method == "subset-is":
+            r = d["subset_is"]
+            parts.append(f"subset-is: {r['n_evaluations']} evaluations ({r['subset']['levels']} "
+                         f"subset levels), CoV {r['cov']:.3f}; independence chains: "
+                         f"acceptance {d['acceptance_mean']:.2f}, tau {d['tau_max']:.1f}, "
+                         f"ESS {d['ess']:.0f}")
+            parts.extend(d.get("warnings", []))
         else:
             parts.append(f"acceptance {d['acceptance_rate']:.3g} of {d['n_draws']} draws")
         return "; ".join(parts)
@@ -202,6 +210,11 @@ def _seed(seed: int | None) -> int:
     return int(seed)
 
 
+def _costly(region: Region) -> bool:
+    """Whether the region has a criticality constraint (closed-loop simulations)."""
+    return any(c.tier == 2 for c in region.constraints)
+
+
 def _model_info(model: CutInGMM) -> dict[str, Any]:
     return {"features": list(model.features_), "n_components": model.n_components_,
             "training_sha256": getattr(model, "training_", {}).get("sha256"),
@@ -234,7 +247,7 @@ def sample(
         Number of samples (1 ... 1,000,000).
     seed : int, optional
         Seed of everything random; None draws a fresh one (recorded in the result).
-    method : {"auto", "rejection", "mcmc"} or Sampler
+    method : {"auto", "rejection", "mcmc", "subset", "subset-is"} or Sampler
     lane_width : float, optional
         Lane width in m; default the model's ``lane_width_``.
     estimator : PRegionEstimator, optional
@@ -269,10 +282,12 @@ def sample(
 
     bounds = est.p_bounds(problem, rng)
     need = getattr(getattr(strategy, "mcmc", strategy), "n_walkers", 0)
-    if isinstance(strategy, SubsetSampler):
+    if isinstance(strategy, SubsetSampler | SubsetISSampler):
         need = 0  # subset simulation finds its own way in
     elif isinstance(strategy, AutoSampler):
-        need = 1  # no pilot hit: the broadened search (which ends empty regions); few: subset
+        # no pilot hit: the broadened search (which ends empty regions); few: subset-is.
+        # Not for criticality regions: 10^5-10^6 simulations; subset-is ends empty ones
+        need = 0 if _costly(region) else 1
     pilot = est.pilot(problem, rng, need=need, progress=progress)
     if isinstance(strategy, AutoSampler) and strategy.choose(n, pilot).name == "mcmc":
         est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
@@ -320,9 +335,9 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
                       estimator: PRegionEstimator | None = None) -> PRegion:
     """P(A) of a region under the model with its interval, without keeping samples.
 
-    Plain MC when the pilot finds enough hits; subset simulation when it finds fewer than
-    the MCMC walkers; otherwise a short MCMC run supplies the importance sampler's proposal
-    (see ``sampler.probability``).
+    Plain MC when the pilot finds enough hits; subset-is (``sampler.rare``) when it finds
+    fewer than the MCMC walkers; otherwise a short MCMC run supplies the importance
+    sampler's proposal (see ``sampler.probability``).
     """
     model._check_fitted()
     region = _region(model, constraints, lane_width, physical_bounds)
@@ -337,10 +352,10 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     if pilot.n_hits >= est.mc_min_hits:
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                             region_z=pilot.hits, bounds=bounds)
-    if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset simulation
-        if pilot.n_hits == 0:
+    if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset-is
+        if pilot.n_hits == 0 and not _costly(region):
             est.search(problem, rng, pilot, 1)  # ends an empty region with its upper bound
-        result = SubsetSampler().run(problem, 1, rng)
+        result = SubsetISSampler().run(problem, rng)
         return est.from_subset(problem, result, bounds)
     drawn = mcmc.draw(problem, 500, rng, pilot)
     return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,

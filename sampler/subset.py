@@ -261,13 +261,15 @@ def _margin_scale(values: FloatArray) -> float:
 
 
 def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator,
-                       n_scale: int = 4096) -> LimitState:
+                       n_scale: int = 2048) -> LimitState:
     """A limit state whose set ``g <= 0`` is the region (up to ties at the thresholds).
 
     ``g = max_c m_c``, the constraints' margins ``(q - v) / s_c`` for ``q < v`` (``q <= v``)
     and ``(v - q) / s_c`` for ``q > v`` (``q >= v``), ``s_c`` the quantity's robust spread
     (IQR / 1.349) over ``n_scale`` model draws (so no constraint dominates the levels by
-    its unit); +inf outside the physical bounds (when on) and where a quantity is NaN.
+    its unit; 1 when the constraints name one quantity: then the scale changes nothing and
+    costs no simulation); +inf outside the physical bounds (when on) and where a quantity
+    is NaN.
     """
     cons = region.constraints
     if not cons:
@@ -280,8 +282,11 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         params = model.params_matrix(model.from_z(z))
         return params, region.quantities(params, names)
 
-    _, q0 = quantities(model.sample_z(int(n_scale), rng))
-    scale = {name: _margin_scale(q0[name]) for name in names}
+    if len(names) > 1:
+        _, q0 = quantities(model.sample_z(int(n_scale), rng))
+        scale = {name: _margin_scale(q0[name]) for name in names}
+    else:  # one quantity: its scale does not change the sets g <= b
+        scale = {names[0]: 1.0}
     signs = [(c.name, 1.0 if c.op in ("<", "<=") else -1.0, float(c.value)) for c in cons]
 
     def g(z: FloatArray) -> FloatArray:
