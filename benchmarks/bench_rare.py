@@ -32,7 +32,8 @@ Targets (issue 12): acceleration >= 100 at 1e-4 and >= 1000 at 1e-5, estimates i
 the brute-force interval.
 
 Usage: ``.venv/bin/python benchmarks/bench_rare.py [--reps 20] [--naive 3e6]
-[--envelope 4e6] [--methods subset,subset-is,auto] [--regions 0,1,2]``
+[--envelope 4e6] [--methods subset,subset-is,auto] [--regions 0,1,2]
+[--refs-cache /tmp/rare-refs.pkl]``
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import pickle
 import sys
 import time
 from pathlib import Path
@@ -166,6 +168,9 @@ def main() -> int:
     parser.add_argument("--envelope", type=float, default=4e6,
                         help="draws of the model restricted to the ttc<3 envelope")
     parser.add_argument("--methods", default="subset,subset-is,auto")
+    parser.add_argument("--refs-cache", default="",
+                        help="pickle file for the brute-force passes (reused when the "
+                             "draw counts and the model match)")
     parser.add_argument("--regions", default=",".join(str(i) for i in range(len(REGIONS))))
     args = parser.parse_args()
 
@@ -179,7 +184,15 @@ def main() -> int:
     model = CutInGMM(random_state=0).fit(default_parameter_table(), source="embedded")
     print(f"model: TNO cut-ins, K = {model.n_components_}", flush=True)
     t = time.perf_counter()
-    refs = _references(model, int(args.naive), int(args.envelope), 12345)
+    cache = Path(args.refs_cache) if args.refs_cache else None
+    key = f"{int(args.naive)}-{int(args.envelope)}-{model.training_['sha256']}"
+    if cache is not None and cache.exists() and pickle.loads(cache.read_bytes())[0] == key:
+        refs = pickle.loads(cache.read_bytes())[1]
+        print(f"references read from {cache} (computed by an earlier run of this script)")
+    else:
+        refs = _references(model, int(args.naive), int(args.envelope), 12345)
+        if cache is not None:
+            cache.write_bytes(pickle.dumps((key, refs)))
     print(f"references: {int(args.naive):,} naive draws ({refs['naive']['seconds']:.0f} s), "
           f"{int(args.envelope):,} envelope draws, P(S) = {refs['envelope']['mass']:.4g} "
           f"({refs['envelope']['seconds']:.0f} s); load {load()}", flush=True)

@@ -49,17 +49,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
-from scipy.special import gammaln, logsumexp
 
 from sampler._exceptions import EmptyRegionError, SamplerError
+from sampler.importance import ImportanceStage, KernelProposal, independence_chain, kish_ess
 from sampler.mcmc import _tau
 from sampler.model import CutInGMM
 from sampler.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
 from sampler.subset import LimitState, SubsetResult, region_limit_state, subset_simulation
 
-__all__ = ["ImportanceStage", "RareResult", "SubsetISSampler", "independence_chain",
-           "subset_importance"]
+__all__ = ["RareResult", "SubsetISSampler", "rare_probability", "subset_importance"]
 
 
 @dataclass(frozen=True)
@@ -118,59 +116,6 @@ class RareResult:
                 "seconds": self.seconds, "subset": self.subset.summary()}
 
 
-class ImportanceStage:
-    """Draws of the defensive proposal q with their limit state: P(A) and its CoV so far."""
-
-    def __init__(self, model: CutInGMM, limit_state: LimitState, proposal: KernelProposal,
-                 deadline: float, max_seconds: float) -> None:
-        self.model = model
-        self.limit_state = limit_state
-        self.proposal = proposal
-        self.deadline = deadline
-        self.max_seconds = max_seconds
-        self.n = 0
-        self._z: list[FloatArray] = []
-        self._lw: list[FloatArray] = []  # log p - log q, -inf outside A
-
-    def add(self, n: int, rng: np.random.Generator, batch: int = 4096) -> None:
-        """Draw ``n`` more points of q (in batches, the time budget checked between)."""
-        done = 0
-        while done < n:
-            if time.monotonic() > self.deadline:
-                raise SamplerError(
-                    f"subset-is: stopped after max_seconds={self.max_seconds:g} s in the "
-                    f"importance stage ({self.n} draws of q); raise max_seconds")
-            b = min(batch, n - done)
-            z = self.proposal.draw(b, rng)
-            g = np.asarray(self.limit_state(z), dtype=np.float64)
-            lw = self.model.log_density_z(z) - self.proposal.log_q(z)
-            self._z.append(z)
-            self._lw.append(np.where(g <= 0.0, lw, -np.inf))
-            self.n += b
-            done += b
-
-    @property
-    def z(self) -> FloatArray:
-        return np.concatenate(self._z, axis=0)
-
-    @property
-    def log_w(self) -> FloatArray:
-        return np.concatenate(self._lw)
-
-    def estimate(self) -> tuple[float, float]:
-        """(P(A), CoV): mean of the weights (0 outside A), standard error / mean."""
-        w = np.exp(self.log_w)
-        p = float(w.mean())
-        if not p > 0:
-            return 0.0, math.inf
-        return p, float(w.std(ddof=1) / math.sqrt(w.size) / p)
-
-
-def _kish(log_w: FloatArray) -> float:
-    w = np.exp(log_w - log_w.max())
-    return float(w.sum() ** 2 / (w * w).sum())
-
-
 def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
                       n_per_level: int = 1000, n_is: int = 4000, alpha: float = 0.1,
                       inflate: float = 1.3, p0: float = 0.1,
@@ -227,9 +172,8 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
     proposal = KernelProposal(model, pts, inflate, alpha, nu)
     n_adapt_evals = 0
     for _ in range(adapt_rounds):
-        # the adaptation: importance draws inside A resampled by their weights (so they
-        # follow the model restricted to A, not the subset chains' coverage of it) are
-        # the next kernel density's centres
+        # importance draws inside A resampled by their weights (they follow the model
+        # restricted to A, not the subset chains' coverage of it) are the next centres
         pilot = ImportanceStage(model, limit_state, proposal, deadline, max_seconds)
         pilot.add(int(n_adapt), rng)
         n_adapt_evals += pilot.n
@@ -249,63 +193,6 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
     return _result(stage, sub, t0, n_adapt_evals, inflate)
 
 
-class KernelProposal:
-    """Defensive kernel density ``q = (1 - alpha) g + alpha p`` in the model's z-space.
-
-    ``g`` is an equal mixture of multivariate Student-t kernels (``nu`` degrees of freedom:
-    heavier tails than Gaussians, so a region's tail that the centres under-represent
-    still gets draws; Oh & Berger 1992, JASA 87, mixtures of t as importance densities)
-    centred at ``centres`` (m, d), all with the scale matrix ``h^2 S``: ``S`` the
-    covariance of ``shape`` (default the centres), ``h`` Silverman's factor
-    ``(4 / (d + 2))^(1 / (d + 4)) m^(-1 / (d + 4))`` times ``inflate``. ``p`` is the model
-    (weights ``p / q <= 1 / alpha``).
-    """
-
-    def __init__(self, model: CutInGMM, centres: FloatArray, inflate: float, alpha: float,
-                 nu: float, shape: FloatArray | None = None) -> None:
-        m, d = centres.shape
-        ref = centres if shape is None else shape
-        cov = np.cov(ref, rowvar=False) + 1e-9 * np.eye(d)
-        h = (4.0 / (d + 2)) ** (1.0 / (d + 4)) * m ** (-1.0 / (d + 4)) * inflate
-        self.model = model
-        self.alpha = float(alpha)
-        self.nu = float(nu)
-        self.k = m
-        self.centres = np.asarray(centres, dtype=np.float64)
-        self.chol = np.linalg.cholesky(cov * h * h)
-        self._inv_t = np.linalg.inv(self.chol).T  # z @ _inv_t whitens
-        self._wc = self.centres @ self._inv_t
-        self._wc2 = np.einsum("ij,ij->i", self._wc, self._wc)
-        self._log_norm = (gammaln(0.5 * (nu + d)) - gammaln(0.5 * nu)
-                          - 0.5 * d * math.log(nu * math.pi)
-                          - float(np.log(np.diag(self.chol)).sum()) - math.log(m))
-
-    def log_g(self, z: FloatArray) -> FloatArray:
-        wz = z @ self._inv_t
-        d2 = np.einsum("ij,ij->i", wz, wz)[:, None] + self._wc2[None, :] - 2.0 * wz @ self._wc.T
-        d2 = np.maximum(d2, 0.0)
-        d = z.shape[1]
-        return np.asarray(self._log_norm + logsumexp(
-            -0.5 * (self.nu + d) * np.log1p(d2 / self.nu), axis=1), dtype=np.float64)
-
-    def log_q(self, z: FloatArray) -> FloatArray:
-        return np.asarray(np.logaddexp(math.log(self.alpha) + self.model.log_density_z(z),
-                                       math.log1p(-self.alpha) + self.log_g(z)),
-                          dtype=np.float64)
-
-    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
-        d = self.centres.shape[1]
-        from_model = rng.random(n) < self.alpha
-        idx = rng.integers(0, self.k, size=n)
-        e = rng.standard_normal((n, d)) @ self.chol.T
-        scale = np.sqrt(self.nu / rng.chisquare(self.nu, size=n))
-        out = self.centres[idx] + e * scale[:, None]
-        n_m = int(from_model.sum())
-        if n_m:
-            out[from_model] = self.model.sample_z(n_m, rng)
-        return np.asarray(out, dtype=np.float64)
-
-
 def _result(stage: ImportanceStage, sub: SubsetResult, t0: float, n_adapt: int,
             inflate: float) -> RareResult:
     p, cov = stage.estimate()
@@ -321,47 +208,12 @@ def _result(stage: ImportanceStage, sub: SubsetResult, t0: float, n_adapt: int,
         probability=p, cov=cov, n_evaluations=sub.n_evaluations + n_adapt + stage.n,
         n_subset_evaluations=sub.n_evaluations, n_adapt=n_adapt, n_is=stage.n,
         n_hits=int(inside.sum()),
-        ess_weights=_kish(lw[inside]), z=stage.z[inside], log_w=lw[inside], subset=sub,
+        ess_weights=kish_ess(lw[inside]), z=stage.z[inside], log_w=lw[inside], subset=sub,
         proposal={"kind": "defensive-kernel-density", "centres": prop.k,
                   "alpha": prop.alpha, "inflate": inflate,
                   "centres_from": ("importance draws inside A resampled by weight"
                                    if n_adapt else "final subset level")},
         seconds=time.monotonic() - t0)
-
-
-def independence_chain(log_w: FloatArray, rng: np.random.Generator, n_chains: int = 4
-                       ) -> tuple[NDArray[np.int64], FloatArray]:
-    """Independence Metropolis-Hastings over a stream of proposals with log-weights.
-
-    ``log_w[i]`` is ``log p - log q`` of proposal i (-inf outside A). The stream is split
-    round-robin over ``n_chains`` chains; each starts at a proposal inside A chosen with
-    probability proportional to its weight (importance resampling: close to the target,
-    so the burn-in is short) and moves to proposal i with probability
-    ``min(1, w_i / w_state)``. Returns (indices of the states, shape (steps, n_chains);
-    acceptance per chain).
-    """
-    inside = np.flatnonzero(np.isfinite(log_w))
-    if inside.size == 0:
-        raise EmptyRegionError("independence chain: no proposal inside the region")
-    w = np.exp(log_w[inside] - log_w[inside].max())
-    starts = inside[rng.choice(inside.size, size=n_chains, p=w / w.sum())]
-    steps = log_w.size // n_chains
-    log_u = np.log(rng.random((steps, n_chains)))
-    states = np.empty((steps, n_chains), dtype=np.int64)
-    accepted = np.zeros(n_chains)
-    for c in range(n_chains):
-        s = int(starts[c])
-        ls = float(log_w[s])
-        prop = log_w[c::n_chains][:steps]
-        idx = np.arange(c, c + n_chains * steps, n_chains)
-        lu = log_u[:, c]
-        for t in range(steps):  # scalar loop: cheap next to the limit state
-            if lu[t] < prop[t] - ls:
-                s = int(idx[t])
-                ls = float(prop[t])
-                accepted[c] += 1
-            states[t, c] = s
-    return states, accepted / max(steps, 1)
 
 
 class SubsetISSampler(Sampler):
@@ -461,3 +313,19 @@ class SubsetISSampler(Sampler):
                 "n_distinct": int(np.unique(pick).size), "warnings": warnings}
         return Draw(z=np.ascontiguousarray(z), method=self.name, diagnostics=diag,
                     mc_draws=pilot.n_draws, mc_hits=pilot.n_hits, subset=res)
+
+
+def rare_probability(model: CutInGMM, constraints: Any, seed: int, *,
+                     lane_width: float | None = None, physical_bounds: bool = True,
+                     **settings: Any) -> RareResult:
+    """P(A and B) of a region (constraints as for ``sample``) by subset-is, as a function
+    (e.g. once per bootstrap replicate of the model). ``settings`` go to
+    ``SubsetISSampler``. Divide by P(B) (``sampler.probability``) for P(A); or use
+    ``estimate_p_region``, which does both (and picks subset-is for rare regions)."""
+    from sampler.constraints import Region
+
+    region = constraints if isinstance(constraints, Region) else Region.from_constraints(
+        constraints, lane_width=model.lane_width_ if lane_width is None else lane_width,
+        physical_bounds=physical_bounds)
+    problem = Problem(model, region, use_envelope=False)
+    return SubsetISSampler(**settings).run(problem, np.random.default_rng(seed))

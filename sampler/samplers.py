@@ -13,8 +13,11 @@ and draws from the *proposal*: the model restricted to the region's half-space e
 * ``SubsetISSampler`` — subset levels to find the region, importance sampling for P(A),
   independence chains for the samples (``sampler.rare``): far cheaper than plain subset
   simulation for the same CoV.
-* ``AutoSampler`` — ``subset-is`` when the pilot found fewer than ``subset_below``
-  draws inside A (too few to start MCMC walkers from or to estimate P(A) by plain MC);
+* ``AutoSampler`` — when the pilot found fewer than ``subset_below`` draws inside A (too
+  few to start MCMC walkers from or to estimate P(A) by plain MC): ``subset-is`` for
+  regions with a criticality constraint (closed-loop simulations: where its economy
+  matters), plain subset simulation otherwise (unbiased whatever the region's shape;
+  subset-is can miss a mode, see ``sampler.rare``);
   otherwise rejection when its expected cost ``n / p_pilot`` draws is below the MCMC cost
   model ``cost_ratio * (n * tau_guess + n_walkers * burn_guess)`` (a fixed, documented
   rule, so the choice is deterministic), MCMC otherwise.
@@ -137,10 +140,11 @@ class AutoSampler(Sampler):
     tau_guess, burn_guess : float
         Assumed autocorrelation time and burn-in, in steps.
     subset_below : int
-        Fewer pilot hits than this choose ``rare`` (default: the MCMC walkers).
-    rare : Sampler
-        The rare-region sampler (default ``SubsetISSampler``; measured against plain
-        subset simulation in ``benchmarks/bench_rare.py``).
+        Fewer pilot hits than this choose ``rare`` for criticality regions, ``subset``
+        otherwise (default: the MCMC walkers).
+    rare, subset : Sampler
+        The rare-region samplers (defaults ``SubsetISSampler``, ``SubsetSampler``;
+        measured in ``benchmarks/bench_rare.py``).
     """
 
     name = "auto"
@@ -148,18 +152,22 @@ class AutoSampler(Sampler):
     def __init__(self, rejection: RejectionSampler | None = None,
                  mcmc: MCMCSampler | None = None, cost_ratio: float = 50.0,
                  tau_guess: float = 30.0, burn_guess: float = 600.0,
-                 rare: Sampler | None = None, subset_below: int | None = None) -> None:
+                 rare: Sampler | None = None, subset: Sampler | None = None,
+                 subset_below: int | None = None) -> None:
         self.rejection = rejection or RejectionSampler()
         self.mcmc = mcmc or MCMCSampler()
         self.rare = rare or SubsetISSampler()
+        self.subset = subset or SubsetSampler()
         self.subset_below = int(self.mcmc.n_walkers if subset_below is None else subset_below)
         self.cost_ratio = float(cost_ratio)
         self.tau_guess = float(tau_guess)
         self.burn_guess = float(burn_guess)
 
-    def choose(self, n: int, pilot: Pilot) -> Sampler:
+    def choose(self, n: int, pilot: Pilot, costly: bool = False) -> Sampler:
+        """The sampler for ``n`` samples given the pilot; ``costly``: the region has a
+        criticality constraint."""
         if pilot.n_hits < self.subset_below:
-            return self.rare
+            return self.rare if costly else self.subset
         rej_cost = n / pilot.p_hat
         mcmc_cost = self.cost_ratio * (n * self.tau_guess
                                        + self.mcmc.n_walkers * self.burn_guess)
@@ -169,7 +177,8 @@ class AutoSampler(Sampler):
 
     def draw(self, problem: Problem, n: int, rng: np.random.Generator, pilot: Pilot,
              progress: ProgressFn | None = None) -> Draw:
-        chosen = self.choose(n, pilot)
+        costly = any(c.tier == 2 for c in problem.region.constraints)
+        chosen = self.choose(n, pilot, costly)
         out = chosen.draw(problem, n, rng, pilot, progress)
         out.diagnostics["auto"] = {"p_pilot": pilot.p_hat, "chosen": chosen.name,
                                    "cost_ratio": self.cost_ratio,
@@ -180,6 +189,7 @@ class AutoSampler(Sampler):
         return {"name": self.name, "cost_ratio": self.cost_ratio, "tau_guess": self.tau_guess,
                 "burn_guess": self.burn_guess, "rejection": self.rejection.settings(),
                 "mcmc": self.mcmc.settings(), "rare": self.rare.settings(),
+                "subset": self.subset.settings(),
                 "subset_below": self.subset_below}
 
 

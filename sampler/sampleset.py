@@ -289,7 +289,8 @@ def sample(
         # Not for criticality regions: 10^5-10^6 simulations; subset-is ends empty ones
         need = 0 if _costly(region) else 1
     pilot = est.pilot(problem, rng, need=need, progress=progress)
-    if isinstance(strategy, AutoSampler) and strategy.choose(n, pilot).name == "mcmc":
+    if isinstance(strategy, AutoSampler) and strategy.choose(
+            n, pilot, _costly(region)).name == "mcmc":
         est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
     drawn = strategy.draw(problem, n, rng, pilot, progress)
     if drawn.subset is not None:
@@ -335,9 +336,10 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
                       estimator: PRegionEstimator | None = None) -> PRegion:
     """P(A) of a region under the model with its interval, without keeping samples.
 
-    Plain MC when the pilot finds enough hits; subset-is (``sampler.rare``) when it finds
-    fewer than the MCMC walkers; otherwise a short MCMC run supplies the importance
-    sampler's proposal (see ``sampler.probability``).
+    Plain MC when the pilot finds enough hits; when it finds fewer than the MCMC walkers,
+    subset-is (``sampler.rare``) for criticality regions and subset simulation otherwise
+    (as ``auto``); otherwise a short MCMC run supplies the importance sampler's proposal
+    (see ``sampler.probability``).
     """
     model._check_fitted()
     region = _region(model, constraints, lane_width, physical_bounds)
@@ -352,9 +354,11 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     if pilot.n_hits >= est.mc_min_hits:
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                             region_z=pilot.hits, bounds=bounds)
-    if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset-is
-        if pilot.n_hits == 0 and not _costly(region):
-            est.search(problem, rng, pilot, 1)  # ends an empty region with its upper bound
+    if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset(-is)
+        if not _costly(region):
+            if pilot.n_hits == 0:
+                est.search(problem, rng, pilot, 1)  # ends an empty region with its bound
+            return est.from_subset(problem, SubsetSampler().run(problem, 1, rng), bounds)
         result = SubsetISSampler().run(problem, rng)
         return est.from_subset(problem, result, bounds)
     drawn = mcmc.draw(problem, 500, rng, pilot)

@@ -224,9 +224,12 @@ def test_auto_cost_rule() -> None:
     rare = Pilot(n_draws=10**7, hits=np.zeros((100, 8)))  # p = 1e-5: 1e8 >> 1.6e6
     assert auto.choose(1000, common).name == "rejection"
     assert auto.choose(1000, rare).name == "mcmc"
-    # fewer pilot hits than MCMC walkers (64): subset-is (issue 12)
-    assert auto.choose(1000, Pilot(n_draws=10**7, hits=np.zeros((63, 8)))).name == "subset-is"
-    assert auto.choose(1000, Pilot(n_draws=10, hits=np.zeros((0, 8)))).name == "subset-is"
+    # fewer pilot hits than MCMC walkers (64): subset simulation (issue 12); subset-is
+    # for criticality regions
+    assert auto.choose(1000, Pilot(n_draws=10**7, hits=np.zeros((63, 8)))).name == "subset"
+    assert auto.choose(1000, Pilot(n_draws=10, hits=np.zeros((0, 8)))).name == "subset"
+    assert auto.choose(1000, Pilot(n_draws=10, hits=np.zeros((0, 8))),
+                       costly=True).name == "subset-is"
 
 
 def test_auto_picks_rejection_on_moderate_region(model: CutInGMM) -> None:

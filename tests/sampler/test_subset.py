@@ -160,28 +160,25 @@ def test_bad_settings_are_refused() -> None:
         subset_simulation(model, lambda z: z[:, 0], 0, n_per_level=20)
 
 
-def test_auto_picks_subset_is_when_the_pilot_finds_too_few_hits(tno: CutInGMM) -> None:
+def test_auto_picks_subset_when_the_pilot_finds_too_few_hits(tno: CutInGMM) -> None:
     auto = AutoSampler()
     d = tno.n_features
-    assert auto.choose(100, Pilot(n_draws=1 << 20, hits=np.zeros((3, d)))).name == \
-        "subset-is"
+    few = Pilot(n_draws=1 << 20, hits=np.zeros((3, d)))
+    assert auto.choose(100, few).name == "subset"
+    assert auto.choose(100, few, costly=True).name == "subset-is"  # criticality regions
     assert auto.choose(100, Pilot(n_draws=1 << 14, hits=np.zeros((400, d)))).name == \
         "rejection"
-    # a short pilot on a rare region: auto runs subset-is
+    # a short pilot on a rare region: auto runs subset simulation
     est = PRegionEstimator(pilot_max=1 << 14)
     ss = sample(tno, ["ttc<1.5"], 100, seed=3, estimator=est, use_envelope=False)
-    assert ss.method == "subset-is" and ss.diagnostics["auto"]["chosen"] == "subset-is"
-    assert ss.p_region.method == "subset-is"
+    assert ss.method == "subset" and ss.diagnostics["auto"]["chosen"] == "subset"
     assert isinstance(make_sampler("subset"), SubsetSampler)
-    # plain subset simulation stays selectable by name
-    assert AutoSampler(rare=SubsetSampler()).choose(
-        100, Pilot(n_draws=1 << 20, hits=np.zeros((3, d)))).name == "subset"
 
 
-def test_estimate_p_region_uses_subset_is_for_rare_regions(tno: CutInGMM) -> None:
+def test_estimate_p_region_uses_subset_for_rare_regions(tno: CutInGMM) -> None:
     """thw < 0.1 (no half-space envelope, P ~ 4e-6): the 1M-draw pilot finds too few."""
     p = estimate_p_region(tno, ["thw<0.1"], seed=2)
-    assert p.method == "subset-is"
+    assert p.method == "subset"
     assert 0 < p.ci_low < p.estimate < p.ci_high < 1e-4
     assert p == estimate_p_region(tno, ["thw<0.1"], seed=2)
 
