@@ -25,7 +25,7 @@ from app.rates import catalogue_rates
 from riskcore.scenario import ConcreteScenario
 from sampler.record import SCORE_FIELDS, ScenarioRecord
 
-SAMPLER_METHODS = ("auto", "rejection", "mcmc", "subset")
+SAMPLER_METHODS = ("auto", "rejection", "mcmc", "subset", "subset-is")
 
 
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],

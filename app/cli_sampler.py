@@ -77,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     add_constraints(s, default_text="none: the whole model")
     add_n(s, default=100, what="samples")
     s.add_argument("--seed", type=int, default=None, help="seed (default: fresh, reported)")
-    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc", "subset"),
+    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc", "subset", "subset-is"),
                    default="auto", help="sampling method (auto)")
     s.add_argument("--no-envelope", action="store_true",
                    help="draw from the whole model, not the region's half-space envelope")

@@ -50,7 +50,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     create.add_argument("--model", default="default", help="model id (default: the "
                         "embedded data's model)")
     create.add_argument("--sampler", default="auto",
-                        choices=["auto", "rejection", "mcmc", "subset"],
+                        choices=["auto", "rejection", "mcmc", "subset", "subset-is"],
                         help="sampling method (auto)")
     create.add_argument("--no-score", action="store_true", help="skip the TTR risk")
     create.add_argument("--chunk-size", type=int, default=None,

@@ -20,7 +20,7 @@ __all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord
 #: (JavaScript's Number.MAX_SAFE_INTEGER), so a seed survives any client unchanged
 SEED_MAX = 2**53 - 1
 
-SamplerName = Literal["auto", "rejection", "mcmc", "subset"]
+SamplerName = Literal["auto", "rejection", "mcmc", "subset", "subset-is"]
 
 
 class ApiModel(BaseModel):

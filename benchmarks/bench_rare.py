@@ -71,6 +71,7 @@ def _count_evaluations() -> None:
     """Count every row whose criticality quantities are simulated (the costly limit
     state, whichever path evaluates it)."""
     import sampler.constraints as sc
+    import sampler.subset as ss
 
     original = sc.criticality_quantities
 
@@ -79,6 +80,7 @@ def _count_evaluations() -> None:
         return original(params, *args, **kwargs)
 
     sc.criticality_quantities = counted  # type: ignore[assignment]
+    ss.criticality_quantities = counted  # type: ignore[attr-defined]
 
 
 def _references(model: Any, n_naive: int, n_env: int, seed: int) -> dict[str, Any]:

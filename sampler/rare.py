@@ -240,7 +240,7 @@ class SubsetISSampler(Sampler):
     def __init__(self, n_per_level: int = 1000, n_is: int = 4000, alpha: float = 0.1,
                  inflate: float = 1.3, n_adapt: int = 1500, adapt_rounds: int = 2,
                  n_centres: int = 300, max_seconds: float = 120.0,
-                 min_probability: float = 1e-14, ess_target: float = 1.0,
+                 min_probability: float = 1e-14, ess_target: float = 0.25,
                  n_chains: int = 4) -> None:
         self.n_per_level = int(n_per_level)
         self.n_is = int(n_is)

@@ -48,10 +48,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError, SamplerError
 from sampler.constraints import Region
+from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from sampler.model import CutInGMM
 from sampler.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
 
@@ -62,6 +64,9 @@ __all__ = ["LimitState", "SubsetResult", "SubsetSampler", "region_limit_state",
 LimitState = Callable[[FloatArray], FloatArray]
 
 _OT_LOCK = threading.Lock()
+#: limit states treat rows farther than this (Mahalanobis) from every component as outside
+#: A: the mixture's mass there is below the chi-square (d = 8) tail at 15^2, ~1e-44
+R_MAX = 15.0
 _BIG = 1e300  # stands for +inf (outside the bounds, NaN quantities) in OpenTURNS' quantiles
 
 
@@ -249,6 +254,17 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         n_per_level=n, seconds=time.monotonic() - t0)
 
 
+def _near(model: CutInGMM, z: FloatArray) -> NDArray[np.bool_]:
+    """Rows with finite coordinates within ``R_MAX`` Mahalanobis units of a component."""
+    finite = np.asarray(np.isfinite(z).all(axis=1), dtype=bool)
+    zz = np.where(finite[:, None], z, 0.0)
+    near = np.zeros(z.shape[0], dtype=bool)
+    for k in range(model.n_components_):
+        y = np.linalg.solve(model._chol[k], (zz - model.means_[k]).T)
+        near |= np.einsum("ij,ij->j", y, y) <= R_MAX**2
+    return near & finite
+
+
 def _margin_scale(values: FloatArray) -> float:
     v = values[np.isfinite(values)]
     if v.size < 2:
@@ -268,8 +284,10 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     and ``(v - q) / s_c`` for ``q > v`` (``q >= v``), ``s_c`` the quantity's robust spread
     (IQR / 1.349) over ``n_scale`` model draws (so no constraint dominates the levels by
     its unit; 1 when the constraints name one quantity: then the scale changes nothing and
-    costs no simulation); +inf outside the physical bounds (when on) and where a quantity
-    is NaN.
+    costs no simulation); +inf outside the physical bounds (when on; such rows are not
+    simulated), where a quantity is NaN, and farther than ``R_MAX`` = 15 Mahalanobis
+    units from every component (mass ~1e-44 for d = 8; importance densities' tails
+    reach such rows, whose closed-loop simulation would be meaningless and huge).
     """
     cons = region.constraints
     if not cons:
@@ -278,9 +296,16 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     names = sorted({c.name for c in cons})
     region = region.bind(model)  # its model quantities (density_pct) use the model
 
+    crit = [name for name in names if name in CRITICALITY_QUANTITIES]
+    other = [name for name in names if name not in CRITICALITY_QUANTITIES]
+    with_ttr = "ttr_true" in crit  # the TTR scan is the costliest part: only when asked
+
     def quantities(z: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
         params = model.params_matrix(model.from_z(z))
-        return params, region.quantities(params, names)
+        q = region.quantities(params, other) if other else {}
+        if crit:
+            q.update(criticality_quantities(params, region.lane_width, with_ttr=with_ttr))
+        return params, q
 
     if len(names) > 1:
         _, q0 = quantities(model.sample_z(int(n_scale), rng))
@@ -290,14 +315,20 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     signs = [(c.name, 1.0 if c.op in ("<", "<=") else -1.0, float(c.value)) for c in cons]
 
     def g(z: FloatArray) -> FloatArray:
-        params, q = quantities(z)
+        out = np.full(z.shape[0], np.inf)
+        # rows farther than R_MAX Mahalanobis units from every component hold no mass worth
+        # simulating (an importance density's tails reach them: lane changes lasting hours)
+        ok = np.flatnonzero(_near(model, z))
+        if ok.size and region.physical_bounds:  # simulate physical cut-ins only
+            ok = ok[region.in_bounds(model.params_matrix(model.from_z(z[ok])))]
+        if ok.size == 0:
+            return out
+        _, q = quantities(z[ok])
         with np.errstate(invalid="ignore"):
             m = np.max(np.stack([sgn * (q[name] - v) / scale[name] for name, sgn, v in signs]),
                        axis=0)
-        m = np.where(np.isnan(m), np.inf, m)
-        if region.physical_bounds:
-            m = np.where(region.in_bounds(params), m, np.inf)
-        return np.asarray(m, dtype=np.float64)
+        out[ok] = np.where(np.isnan(m), np.inf, m)
+        return out
 
     return g
 
