@@ -278,7 +278,8 @@ def _margin_scale(values: FloatArray) -> float:
 
 def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator,
                        n_scale: int = 2048) -> LimitState:
-    """A limit state whose set ``g <= 0`` is the region (up to ties at the thresholds).
+    """A limit state whose set ``g <= 0`` is the region (a strict constraint's threshold
+    gets the smallest positive margin, so it lies outside, as in ``Region.contains``).
 
     ``g = max_c m_c``, the constraints' margins ``(q - v) / s_c`` for ``q < v`` (``q <= v``)
     and ``(v - q) / s_c`` for ``q > v`` (``q >= v``), ``s_c`` the quantity's robust spread
@@ -312,7 +313,16 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         scale = {name: _margin_scale(q0[name]) for name in names}
     else:  # one quantity: its scale does not change the sets g <= b
         scale = {names[0]: 1.0}
-    signs = [(c.name, 1.0 if c.op in ("<", "<=") else -1.0, float(c.value)) for c in cons]
+    signs = [(c.name, 1.0 if c.op in ("<", "<=") else -1.0, float(c.value), c.op in "<>")
+             for c in cons]
+    tiny = float(np.finfo(np.float64).tiny)
+
+    def margin(q: dict[str, FloatArray], name: str, sgn: float, v: float,
+               strict: bool) -> FloatArray:
+        m = sgn * (q[name] - v) / scale[name]
+        # a strict constraint excludes its threshold (discrete quantities such as ttr_true,
+        # a multiple of the step, put mass on it): margin 0 counts as outside
+        return np.where(m == 0.0, tiny, m) if strict else m
 
     def g(z: FloatArray) -> FloatArray:
         out = np.full(z.shape[0], np.inf)
@@ -325,8 +335,7 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
             return out
         _, q = quantities(z[ok])
         with np.errstate(invalid="ignore"):
-            m = np.max(np.stack([sgn * (q[name] - v) / scale[name] for name, sgn, v in signs]),
-                       axis=0)
+            m = np.max(np.stack([margin(q, *sig) for sig in signs]), axis=0)
         out[ok] = np.where(np.isnan(m), np.inf, m)
         return out
 

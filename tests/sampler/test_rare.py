@@ -174,6 +174,10 @@ def test_sample_with_subset_is_deterministic_and_inside(tno: CutInGMM) -> None:
     c = sample(tno, ["ttc<3", "btn>0.5"], 50, seed=1)
     assert c.method == "subset-is" and c.p_region.method == "subset-is"
     assert (c.derived["ttc"] < 3).all()
+    # ttr_true is a multiple of the step: the strict threshold itself has mass and lies
+    # outside (sample() raises if a sample violates its region)
+    t = sample(tno, ["ttc<3", "ttr_true<2"], 50, seed=1000)
+    assert t.method == "subset-is"
     np.testing.assert_array_equal(a.params.to_numpy(), b.params.to_numpy())
     assert a.p_region == b.p_region
     assert a.method == "subset-is" and a.p_region.method == "subset-is"
