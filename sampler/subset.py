@@ -277,7 +277,7 @@ def _margin_scale(values: FloatArray) -> float:
 
 
 def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator,
-                       n_scale: int = 2048) -> LimitState:
+                       n_scale: int = 4096) -> LimitState:
     """A limit state whose set ``g <= 0`` is the region (a strict constraint's threshold
     gets the smallest positive margin, so it lies outside, as in ``Region.contains``).
 
@@ -308,10 +308,11 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
             q.update(criticality_quantities(params, region.lane_width, with_ttr=with_ttr))
         return params, q
 
-    if len(names) > 1:
-        _, q0 = quantities(model.sample_z(int(n_scale), rng))
+    if len(names) > 1 or not crit:
+        # criticality regions: half the draws (each is a closed-loop simulation)
+        _, q0 = quantities(model.sample_z(int(n_scale) // (2 if crit else 1), rng))
         scale = {name: _margin_scale(q0[name]) for name in names}
-    else:  # one quantity: its scale does not change the sets g <= b
+    else:  # one criticality quantity: its scale does not change the sets g <= b
         scale = {names[0]: 1.0}
     signs = [(c.name, 1.0 if c.op in ("<", "<=") else -1.0, float(c.value), c.op in "<>")
              for c in cons]
