@@ -55,7 +55,11 @@ def test_schemathesis_finds_nothing(server: str, tmp_path: Path) -> None:
     env = {**os.environ, "SCENGEN_ST_CATALOGUE": cid}
     run = subprocess.run(
         [_schemathesis(), "--config-file", str(CONFIG), "run", f"{server}/openapi.json",
-         "--checks", "all", "--max-examples", "25", "--workers", "2", "--seed", "1",
+         # one worker: with two, the stateful phase once reported ST302 (a catalogue
+         # POST made was not found by the GET after it). 40 POST-then-GET pairs by hand
+         # all found theirs and one worker passes: most likely the other worker's
+         # DELETE (its links reach catalogue ids too) removed it in between
+         "--checks", "all", "--max-examples", "25", "--workers", "1", "--seed", "1",
          "--generation-database", "none", "--no-color", "--report-dir", str(tmp_path)],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1500)
     out = run.stdout + run.stderr
