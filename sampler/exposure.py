@@ -209,8 +209,11 @@ def uncertainty_report(model: Any, p_region: Any, region: Any, seed: int = 0,
                                         "method": p.method}}
     model_iv = None
     if getattr(model, "bootstrap_", None):
-        # rare when the region needed subset simulation under the fitted model
-        model_iv = pooled_interval(model, region, seed, rare=p.method == "subset",
+        # rare when the region needed subset simulation (plain or with importance
+        # sampling) under the fitted model: plain draws of the replicates' average do not
+        # reach it either
+        model_iv = pooled_interval(model, region, seed,
+                                   rare=p.method in ("subset", "subset-is"),
                                    n_plain=n_plain, confidence=confidence)
         out["p_region"]["model_ci"] = model_iv["ci"]
         out["model_interval"] = dict(model_iv)
