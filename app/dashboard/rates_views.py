@@ -67,7 +67,7 @@ def compare_models(ctx: ServiceContext, a: str, b: str, constraint_text: str, n:
         raise InvalidInput(f"n must be between 1 and {PREVIEW_N_LIMIT}, got {n}",
                            field="query.n")
     texts = split_constraints(constraint_text)
-    constraints = domain.parse_constraints(texts, field="query.constraint")
+    constraints = domain.parse_constraints(texts, field="query.constraints")
     sides = []
     for key, model_id in (("a", a), ("b", b)):
         try:

@@ -79,14 +79,14 @@ def compare(
     ctx: ContextDep,
     a: Annotated[str, Query(max_length=64, description="a model id ('default' too)")],
     b: Annotated[str, Query(max_length=64, description="another model id")],
-    constraint: Annotated[str, Query(max_length=500, description="the region, e.g. "
+    constraints: Annotated[str, Query(max_length=500, description="the region, e.g. "
                                      "'ttc<3' or 'ttc<3; v_ego>=20'")] = "ttc<3",
     n: Annotated[int, Query(ge=1, le=PREVIEW_N_LIMIT,
                             description="samples of each model in the region")] = 400,
     seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
 ) -> ModelComparison:
     return ModelComparison.model_validate(jsonconv.encode(
-        rates_views.compare_models(ctx, a, b, constraint, n, seed)))
+        rates_views.compare_models(ctx, a, b, constraints, n, seed)))
 
 
 @router.get("/{model_id}", response_model=ModelDetail,

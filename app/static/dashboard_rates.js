@@ -283,7 +283,7 @@
     note.dataset.state = "loading";
     try {
       const view = await S.api("/models/compare?a=" + encodeURIComponent(a) + "&b=" +
-                               encodeURIComponent(b) + "&constraint=" +
+                               encodeURIComponent(b) + "&constraints=" +
                                encodeURIComponent(text) + "&n=400");
       const [ma, mb] = view.models;
       note.textContent = "Model A (" + ma.id + ", fitted on " + ma.dataset + ") against model B (" +

@@ -41,7 +41,7 @@ def test_region_rates_view(client: Any) -> None:
 
 def test_compare_two_models(client: Any, other_model: str) -> None:
     r = client.get("/models/compare", params={"a": "default", "b": other_model,
-                                              "constraint": "ttc<3", "n": 100})
+                                              "constraints": "ttc<3", "n": 100})
     assert r.status_code == 200, r.text
     body = r.json()
     a, b = body["models"]
@@ -60,14 +60,14 @@ def test_compare_two_models(client: Any, other_model: str) -> None:
         assert hist["constrained"]["n"] == 100
     # same request, same answer (seeded)
     again = client.get("/models/compare", params={"a": "default", "b": other_model,
-                                                  "constraint": "ttc<3", "n": 100}).json()
+                                                  "constraints": "ttc<3", "n": 100}).json()
     assert again == body
 
 
 @pytest.mark.parametrize(("params", "status", "field"), [
     ({"a": "nope", "b": "default"}, 404, "query.a"),
     ({"a": "default", "b": "nope"}, 404, "query.b"),
-    ({"a": "default", "b": "default", "constraint": "ttc<<3"}, 422, "query.constraint.0"),
+    ({"a": "default", "b": "default", "constraints": "ttc<<3"}, 422, "query.constraints.0"),
     ({"a": "default", "b": "default", "n": 0}, 422, "query.n"),
     ({"b": "default"}, 422, "query.a"),
 ])
