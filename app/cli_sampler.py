@@ -279,7 +279,7 @@ def _sample(args: argparse.Namespace) -> int:
     if getattr(model, "bootstrap_", None) or getattr(model, "exposure_", None):
         from sampler.exposure import region_report, report_text
 
-        report = region_report(model, ss, seed=ss.seed)
+        report = region_report(model, ss)
         print(report_text(report), file=sys.stderr)
         if args.summary_json:
             summary["uncertainty"] = report

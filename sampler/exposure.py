@@ -35,6 +35,7 @@ The count's own exact (Garwood) Poisson interval is reported with ``lambda``.
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
@@ -44,9 +45,10 @@ import numpy as np
 from scipy import stats
 
 from sampler._exceptions import ModelError
+from sampler.memo import MODEL_SEED, memoised
 
-__all__ = ["TNO_HOURS", "Exposure", "cutin_rate", "highd_exposure", "region_rates",
-           "region_report", "report_text", "tno_exposure", "uncertainty_report"]
+__all__ = ["TNO_HOURS", "Exposure", "cutin_rate", "highd_exposure", "model_interval",
+           "region_rates", "region_report", "report_text", "tno_exposure", "uncertainty_report"]
 
 #: hours of driving of the TNO cut-in data (de Gelder et al. 2021, N_HOUR in uncertainty.py)
 TNO_HOURS = 63.0
@@ -186,7 +188,7 @@ def region_rates(exposure: Exposure, p_region: Mapping[str, Any] | Any,
     return out
 
 
-def uncertainty_report(model: Any, p_region: Any, region: Any, seed: int = 0,
+def uncertainty_report(model: Any, p_region: Any, region: Any,
                        n_samples: int | None = None, n_plain: int = 8192,
                        confidence: float = 0.95) -> dict[str, Any]:
     """P(A) with its "Monte Carlo" interval, the "model" interval (when the model has
@@ -200,9 +202,11 @@ def uncertainty_report(model: Any, p_region: Any, region: Any, seed: int = 0,
     region : sampler.constraints.Region
     n_samples : samples the region was drawn with (then each sample's exposure weight in
         each unit is given, ``weight_per_sample``: they sum to the rate)
-    """
-    from sampler.bootstrap import pooled_interval
 
+    The model interval (and the Poisson replicates of the rates' one) depend on the model
+    and the region only: they are computed with ``sampler.memo.MODEL_SEED``, once per model
+    object and region (``sampler.memo``), whatever seed drew the samples.
+    """
     p = p_region
     out: dict[str, Any] = {"p_region": {"estimate": p.estimate, "mc_ci": [p.ci_low, p.ci_high],
                                         "model_ci": None, "cov": p.cov,
@@ -212,15 +216,14 @@ def uncertainty_report(model: Any, p_region: Any, region: Any, seed: int = 0,
         # rare when the region needed subset simulation (plain or with importance
         # sampling) under the fitted model: plain draws of the replicates' average do not
         # reach it either
-        model_iv = pooled_interval(model, region, seed,
-                                   rare=p.method in ("subset", "subset-is"),
-                                   n_plain=n_plain, confidence=confidence)
+        model_iv = model_interval(model, region, rare=p.method in ("subset", "subset-is"),
+                                  n_plain=n_plain, confidence=confidence)
         out["p_region"]["model_ci"] = model_iv["ci"]
         out["model_interval"] = dict(model_iv)
         out["model_interval"]["replicates_quantiles"] = _quantiles(model_iv["replicates"])
     exp = getattr(model, "exposure_", None)
     if exp:
-        rates = region_rates(Exposure.from_dict(exp), p, model_iv, seed=seed,
+        rates = region_rates(Exposure.from_dict(exp), p, model_iv, seed=MODEL_SEED,
                              confidence=confidence)
         if n_samples:
             for unit in ("per_hour", "per_1e6_km"):
@@ -240,11 +243,25 @@ def _quantiles(values: Any) -> dict[str, float]:
     return {f"p{q:g}": float(x) for q, x in zip(qs, np.percentile(v, qs), strict=True)}
 
 
-def region_report(model: Any, sample_set: Any, seed: int = 0, n_plain: int = 8192,
+def model_interval(model: Any, region: Any, *, rare: bool, n_plain: int = 8192,
+                   confidence: float = 0.95) -> dict[str, Any]:
+    """``sampler.bootstrap.pooled_interval`` of the region with ``MODEL_SEED``, memoised on
+    the model per region and replicate set (a copy: callers may change it)."""
+    from sampler.bootstrap import pooled_interval
+
+    boot = model.bootstrap_
+    key = ("pooled_interval", region, bool(rare), int(n_plain), float(confidence),
+           boot.get("seed"), boot.get("n_boot"), len(boot.get("weights", ())))
+    found = memoised(model, key, lambda: pooled_interval(
+        model, region, MODEL_SEED, rare=rare, n_plain=n_plain, confidence=confidence))
+    return copy.deepcopy(found)
+
+
+def region_report(model: Any, sample_set: Any, n_plain: int = 8192,
                   confidence: float = 0.95) -> dict[str, Any]:
     """``uncertainty_report`` of a sample set drawn from the model (its region, P(A) and
     size)."""
-    return uncertainty_report(model, sample_set.p_region, sample_set.region, seed,
+    return uncertainty_report(model, sample_set.p_region, sample_set.region,
                               n_samples=max(1, len(sample_set)), n_plain=n_plain,
                               confidence=confidence)
 

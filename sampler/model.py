@@ -38,6 +38,7 @@ from scipy.special import logsumexp
 from sklearn.mixture import GaussianMixture
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES
+from sampler import memo
 from sampler._exceptions import ModelError, NotFittedError
 from sampler._threads import single_threaded
 from sampler.intervals import clopper_pearson
@@ -217,6 +218,7 @@ class CutInGMM:
             transform's domain, too few rows, or every K failing to fit.
         """
         features, k_lo, k_hi = self._check_settings()
+        memo.clear(self)  # P(B) and model intervals of an earlier fit
         x = self._table_matrix(table, features)
         n, d = x.shape
         if n < max(2 * d, 10):

@@ -49,6 +49,7 @@ from scipy import stats
 
 from sampler._exceptions import EmptyRegionError
 from sampler.intervals import clopper_pearson, upper_bound
+from sampler.memo import MODEL_SEED, memoised
 from sampler.problem import Pilot, Problem, ProgressFn
 
 __all__ = ["PRegion", "PRegionEstimator"]
@@ -155,9 +156,18 @@ class PRegionEstimator:
     # ---------------------------------------------------------------- P(B)
 
     def p_bounds(self, problem: Problem, rng: np.random.Generator) -> tuple[float, float, float]:
-        """P(B) and its interval from ``n_bounds`` plain draws."""
-        z = problem.model.sample_z(self.n_bounds, rng)
-        k = int(problem.in_bounds(z).sum())
+        """P(B) and its interval from ``n_bounds`` plain draws.
+
+        P(B) is a property of the model (and the region's lane width): it is estimated once
+        per model object from draws of a generator seeded with ``sampler.memo.MODEL_SEED``
+        and then reused (``sampler.memo``). ``rng`` still advances by ``n_bounds`` draws, so
+        the samples of a seed are the same whether or not P(B) was memoised.
+        """
+        problem.model.sample_z(self.n_bounds, rng)  # keep the caller's stream as it was
+        region = problem.region
+        key = ("p_bounds", region.lane_width, region.physical_bounds, self.n_bounds)
+        k = memoised(problem.model, key, lambda: int(problem.in_bounds(
+            problem.model.sample_z(self.n_bounds, np.random.default_rng(MODEL_SEED))).sum()))
         if k == 0:
             raise EmptyRegionError(
                 f"none of {self.n_bounds} model draws satisfies the physical bounds: the "

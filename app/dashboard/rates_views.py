@@ -48,7 +48,7 @@ def region_rates(ctx: ServiceContext, model_id: str, constraint_text: str,
 
     def compute() -> dict[str, Any]:
         p = domain.estimate_region(model, constraints, seed)
-        full = domain.region_uncertainty(model, constraints, p, seed)
+        full = domain.region_uncertainty(model, constraints, p)
         return {"model": mid, "constraints": texts, "seed": seed,
                 "p_region": _uncertain(full), "rates": full.get("rates"),
                 "exposure": getattr(model, "exposure_", None)}

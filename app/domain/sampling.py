@@ -122,18 +122,17 @@ def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int
         sample_set=ss,
     )
     if report and known_region is None:
-        add_region_report(model, result, seed)
+        add_region_report(model, result)
     return result
 
 
-def add_region_report(model: CutInGMM, result: SampleResult, seed: int) -> None:
+def add_region_report(model: CutInGMM, result: SampleResult) -> None:
     """Issue 12: the "model" interval of P(A) beside the Monte Carlo one, and rates per hour
     / 10^6 km with both (``sampler.exposure.region_report``), added to ``result.p_region``
     when the model has bootstrap refits or an exposure."""
     if result.sample_set is None or not (model.bootstrap_ or model.exposure_):
         return
-    result.p_region.update(_uncertainty_fields(region_report(model, result.sample_set,
-                                                             seed=seed)))
+    result.p_region.update(_uncertainty_fields(region_report(model, result.sample_set)))
 
 
 def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
@@ -158,7 +157,7 @@ def _uncertainty_fields(report: dict[str, Any]) -> dict[str, Any]:
 
 
 def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
-                       p_region: dict[str, Any], seed: int,
+                       p_region: dict[str, Any],
                        n_samples: int | None = None) -> dict[str, Any]:
     """``p_region`` (a ``region_dict``) with the "model" interval beside the Monte Carlo one
     and the rates per hour / per 10^6 km with both, when the model has bootstrap replicates
@@ -167,8 +166,7 @@ def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
         return p_region
     region = Region.from_constraints(list(constraints), lane_width=model.lane_width_).bind(model)
     try:
-        report = uncertainty_report(model, region_of(p_region), region, seed,
-                                    n_samples=n_samples)
+        report = uncertainty_report(model, region_of(p_region), region, n_samples=n_samples)
     except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
         raise _sampling_error(exc) from None
     return {**p_region, **_uncertainty_fields(report)}

@@ -63,7 +63,7 @@ def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
     seed = region_seed(spec.seed)
     p_region = domain.estimate_region(model, constraints, seed)
     encoded: dict[str, Any] = jsonconv.encode(
-        domain.region_uncertainty(model, constraints, p_region, seed, n_samples=spec.n))
+        domain.region_uncertainty(model, constraints, p_region, n_samples=spec.n))
     return encoded
 
 

@@ -77,7 +77,7 @@ def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosRespons
     drawn = domain.sample(model, constraints, body.n, body.seed, method=body.sampler,
                           report=False)
     later = _score(ctx, drawn, body)  # the workers score while this thread ...
-    domain.add_region_report(model, drawn, body.seed)  # ... adds the model interval, rates
+    domain.add_region_report(model, drawn)  # ... adds the model interval, rates
     records = later()
     return ScenariosResponse(
         model=model_id, n=len(records), seed=body.seed, sampler=body.sampler,

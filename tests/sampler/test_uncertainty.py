@@ -214,7 +214,7 @@ def test_region_report_weights_sum_to_the_rate() -> None:
     bootstrap_fit(model, table, 20, seed=0)
     model.exposure_ = Exposure(n_events=300, hours=25.0, km=2500.0, source="t").to_dict()
     ss = sample(model, ["ttc<8"], 200, seed=1)
-    rep = region_report(model, ss, seed=1)
+    rep = region_report(model, ss)
     lam_h = 300 / 25.0
     assert rep["rates"]["per_hour"]["estimate"] == pytest.approx(lam_h * ss.p_region.estimate)
     assert float(ss.exposure_weights.sum()) * lam_h == pytest.approx(
@@ -224,7 +224,7 @@ def test_region_report_weights_sum_to_the_rate() -> None:
     lo, hi = rep["p_region"]["model_ci"]
     assert lo < hi and lo > 0
     assert rep["rates"]["per_1e6_km"]["model_ci"][0] > 0
-    assert region_report(model, ss, seed=1) == rep  # deterministic
+    assert region_report(model, ss) == rep  # deterministic
 
 
 def test_cli_fit_stores_bootstrap_and_tno_exposure(tmp_path: Path,
