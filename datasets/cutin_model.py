@@ -158,6 +158,18 @@ class CutInMotion:
     yaw_rate: FloatArray
 
 
+def _with_points(base: FloatArray, points: list[float]) -> FloatArray:
+    """``np.unique(np.concatenate([base, points]))`` for an increasing ``base`` and a few
+    points, without sorting the whole grid."""
+    if base.size < 2 or not bool((base[1:] > base[:-1]).all()):
+        return np.unique(np.concatenate([base, points]))
+    extra = np.unique(np.asarray(points, dtype=np.float64))
+    at = np.searchsorted(base, extra)
+    new = np.array([e for e, k in zip(extra.tolist(), at.tolist(), strict=True)
+                    if not (k < base.size and base[k] == e)], dtype=np.float64)
+    return np.insert(base, np.searchsorted(base, new), new) if new.size else base
+
+
 def motion(p: CutInParams, t: ArrayLike, substep: float = 1e-3) -> CutInMotion:
     """Evaluate the cut-in kinematics at times ``t`` (s, any order, may be negative).
 
@@ -176,14 +188,19 @@ def motion(p: CutInParams, t: ArrayLike, substep: float = 1e-3) -> CutInMotion:
     hi = max(float(t_a.max()), 0.0)
     n_sub = max(int(np.ceil((hi - lo) / substep)), 1)
     edges = [p.p_a2, p.p_a2 + p.p_a3, 0.0, 2.0 * p.p_t]
-    grid = np.unique(np.concatenate([
-        np.linspace(lo, hi, n_sub + 1),
-        [e for e in edges if lo < e < hi],
-    ]))
+    grid = _with_points(np.linspace(lo, hi, n_sub + 1), [e for e in edges if lo < e < hi])
     v = speed(p, grid)
-    psi = heading(p, grid)
-    dx = 0.5 * (v[1:] * np.cos(psi[1:]) + v[:-1] * np.cos(psi[:-1])) * np.diff(grid)
-    dy = 0.5 * (v[1:] * np.sin(psi[1:]) + v[:-1] * np.sin(psi[:-1])) * np.diff(grid)
+    # heading(p, grid), cos and sin only where the cutter turns: psi = 0 elsewhere, where
+    # cos = 1 and sin = 0 exactly (the same numbers as evaluating them everywhere)
+    a = int(np.searchsorted(grid, 0.0, side="left"))  # first grid point >= 0
+    b = int(np.searchsorted(grid, 2.0 * p.p_t, side="right"))  # first one > 2 p_t
+    psi_in = p.p_y1 * p.p_t / np.pi * (1.0 - np.cos(np.pi * grid[a:b] / p.p_t))
+    vc = v.copy()
+    vc[a:b] = v[a:b] * np.cos(psi_in)
+    vs = np.zeros_like(v)
+    vs[a:b] = v[a:b] * np.sin(psi_in)
+    dx = 0.5 * (vc[1:] + vc[:-1]) * np.diff(grid)
+    dy = 0.5 * (vs[1:] + vs[:-1]) * np.diff(grid)
     x_grid = np.concatenate([[0.0], np.cumsum(dx)])
     y_grid = np.concatenate([[0.0], np.cumsum(dy)])
     i0 = int(np.searchsorted(grid, 0.0))

@@ -894,3 +894,24 @@ def scene_risk(ox: float, oy: float, opsi: float, ov: float, mean_a: float, std_
                                         dt, eva, done)
     _, _, _, risk = _kernels.finish(first, react, dt, t_pnr, t_max, m, weight)
     return risk
+
+
+@njit(cache=True)
+def scene_risks(ox: FloatArray, oy: FloatArray, opsi: FloatArray, ov: FloatArray,
+                dist: FloatArray, za: FloatArray, zw: FloatArray, weight: FloatArray,
+                ohl: float, ohw: float, ex: FloatArray, ey: FloatArray, epsi: FloatArray,
+                ev: FloatArray, ehl: float, ehw: float, man_a: FloatArray, man_w: FloatArray,
+                dt: float, t_pnr: float, t_max: float, m: float, level: float,
+                out: FloatArray) -> int:  # pragma: no cover - jit
+    """:func:`scene_risk` of the scenes ``b = 0, 1, ...`` (row b of every array: the
+    object's state, ``dist[b]`` = mean_a, std_a, mean_w, std_w, the ego's future and the
+    manoeuvres' inputs) in order, until one reaches ``level``: ``out[b]`` its risk (rows
+    after it are left as they were). Returns the number of scenes computed."""
+    for b in range(ex.shape[0]):
+        r = scene_risk(ox[b], oy[b], opsi[b], ov[b], dist[b, 0], dist[b, 1], dist[b, 2],
+                       dist[b, 3], za, zw, weight, ohl, ohw, ex[b], ey[b], epsi[b], ev[b],
+                       ehl, ehw, man_a[b], man_w[b], dt, t_pnr, t_max, m)
+        out[b] = r
+        if r >= level:
+            return b + 1
+    return ex.shape[0]

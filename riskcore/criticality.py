@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -504,6 +504,55 @@ class _Wagner:
         y = np.interp(tq, self._tg, f.ey) - back * np.sin(psi)
         return x, y, psi, v_r
 
+    def first_reaching(self, ks: Sequence[int], level: float, cache: dict[int, float],
+                       first_block: int = 8) -> int | None:
+        """Scripted-ego r_dep at the sample steps ``ks`` (indices into ``t``), in order and
+        stored in ``cache``, until one reaches ``level``: its position in ``ks`` (None: no
+        step does). Steps already in ``cache`` are not computed again. The steps go in
+        blocks (``first_block``, then doubling) through one compiled call each, which stops
+        at the first scene reaching ``level``; the risks are those of :meth:`scene`."""
+        i, size = 0, max(1, int(first_block))
+        while i < len(ks):
+            block = list(ks[i:i + size])
+            todo = [k for k in block if k not in cache]
+            if todo:
+                self._step_risks(todo, level, cache)
+            for j, k in enumerate(block):
+                if cache[k] >= level:
+                    return i + j
+            i += len(block)
+            size *= 2
+        return None
+
+    def _step_risks(self, ks: list[int], level: float, cache: dict[int, float]) -> None:
+        """r_dep (scripted ego) at the steps ks into cache, in order, stopping after the
+        first that reaches level."""
+        if len(self.objects) != 1:
+            for k in ks:
+                cache[k] = self.scene(float(self.t[k]))[0]
+                if cache[k] >= level:
+                    return
+            return
+        rs, f = self.rs, self.f
+        track, psi_u, _, _ = self.objects[0]
+        idx = np.asarray(ks, dtype=np.int64)
+        tq = self.t[idx][:, None] + self._offsets[None, :]  # as scene(): t_now + offsets
+        x, y, psi, v = (np.interp(tq, self._tg, arr) for arr in (f.ex, f.ey, f.epsi, f.ev))
+        n = rs.n_steps
+        man_a = np.empty((idx.shape[0], n, len(MANOEUVRES)))
+        man_w = np.empty((idx.shape[0], n, len(MANOEUVRES)))
+        for j, man in enumerate(MANOEUVRES):
+            man_a[:, :, j], man_w[:, :, j] = man.inputs(v[:, :n], rs)
+        out = np.full(idx.shape[0], np.nan)
+        eng = self.engine
+        done = _ck.scene_risks(
+            track.x[idx], track.y[idx], psi_u[idx], track.v[idx], self._dist[idx], eng._za,
+            eng._zw, eng._weight, 0.5 * track.length, 0.5 * track.width, x, y, psi, v,
+            0.5 * self.scenario.ego.length, 0.5 * self.scenario.ego.width, man_a, man_w,
+            rs.dt, rs.t_pnr, rs.t_max, rs.m, float(level), out)
+        for j in range(int(done)):
+            cache[ks[j]] = float(out[j])
+
     def scene(self, t_now: float, t_b: float = math.nan) -> tuple[float, float]:
         """(r_dep, r_ind) of the scene at t_now with the ego braking from t_b (NaN: never)."""
         rs = self.rs
@@ -702,40 +751,30 @@ def _wagner_fields(scenario: ConcreteScenario, f: _Frames, t_p: float | None,
         out[f"r_dep_{label}_r157"], out[f"r_ind_{label}_r157"] = sr
     t = w.t
     cache: dict[int, float] = {}
-
-    def r_at(k: int) -> float:
-        if k not in cache:
-            cache[k] = w.scene(float(t[k]))[0]
-        return cache[k]
-
-    # alarm: from t_p on (t_p itself, then the samples) until r_dep >= alarm_level
+    contact = d.none[0]
+    # alarm: from t_p on (t_p itself, then the samples up to contact) until r_dep >=
+    # alarm_level
     alarm: float | None = None
     if t_p is not None:
-        contact = d.none[0]
         r0 = out["r_dep_tp"]
         if isinstance(r0, float) and r0 >= s.alarm_level:
             alarm = 0.0
         else:
-            for k in (int(i) for i in np.flatnonzero(t > t_p)):
-                if not math.isnan(contact) and t[k] > contact:
-                    break
-                if r_at(k) >= s.alarm_level:
-                    alarm = float(t[k] - t_p)
-                    break
+            ks = [int(i) for i in np.flatnonzero(t > t_p)
+                  if math.isnan(contact) or t[i] <= contact]
+            hit = w.first_reaching(ks, s.alarm_level, cache)
+            if hit is not None:
+                alarm = float(t[ks[hit]] - t_p)
     out["alarm_time"] = alarm
     # peak: r_dep <= 1, so one step at 1 ends the search; the step before contact first
     order = list(range(t.shape[0]))
-    contact = d.none[0]
     if not math.isnan(contact):
         before = int(np.searchsorted(t, contact)) - 1
         if 0 <= before < t.shape[0]:
             order.remove(before)
             order.insert(0, before)
-    peak = 0.0
-    for k in order:
-        peak = max(peak, r_at(k))
-        if peak >= 1.0:
-            break
+    hit = w.first_reaching(order, 1.0, cache, first_block=1)
+    peak = max([0.0, *(cache[k] for k in order[:len(order) if hit is None else hit + 1])])
     out["risk_peak"] = peak
     return out
 

@@ -94,3 +94,53 @@ def test_validation_names_the_parameter() -> None:
 def test_ttc() -> None:
     assert ttc_from_gap_dv([10.0, 10.0, 10.0], [2.0, 0.0, -1.0]) == pytest.approx(
         [5.0, np.inf, np.inf])
+
+
+def _motion_reference(p: CutInParams, t: np.ndarray, substep: float = 1e-3
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """x(t), y(t) the straightforward way: sort the whole integration grid, evaluate the
+    heading, cos and sin at every grid point (what ``motion`` did before it skipped the
+    trigonometry where the cutter does not turn)."""
+    lo, hi = min(float(t.min()), 0.0), max(float(t.max()), 0.0)
+    n_sub = max(int(np.ceil((hi - lo) / substep)), 1)
+    edges = [p.p_a2, p.p_a2 + p.p_a3, 0.0, 2.0 * p.p_t]
+    grid = np.unique(np.concatenate([np.linspace(lo, hi, n_sub + 1),
+                                     [e for e in edges if lo < e < hi]]))
+    v, psi = speed(p, grid), heading(p, grid)
+    dx = 0.5 * (v[1:] * np.cos(psi[1:]) + v[:-1] * np.cos(psi[:-1])) * np.diff(grid)
+    dy = 0.5 * (v[1:] * np.sin(psi[1:]) + v[:-1] * np.sin(psi[:-1])) * np.diff(grid)
+    xg, yg = np.concatenate([[0.0], np.cumsum(dx)]), np.concatenate([[0.0], np.cumsum(dy)])
+    i0 = int(np.searchsorted(grid, 0.0))
+    return np.interp(t, grid, xg - xg[i0]), np.interp(t, grid, yg - yg[i0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(p_y1=st.floats(-0.1, 0.1).filter(lambda v: v != 0), p_t=st.floats(0.5, 5.0),
+       p_a1=st.floats(-2.0, 2.0), p_a2=st.floats(-3.0, 6.0), p_a3=st.floats(0.0, 4.0),
+       lead=st.floats(0.0, 4.0), span=st.floats(0.0, 15.0), n=st.integers(1, 300))
+def test_motion_equals_the_straightforward_integration(p_y1: float, p_t: float, p_a1: float,
+                                                       p_a2: float, p_a3: float, lead: float,
+                                                       span: float, n: int) -> None:
+    p = CutInParams(p_y1=p_y1, p_t=p_t, p_a1=p_a1, p_a2=p_a2, p_a3=p_a3, p_v0=25.0, dv=1.0,
+                    gap=10.0)
+    t = np.linspace(-lead, span, n)
+    m = motion(p, t)
+    x_ref, y_ref = _motion_reference(p, t)
+    np.testing.assert_array_equal(m.x, x_ref)  # bit for bit
+    np.testing.assert_array_equal(m.y, y_ref)
+    np.testing.assert_array_equal(m.psi, heading(p, t))
+
+
+@settings(max_examples=60, deadline=None)
+@given(lo=st.floats(-5, 5), width=st.floats(0.0, 10.0), n=st.integers(1, 50),
+       points=st.lists(st.floats(-20, 20), max_size=5), on_grid=st.lists(
+           st.integers(0, 50), max_size=3))
+def test_with_points_is_unique_of_the_concatenation(lo: float, width: float, n: int,
+                                                    points: list[float],
+                                                    on_grid: list[int]) -> None:
+    from datasets.cutin_model import _with_points
+
+    base = np.linspace(lo, lo + width, n + 1)
+    pts = points + [float(base[min(i, n)]) for i in on_grid]  # some exactly on the grid
+    np.testing.assert_array_equal(_with_points(base, pts),
+                                  np.unique(np.concatenate([base, pts])))
