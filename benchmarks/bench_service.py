@@ -359,7 +359,7 @@ def before_after(data_dir: Path, cid: str, chunk_size: int, quick: bool) -> dict
     out["status_statistics"] = {"before_s": old_q, "after_s": new_q, "ratio": old_q / new_q,
                                 "load": load()}
     note(f"  status statistics of the stored catalogue: before {old_q * 1e3:.1f} ms "
-         f"(Python sort), after {new_q * 1e3:.1f} ms (SQL), x{old_q / new_q:.1f}")
+         f"(Python sort), after {new_q * 1e3:.1f} ms (per-chunk blobs), x{old_q / new_q:.1f}")
     return out
 
 

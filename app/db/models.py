@@ -20,6 +20,7 @@ from sqlalchemy import (
     ForeignKey,
     Index,
     Integer,
+    LargeBinary,
     String,
     Text,
     UniqueConstraint,
@@ -103,6 +104,10 @@ class ChunkRow(Base):
     file_path: Mapped[str | None] = mapped_column(Text, nullable=True)  # relative to data dir
     sha256: Mapped[str | None] = mapped_column(String(64), nullable=True)
     diagnostics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # the chunk's status values (repository.stat_values: rows x stat_columns, float64, NaN
+    # = null) as .npy bytes, so an uncached status reads one blob per chunk, not every row
+    stat_values: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True)
+    stat_columns: Mapped[list[str] | None] = mapped_column(JSON, nullable=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 

@@ -9,6 +9,7 @@ missing or half-written file.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import shutil
@@ -111,7 +112,8 @@ def store_chunk(session: Session, data_dir: Path, catalogue_id: str, index: int,
         with session.begin_nested():
             session.add(ChunkRow(catalogue_id=catalogue_id, chunk_index=index,
                                  n_scenarios=len(rows), file_path=rel, sha256=sha256,
-                                 diagnostics=diagnostics))
+                                 diagnostics=diagnostics, stat_values=_stat_blob(rows),
+                                 stat_columns=list(STAT_COLUMNS)))
             session.flush()
             if rows:
                 session.execute(insert(ScenarioRow),
@@ -260,18 +262,59 @@ def value_statistics(values: np.ndarray) -> dict[str, Any]:
 QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 
 
+def _stat_row_value(row: dict[str, Any], name: str) -> float:
+    v = row.get("class_" if name == "class" else name)
+    return math.nan if v is None else float(v)
+
+
+def _stat_blob(rows: Sequence[dict[str, Any]]) -> bytes:
+    """The ``stat_values`` of a chunk's rows (as stored) in .npy form."""
+    values = np.array([[_stat_row_value(r, n) for n in STAT_COLUMNS] for r in rows],
+                      dtype=np.float64).reshape(len(rows), len(STAT_COLUMNS))
+    buf = io.BytesIO()
+    np.save(buf, values, allow_pickle=False)
+    return buf.getvalue()
+
+
 def stat_values(session: Session, catalogue_id: str,
                 chunks: Collection[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(chunk_index, values)`` of a catalogue's rows (of ``chunks``; None: all):
     ``values`` has one float column per ``STAT_COLUMNS`` name (NaN = null).
 
-    One query, plain tuples (Core rows, no ORM objects), turned into arrays by
-    ``numpy.fromiter`` (``numpy.array`` of a list of tuples is ~30x slower).
+    Each chunk row keeps its values as one blob (``store_chunk``); chunks stored before
+    that (or with other columns) are read from their scenario rows: one query, plain tuples
+    (Core rows, no ORM objects), turned into arrays by ``numpy.fromiter`` (``numpy.array``
+    of a list of tuples is ~30x slower).
     """
-    columns = [ScenarioRow.chunk_index, *(getattr(ScenarioRow, n) for n in STAT_COLUMNS)]
-    stmt = select(*columns).where(ScenarioRow.catalogue_id == catalogue_id)
+    stmt = select(ChunkRow.chunk_index, ChunkRow.stat_columns, ChunkRow.stat_values).where(
+        ChunkRow.catalogue_id == catalogue_id)
     if chunks is not None:
-        stmt = stmt.where(ScenarioRow.chunk_index.in_(sorted(chunks)))
+        stmt = stmt.where(ChunkRow.chunk_index.in_(sorted(chunks)))
+    index_parts: list[np.ndarray] = []
+    value_parts: list[np.ndarray] = []
+    scan: list[int] = []
+    for index, names, blob in session.connection().execute(stmt).all():
+        if blob is None or names != list(STAT_COLUMNS):
+            scan.append(int(index))
+            continue
+        values = np.load(io.BytesIO(blob), allow_pickle=False)
+        index_parts.append(np.full(values.shape[0], int(index), dtype=np.int64))
+        value_parts.append(values)
+    if scan:
+        chunk_of, values = _scan_stat_values(session, catalogue_id, scan)
+        index_parts.append(chunk_of)
+        value_parts.append(values)
+    if not value_parts:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, len(STAT_COLUMNS)))
+    return np.concatenate(index_parts), np.concatenate(value_parts)
+
+
+def _scan_stat_values(session: Session, catalogue_id: str,
+                      chunks: Collection[int]) -> tuple[np.ndarray, np.ndarray]:
+    """``stat_values`` of the given chunks from their scenario rows."""
+    columns = [ScenarioRow.chunk_index, *(getattr(ScenarioRow, n) for n in STAT_COLUMNS)]
+    stmt = select(*columns).where(ScenarioRow.catalogue_id == catalogue_id,
+                                  ScenarioRow.chunk_index.in_(sorted(chunks)))
     rows = session.connection().execute(stmt).all()
     width = len(columns)
     flat = np.fromiter((math.nan if v is None else v for row in rows for v in row),

@@ -42,7 +42,7 @@ def test_migrations_create_the_schema_and_are_idempotent(database_url: str) -> N
     assert {"datasets", "models", "catalogues", "catalogue_chunks",
             "catalogue_scenarios", "alembic_version"} <= names
     with db.engine.connect() as conn:
-        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0004"
+        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0005"
     db.dispose()
 
 
@@ -201,4 +201,37 @@ def test_status_statistics_hand_case_and_read_per_new_chunk(
     # ttc of idx 0, 4, 8 is +inf (scenario_rows): not in the finite statistics
     assert both["ttc"]["count_inf"] == 3 and both["ttc"]["count"] == 7
     assert asked == [None, [1]]  # all at first, then only the chunk stored since
+    db.dispose()
+
+
+def test_chunk_stat_blob_equals_the_row_scan_and_old_chunks_are_scanned(
+        database_url: str, tmp_path: Path) -> None:
+    from sqlalchemy import update as sql_update
+
+    db = _store(database_url)
+    _catalogue(db)
+    with db.session() as s:
+        for c in range(3):
+            repo.store_chunk(s, tmp_path, "cat-1", c, scenario_rows(c, 4 * c, 4), None, None,
+                             {})
+    with db.session() as s:
+        chunk_of, blobs = repo.stat_values(s, "cat-1")
+        scan_of, scanned = repo._scan_stat_values(s, "cat-1", [0, 1, 2])
+    order, scan_order = np.argsort(chunk_of, kind="stable"), np.argsort(scan_of, kind="stable")
+    np.testing.assert_array_equal(chunk_of[order], scan_of[scan_order])
+    np.testing.assert_array_equal(blobs[order], scanned[scan_order])  # NaN = NaN, inf = inf
+    assert np.isinf(blobs).any() and blobs.shape == (12, len(repo.STAT_COLUMNS))
+    # a chunk stored before the blob (or with other columns) is read from its rows
+    with db.session() as s:
+        s.execute(sql_update(ChunkRow).where(ChunkRow.chunk_index == 1)
+                  .values(stat_values=None))
+        s.execute(sql_update(ChunkRow).where(ChunkRow.chunk_index == 2)
+                  .values(stat_columns=["risk"]))
+    with db.session() as s:
+        mixed_of, mixed = repo.stat_values(s, "cat-1")
+        only_1, values_1 = repo.stat_values(s, "cat-1", [1])
+    m_order = np.argsort(mixed_of, kind="stable")
+    np.testing.assert_array_equal(mixed[m_order], scanned[scan_order])
+    np.testing.assert_array_equal(only_1, [1, 1, 1, 1])
+    np.testing.assert_array_equal(values_1, scanned[scan_of == 1])
     db.dispose()
