@@ -60,6 +60,7 @@ import httpx
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the checkout this script is in, also for in-process parts
 
 
 def load() -> str:
@@ -363,6 +364,65 @@ def before_after(data_dir: Path, cid: str, chunk_size: int, quick: bool) -> dict
     return out
 
 
+def scenarios_before_after(data_dir: Path, quick: bool) -> dict[str, Any]:
+    """The parts of ``POST /scenarios`` n=100 (``ttc<3``) before and after this round, in
+    this process (one core): the Wagner alarm/peak scan one ``scene()`` per step (the old
+    loop, kept here as the baseline) against the compiled blocks, and sampling with the
+    model figures (P(B), the model interval) estimated per request (the memo cleared
+    before each) against memoised on the model."""
+    from app import domain
+    from riskcore import criticality
+    from sampler import memo
+    from sampler.record import score_vector
+
+    def one_scene_per_step(self: Any, ks: Any, level: float, cache: dict[int, float],
+                           first_block: int = 8) -> int | None:
+        for i, k in enumerate(ks):
+            if k not in cache:
+                cache[k] = self.scene(float(self.t[k]))[0]
+            if cache[k] >= level:
+                return i
+        return None
+
+    model_json = sorted((data_dir / "models").glob("default-*.json"))[0].read_text()
+    model = domain.load_model(model_json)
+    ttc3 = domain.parse_constraints(["ttc<3"])
+    drawn = domain.sample(model, ttc3, 100, 1)
+    vectors = [{str(k): float(v) for k, v in r.items()} for r in drawn.params.to_dict("records")]
+
+    def scoring() -> None:
+        for p in vectors:
+            score_vector(p, lane_width=drawn.lane_width)
+
+    batched = criticality._Wagner.first_reaching
+    scoring()  # compilation
+    repeat = 1 if quick else 3
+    criticality._Wagner.first_reaching = one_scene_per_step  # type: ignore[method-assign]
+    try:
+        old_s = _best(scoring, repeat)
+    finally:
+        criticality._Wagner.first_reaching = batched  # type: ignore[method-assign]
+    new_s = _best(scoring, repeat)
+    seeds = iter(range(10_000, 20_000))
+
+    def sample_fresh() -> None:
+        memo.clear(model)  # as before: every request estimates them
+        domain.sample(model, ttc3, 100, next(seeds))
+
+    def sample_memo() -> None:
+        domain.sample(model, ttc3, 100, next(seeds))
+
+    old_m, new_m = _best(sample_fresh, repeat), _best(sample_memo, repeat)
+    note(f"  scoring 100 ttc<3 vectors, one core: one scene() per step {old_s:.3f} s, "
+         f"compiled blocks {new_s:.3f} s, x{old_s / new_s:.2f}")
+    note(f"  sampling 100 with P(A), model interval, rates: per request {old_m:.3f} s, "
+         f"memoised on the model {new_m:.3f} s, x{old_m / new_m:.1f}")
+    return {"score_100": {"before_s": old_s, "after_s": new_s, "ratio": old_s / new_s},
+            "sample_100_with_report": {"before_s": old_m, "after_s": new_m,
+                                       "ratio": old_m / new_m},
+            "load": load()}
+
+
 def export_csv(base: str, cid: str) -> bytes:
     r = httpx.get(f"{base}/catalogues/{cid}/export", params={"format": "csv"}, timeout=600)
     r.raise_for_status()
@@ -430,6 +490,9 @@ def main(argv: list[str] | None = None) -> int:
                 note(f"POST /scenarios n={args.n} with scoring, {args.requests} requests")
                 results["scenarios_latency"] = latency(server.base, args.n, args.requests)
                 note(f"  p50 {results['scenarios_latency']['p50_s']:.2f} s")
+                note("parts of POST /scenarios before/after, in this process")
+                results["scenarios_before_after"] = scenarios_before_after(data_dir,
+                                                                           args.quick)
             if "health" in only:
                 note(f"/health under load (SQLite): a {args.health_n}-scenario job and "
                      f"{args.readers} readers")
