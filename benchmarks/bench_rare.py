@@ -25,8 +25,12 @@ within 2 reported CoV of the reference; whether the mean lies inside the referen
 interval, and the share of single estimates that do.
 
 Methods: ``subset`` (plain subset simulation, 2,000 points per level), ``subset-is``
-(``sampler.rare`` defaults), ``auto`` (``sample(model, constraints, 100, seed)``: its
-P(A and B); evaluations counted through ``Region.contains`` and the limit states).
+(``sampler.rare`` defaults: ``stratify="auto"``), ``subset-is-plain`` (one subset-is on
+the whole model, ``stratify="never"``), ``subset-is-strat`` (one per stratum of the model,
+component x cut-in side, ``stratify="always"``), ``auto``
+(``sample(model, constraints, 100, seed)``: its P(A and B); evaluations counted through
+``Region.contains`` and the limit states; for kinematic regions, which simulate nothing,
+the limit-state rows).
 
 Targets (issue 12): acceleration >= 100 at 1e-4 and >= 1000 at 1e-5, estimates inside
 the brute-force interval.
@@ -39,6 +43,7 @@ Usage: ``.venv/bin/python benchmarks/bench_rare.py [--reps 20] [--naive 3e6]
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import pickle
@@ -62,6 +67,11 @@ REGIONS: list[tuple[list[str], float, str]] = [
     (["ttc<3", "ttr_true<2"], 1e-5, "envelope"),
     (["ttc<3", "btn>0.5"], 1e-5, "envelope"),
     (["ttc<3", "btn>0.7", "btn<1"], 1e-7, "envelope"),
+    # several modes (left and right cut-ins, several components): kinematic, inside ttc<3
+    (["ttc<2"], 1e-4, "envelope"),
+    # standalone (not inside ttc<3) at ~1e-5: naive references need --naive 1e7
+    (["btn>0.4"], 1e-5, "naive"),
+    (["ttr_true<2"], 1e-5, "naive"),
 ]
 
 _COUNT = {"rows": 0}
@@ -150,14 +160,18 @@ def _run(model: Any, constraints: list[str], method: str, seed: int
 
     _COUNT["rows"] = 0
     rng = np.random.default_rng(seed)
-    if method in ("subset", "subset-is"):
+    if method.startswith("subset"):
         region = Region.from_constraints(constraints, lane_width=model.lane_width_)
         problem = Problem(model, region, use_envelope=False)
         if method == "subset":
             res: Any = SubsetSampler().run(problem, 1, rng)
-            return res.probability, res.cov_upper, _COUNT["rows"]
-        res = SubsetISSampler().run(problem, rng)
-        return res.probability, res.cov, _COUNT["rows"]
+            return res.probability, res.cov_upper, _COUNT["rows"] or problem.n_evals
+        stratify = {"subset-is": "auto", "subset-is-plain": "never",
+                    "subset-is-strat": "always"}[method]
+        kw = json.loads(os.environ.get("BENCH_RARE_SETTINGS", "{}"))  # experiments
+        res = SubsetISSampler(stratify=stratify, **kw).run(problem, rng)
+        # kinematic regions simulate nothing: their limit-state evaluations instead
+        return res.probability, res.cov, _COUNT["rows"] or problem.n_evals
     ss = sample(model, constraints, 100, seed=seed, method=method)
     p = ss.p_region
     return p.p_joint, (p.cov if p.cov is not None else math.nan), _COUNT["rows"]
@@ -209,7 +223,7 @@ def main() -> int:
         if k == 0:
             print("  no hit: reference unusable")
             continue
-        print(f"  {'method':9s} {'mean P':>10s} {'CoV':>6s} {'CoV ref':>7s} {'CoV rep':>7s} "
+        print(f"  {'method':15s} {'mean P':>10s} {'CoV':>6s} {'CoV ref':>7s} {'CoV rep':>7s} "
               f"{'evals':>8s} {'accel':>8s} {'accel ref':>9s} {'in 2CoV':>7s} "
               f"{'mean in CI':>10s} {'in CI':>6s} {'s/rep':>6s}")
         for method in args.methods.split(","):
@@ -220,7 +234,7 @@ def main() -> int:
                 try:
                     p, c, e = _run(model, constraints, method, 1000 + rep)
                 except Exception as exc:  # report and go on: a benchmark, not a test
-                    print(f"  {method:9s} failed: {str(exc).splitlines()[0][:120]}")
+                    print(f"  {method:15s} failed: {str(exc).splitlines()[0][:120]}")
                     break
                 est.append(p)
                 cov.append(c)
@@ -238,7 +252,7 @@ def main() -> int:
             in2 = float(np.mean(np.abs(e_arr - p_ref) <= 2 * c_arr * e_arr))
             mean_in = "yes" if lo <= mean <= hi else "no"
             in_ci = float(np.mean((e_arr >= lo) & (e_arr <= hi)))
-            print(f"  {method:9s} {mean:10.3g} {cov_spread:6.3f} {cov_ref:7.3f} "
+            print(f"  {method:15s} {mean:10.3g} {cov_spread:6.3f} {cov_ref:7.3f} "
                   f"{np.nanmean(c_arr):7.3f} {evals:8.0f} {accel:8.0f} {accel_ref:9.0f} "
                   f"{in2:7.2f} {mean_in:>10s} {in_ci:6.2f} {dt:6.2f}", flush=True)
             table.append((name, p_ref, lo, hi, method, mean, cov_spread, cov_ref,

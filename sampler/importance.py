@@ -6,17 +6,29 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import gammaln, logsumexp
 
 from sampler._exceptions import EmptyRegionError, SamplerError
-from sampler.model import CutInGMM
 from sampler.problem import FloatArray
 from sampler.subset import LimitState
 
-__all__ = ["ImportanceStage", "KernelProposal", "independence_chain", "kish_ess"]
+__all__ = ["ImportanceStage", "KernelProposal", "ZDensity", "independence_chain", "kish_ess"]
+
+
+class ZDensity(Protocol):
+    """The base law of an importance stage: the model (``CutInGMM``) or one of its strata
+    (``sampler.strata.Stratum``)."""
+
+    @property
+    def n_features(self) -> int: ...
+
+    def log_density_z(self, z: FloatArray) -> FloatArray: ...
+
+    def sample_z(self, n: int, rng: np.random.Generator) -> FloatArray: ...
 
 
 class KernelProposal:
@@ -25,18 +37,21 @@ class KernelProposal:
     ``g`` is an equal mixture of multivariate Student-t kernels (``nu`` degrees of freedom:
     heavier tails than Gaussians, so a region's tail that the centres under-represent
     still gets draws; Oh & Berger 1992, JASA 87, mixtures of t as importance densities)
-    centred at ``centres`` (m, d), all with the scale matrix ``h^2 S``: ``S`` the
-    covariance of ``shape`` (default the centres), ``h`` Silverman's factor
-    ``(4 / (d + 2))^(1 / (d + 4)) m^(-1 / (d + 4))`` times ``inflate``. ``p`` is the model
-    (weights ``p / q <= 1 / alpha``).
+    centred at ``centres`` (m, d; a repeated centre counts as often as it appears), all with
+    the scale matrix ``h^2 S``: ``S`` the covariance of ``shape`` (default the centres),
+    ``h`` Silverman's factor ``(4 / (d + 2))^(1 / (d + 4)) n^(-1 / (d + 4))`` times
+    ``inflate``, ``n = n_bandwidth`` (default m; the distinct centres when they repeat).
+    ``p`` is the model (weights ``p / q <= 1 / alpha``).
     """
 
-    def __init__(self, model: CutInGMM, centres: FloatArray, inflate: float, alpha: float,
-                 nu: float, shape: FloatArray | None = None) -> None:
+    def __init__(self, model: ZDensity, centres: FloatArray, inflate: float, alpha: float,
+                 nu: float, shape: FloatArray | None = None,
+                 n_bandwidth: int | None = None) -> None:
         m, d = centres.shape
         ref = centres if shape is None else shape
         cov = np.cov(ref, rowvar=False) + 1e-9 * np.eye(d)
-        h = (4.0 / (d + 2)) ** (1.0 / (d + 4)) * m ** (-1.0 / (d + 4)) * inflate
+        nb = m if n_bandwidth is None else int(n_bandwidth)
+        h = (4.0 / (d + 2)) ** (1.0 / (d + 4)) * nb ** (-1.0 / (d + 4)) * inflate
         self.model = model
         self.alpha = float(alpha)
         self.nu = float(nu)
@@ -79,7 +94,7 @@ class KernelProposal:
 class ImportanceStage:
     """Draws of the defensive proposal q with their limit state: P(A) and its CoV so far."""
 
-    def __init__(self, model: CutInGMM, limit_state: LimitState, proposal: KernelProposal,
+    def __init__(self, model: ZDensity, limit_state: LimitState, proposal: KernelProposal,
                  deadline: float, max_seconds: float) -> None:
         self.model = model
         self.limit_state = limit_state

@@ -36,6 +36,20 @@ no new evaluations, honest diagnostics: acceptance, integrated autocorrelation t
 too) until the chains' effective sample size reaches ``ess_target * n``, within the time
 budget.
 
+**Stratified** (``stratified_importance``, ``SubsetISSampler(stratify="always")``): the
+model is a mixture, so ``P(A) = sum_s pi_s P_s(A)`` over its strata (``sampler.strata``:
+component x cut-in side, ``pi_s`` exact, ``P_s`` sampled exactly); one subset-is per
+stratum (500 points per level, two adaptation rounds of 1,000 whose resampled centres keep
+their multiplicity), the final ``n_is`` draws allocated in proportion to the strata's
+estimated contributions (at least ``n_is_min`` each), variance ``sum pi_s^2 var_s``; the
+samples are drawn from the strata in proportion to their estimated contributions, each
+stratum's by its own independence chains. A region's separate modes (sides, components)
+then no longer depend on one Markov chain or kernel density finding them all. A stratum
+whose subset levels do not reach A counts 0: correct when it holds less than
+``min_probability``, not when its limit state is flat there (``ttc`` is +inf for every
+non-closing cut-in, most of a component: measured in ``docs/sampler.md``). ``auto`` does
+not stratify (``STRATIFY_AUTO``; the measurements behind that are in the docs).
+
 ``subset_importance(model, limit_state, seed)`` is the estimator as a function (any
 vectorised z-space limit state, ``sampler.subset.region_limit_state`` for a region);
 ``rare_probability(model, constraints, seed)`` the same for constraints;
@@ -49,15 +63,24 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sampler._exceptions import EmptyRegionError, SamplerError
-from sampler.importance import ImportanceStage, KernelProposal, independence_chain, kish_ess
+from sampler.importance import (
+    ImportanceStage,
+    KernelProposal,
+    ZDensity,
+    independence_chain,
+    kish_ess,
+)
 from sampler.mcmc import _tau
 from sampler.model import CutInGMM
 from sampler.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
+from sampler.strata import Stratum, make_strata
 from sampler.subset import LimitState, SubsetResult, region_limit_state, subset_simulation
 
-__all__ = ["RareResult", "SubsetISSampler", "rare_probability", "subset_importance"]
+__all__ = ["RareResult", "StratumRun", "SubsetISSampler", "rare_probability",
+           "stratified_importance", "subset_importance"]
 
 
 @dataclass(frozen=True)
@@ -122,7 +145,8 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
                       n_adapt: int = 1500, adapt_rounds: int = 2, n_centres: int = 300,
                       nu: float = 5.0,
                       max_seconds: float = 120.0, min_probability: float = 1e-14,
-                      keep_stage: list[ImportanceStage] | None = None) -> RareResult:
+                      keep_stage: list[ImportanceStage] | None = None,
+                      stratum: Stratum | None = None) -> RareResult:
     """Estimate ``P(limit_state(z) <= 0)`` under the model: subset levels, then importance
     sampling from a defensive kernel density (module docstring).
 
@@ -144,6 +168,9 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
         Time budget of the whole run; the subset stage gives up below this mass.
     keep_stage : list, optional
         If given, the importance stage is appended to it (to draw more later).
+    stratum : Stratum, optional
+        Estimate under this stratum of the model (``sampler.strata``: one component,
+        optionally one side) instead of the whole model: ``P_s(A)``.
 
     Raises
     ------
@@ -152,15 +179,67 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
     EmptyRegionError
         The subset levels did not reach the region (see ``subset_simulation``).
     """
+    t0 = time.monotonic()
+    ex = _explore(model, limit_state, seed, stratum=stratum, n_per_level=n_per_level,
+                  alpha=alpha, inflate=inflate, p0=p0, n_adapt=n_adapt,
+                  adapt_rounds=adapt_rounds, n_centres=n_centres, nu=nu, n_is=n_is,
+                  max_seconds=max_seconds, min_probability=min_probability)
+    stage = ImportanceStage(ex.base, ex.limit_state, ex.proposal, ex.deadline, max_seconds)
+    stage.add(int(n_is), ex.rng)
+    if keep_stage is not None:
+        keep_stage.append(stage)
+    return _result(stage, ex.sub, t0, ex.n_adapt, inflate)
+
+
+@dataclass
+class _Explored:
+    """What the subset levels and the adaptation rounds found (before the final stage)."""
+
+    base: ZDensity
+    limit_state: LimitState
+    sub: SubsetResult
+    proposal: KernelProposal
+    n_adapt: int
+    rng: np.random.Generator
+    deadline: float
+    pilot: tuple[float, float]  # the last adaptation round's (P, CoV); subset's without
+
+
+def _in_stratum(stratum: Stratum, limit_state: LimitState) -> LimitState:
+    """The limit state restricted to the stratum's half-space: rows outside it are outside
+    A for this stratum (their weight is 0) and are not evaluated."""
+    if stratum.a is None:
+        return limit_state
+
+    def g(z: FloatArray) -> FloatArray:
+        out = np.full(z.shape[0], np.inf)
+        ok = stratum.contains(z)
+        if ok.any():
+            out[ok] = np.asarray(limit_state(z[ok]), dtype=np.float64)
+        return out
+
+    return g
+
+
+def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: Stratum | None,
+             n_per_level: int, alpha: float, inflate: float, p0: float, n_adapt: int,
+             adapt_rounds: int, n_centres: int, nu: float, n_is: int, max_seconds: float,
+             min_probability: float, deadline: float | None = None,
+             weighted_centres: bool = False) -> _Explored:
     if not 0.0 < alpha < 1.0:
         raise SamplerError(f"alpha: must be in (0, 1), got {alpha!r}")
     if n_is < 2 or n_adapt < 2 or not inflate > 0 or adapt_rounds < 0 or n_centres < 2:
         raise SamplerError("n_is and n_adapt must be >= 2, inflate > 0, adapt_rounds >= 0, "
                            "n_centres >= 2")
-    t0 = time.monotonic()
-    deadline = t0 + float(max_seconds)
+    if deadline is None:
+        deadline = time.monotonic() + float(max_seconds)
+    base: ZDensity = model if stratum is None else stratum
+    if stratum is not None:
+        limit_state = _in_stratum(stratum, limit_state)
     sub = subset_simulation(model, limit_state, seed, n_per_level=n_per_level, p0=p0,
-                            max_seconds=max_seconds, min_probability=min_probability)
+                            max_seconds=max(deadline - time.monotonic(), 1e-9),
+                            min_probability=min_probability,
+                            from_normal=None if stratum is None else stratum.from_normal)
     pts = np.unique(sub.z, axis=0)
     d = model.n_features
     if pts.shape[0] < d + 2:
@@ -169,28 +248,34 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
             "the region, too few to fit an importance density; raise n_per_level",
             n_draws=sub.n_evaluations, n_hits=int(pts.shape[0]), p_upper=sub.probability)
     rng = np.random.default_rng([int(seed) % (2**32), 1])
-    proposal = KernelProposal(model, pts, inflate, alpha, nu)
+    proposal = KernelProposal(base, pts, inflate, alpha, nu)
     n_adapt_evals = 0
+    pilot = (sub.probability, sub.cov)
     for _ in range(adapt_rounds):
         # importance draws inside A resampled by their weights (they follow the model
         # restricted to A, not the subset chains' coverage of it) are the next centres
-        pilot = ImportanceStage(model, limit_state, proposal, deadline, max_seconds)
-        pilot.add(int(n_adapt), rng)
-        n_adapt_evals += pilot.n
-        lw = pilot.log_w
+        stage = ImportanceStage(base, limit_state, proposal, deadline, max_seconds)
+        stage.add(int(n_adapt), rng)
+        n_adapt_evals += stage.n
+        pilot = stage.estimate()
+        lw = stage.log_w
         ok = np.isfinite(lw)
         if ok.sum() > d + 1:
-            zi, lwi = pilot.z[ok], lw[ok]
+            zi, lwi = stage.z[ok], lw[ok]
             ww = np.exp(lwi - lwi.max())
             pick = rng.choice(zi.shape[0], size=min(n_centres, zi.shape[0]),
                               p=ww / ww.sum())
-            proposal = KernelProposal(model, zi[np.unique(pick)], inflate, alpha, nu,
-                                      shape=zi[pick])
-    stage = ImportanceStage(model, limit_state, proposal, deadline, max_seconds)
-    stage.add(int(n_is), rng)
-    if keep_stage is not None:
-        keep_stage.append(stage)
-    return _result(stage, sub, t0, n_adapt_evals, inflate)
+            # weighted_centres: each resampled centre as often as it was drawn (a part of A
+            # the previous q under-covered, whose draws carry large weights, gets more
+            # kernels), the bandwidth from the distinct ones; else the distinct centres
+            if weighted_centres:
+                proposal = KernelProposal(base, zi[pick], inflate, alpha, nu,
+                                          shape=zi[pick],
+                                          n_bandwidth=int(np.unique(pick).size))
+            else:
+                proposal = KernelProposal(base, zi[np.unique(pick)], inflate, alpha, nu,
+                                          shape=zi[pick])
+    return _Explored(base, limit_state, sub, proposal, n_adapt_evals, rng, deadline, pilot)
 
 
 def _result(stage: ImportanceStage, sub: SubsetResult, t0: float, n_adapt: int,
@@ -216,6 +301,163 @@ def _result(stage: ImportanceStage, sub: SubsetResult, t0: float, n_adapt: int,
         seconds=time.monotonic() - t0)
 
 
+@dataclass
+class StratumRun:
+    """One stratum of a stratified run: its final importance stage (None when its subset
+    levels found no mass in it) and what it contributes."""
+
+    stratum: Stratum
+    stage: ImportanceStage | None
+    sub: SubsetResult | None
+    n_evaluations: int  # subset levels + adaptation (the final stage's draws: stage.n)
+    p_upper: float = 0.0  # empty strata: the upper bound of P_s(A) from the levels
+    note: str = ""  # empty strata: why (the subset stage's message)
+
+    def estimate(self) -> tuple[float, float]:
+        """(P_s(A), its standard error); (0, 0) for an empty stratum."""
+        if self.stage is None:
+            return 0.0, 0.0
+        p, cov = self.stage.estimate()
+        return p, (cov * p if p > 0 else 0.0)
+
+
+def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
+                          strata: list[Stratum] | None = None, n_per_level: int = 500,
+                          n_is: int = 4000, n_is_min: int = 300, alpha: float = 0.1,
+                          inflate: float = 1.3, p0: float = 0.1, n_adapt: int = 1000,
+                          adapt_rounds: int = 2, n_centres: int = 300, nu: float = 5.0,
+                          max_seconds: float = 120.0, min_probability: float = 1e-14,
+                          keep_runs: list[StratumRun] | None = None) -> RareResult:
+    """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
+    x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
+
+    Every stratum gets its subset levels (``n_per_level``) and adaptation rounds; the
+    final importance draws, ``n_is`` in all, are allocated in proportion to the strata's
+    estimated contributions ``pi_s P_s`` from the last adaptation round (Neyman's
+    allocation when the per-draw CoV is the same), at least ``n_is_min`` each: a small
+    contribution judged from the adaptation still gets an unbiased estimate of its own.
+    A stratum whose subset levels go below ``min_probability`` without reaching A counts 0
+    (its bound ``pi_s min_probability`` is in the result). The estimate is unbiased given
+    the strata's proposals; its variance is ``sum pi_s^2 var_s``.
+
+    Raises
+    ------
+    SamplerError
+        Bad settings, or the time budget (whole run) was spent.
+    EmptyRegionError
+        No stratum reached the region.
+    """
+    t0 = time.monotonic()
+    deadline = t0 + float(max_seconds)
+    strata = make_strata(model) if strata is None else strata
+    if not strata:
+        raise SamplerError("stratified subset-is: no stratum (the model has no component)")
+    if n_is_min < 2 or n_is < n_is_min:
+        raise SamplerError("n_is_min must be >= 2 and n_is >= n_is_min")
+    runs: list[StratumRun] = []
+    explored: list[_Explored | None] = []
+    for i, st in enumerate(strata):
+        if time.monotonic() > deadline:
+            raise SamplerError(f"stratified subset-is: stopped after max_seconds="
+                               f"{max_seconds:g} s exploring stratum {i + 1} of {len(strata)} "
+                               f"({st.label}); raise max_seconds")
+        try:
+            ex = _explore(model, limit_state, _stratum_seed(seed, i), stratum=st,
+                          n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
+                          n_adapt=n_adapt, adapt_rounds=adapt_rounds, n_centres=n_centres,
+                          nu=nu, n_is=n_is, max_seconds=max_seconds,
+                          min_probability=min_probability, deadline=deadline,
+                          weighted_centres=True)
+        except EmptyRegionError as exc:
+            runs.append(StratumRun(st, None, None, int(exc.n_draws),
+                                   float(exc.p_upper) if math.isfinite(exc.p_upper)
+                                   else min_probability, str(exc).splitlines()[0]))
+            explored.append(None)
+            continue
+        runs.append(StratumRun(st, None, ex.sub, ex.sub.n_evaluations + ex.n_adapt))
+        explored.append(ex)
+    live = [i for i, ex in enumerate(explored) if ex is not None]
+    if not live:
+        raise EmptyRegionError(
+            f"stratified subset-is: the subset levels reached the region in none of the "
+            f"{len(strata)} strata", n_draws=sum(r.n_evaluations for r in runs), n_hits=0,
+            p_upper=sum(r.stratum.mass * r.p_upper for r in runs))
+    contrib = np.array([runs[i].stratum.mass * max(ex.pilot[0], 0.0)
+                        for i, ex in enumerate(explored) if ex is not None])
+    share = contrib / contrib.sum() if contrib.sum() > 0 else np.full(len(live), 1 / len(live))
+    for i, sh in zip(live, share, strict=True):
+        ex_i = explored[i]
+        assert ex_i is not None
+        stage = ImportanceStage(ex_i.base, ex_i.limit_state, ex_i.proposal, deadline,
+                                max_seconds)
+        stage.add(max(int(n_is_min), round(n_is * float(sh))), ex_i.rng)
+        runs[i].stage = stage
+    if keep_runs is not None:
+        keep_runs.extend(runs)
+    return _stratified_result(runs, t0, inflate)
+
+
+def _stratum_seed(seed: int, i: int) -> int:
+    """A distinct, deterministic seed per stratum."""
+    return int(np.random.default_rng([int(seed) % (2**32), 7, i]).integers(0, 2**31 - 1))
+
+
+def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> RareResult:
+    p = 0.0
+    var = 0.0
+    zs: list[FloatArray] = []
+    lws: list[FloatArray] = []
+    strata: list[dict[str, Any]] = []
+    n_sub = n_adapt = n_is = n_hits = 0
+    best: tuple[float, SubsetResult] | None = None
+    for r in runs:
+        ps, se = r.estimate()
+        pi = r.stratum.mass
+        p += pi * ps
+        var += (pi * se) ** 2
+        info: dict[str, Any] = {"stratum": r.stratum.label, "mass": pi, "p": ps,
+                                "cov": se / ps if ps > 0 else None,
+                                "contribution": pi * ps,
+                                "n_evaluations": r.n_evaluations + (r.stage.n if r.stage
+                                                                    else 0)}
+        if r.sub is not None:
+            n_sub += r.sub.n_evaluations
+            n_adapt += r.n_evaluations - r.sub.n_evaluations
+            info["subset_levels"] = len(r.sub.thresholds)
+        else:
+            n_sub += r.n_evaluations
+            info["empty_upper"] = pi * r.p_upper
+            info["empty_reason"] = r.note
+        if r.stage is not None:
+            n_is += r.stage.n
+            lw = r.stage.log_w
+            inside = np.isfinite(lw)
+            n_hits += int(inside.sum())
+            info["n_is"] = r.stage.n
+            info["n_hits"] = int(inside.sum())
+            zs.append(r.stage.z[inside])
+            # weights relative to the whole model: pi_s p_s / q_s per draw of q_s, divided
+            # by that stratum's draw count (each stratum's draws estimate pi_s P_s)
+            lws.append(lw[inside] + math.log(pi) - math.log(r.stage.n))
+            if r.sub is not None and (best is None or pi * ps > best[0]):
+                best = (pi * ps, r.sub)
+        strata.append(info)
+    if best is None or p <= 0:
+        raise EmptyRegionError("stratified subset-is: no importance draw fell inside the "
+                               "region in any stratum; raise n_is",
+                               n_draws=n_sub + n_adapt + n_is, n_hits=0)
+    lw_all = np.concatenate(lws)
+    return RareResult(
+        probability=p, cov=math.sqrt(var) / p, n_evaluations=n_sub + n_adapt + n_is,
+        n_subset_evaluations=n_sub, n_adapt=n_adapt, n_is=n_is, n_hits=n_hits,
+        ess_weights=kish_ess(lw_all), z=np.concatenate(zs, axis=0), log_w=lw_all,
+        subset=best[1],
+        proposal={"kind": "stratified defensive kernel densities", "inflate": inflate,
+                  "strata": strata,
+                  "neglected_upper": sum(s.get("empty_upper", 0.0) for s in strata)},
+        seconds=time.monotonic() - t0)
+
+
 class SubsetISSampler(Sampler):
     """Subset levels, importance sampling for P(A), an independence chain for the samples.
 
@@ -233,6 +475,13 @@ class SubsetISSampler(Sampler):
         diagnostics instead).
     n_chains : int
         Independence chains the proposals are dealt to.
+    stratify : {"auto", "always", "never"}
+        ``always``: ``stratified_importance`` (one subset-is per stratum of the model:
+        component x cut-in side); ``never``: one subset-is on the whole model; ``auto``:
+        see ``STRATIFY_AUTO``.
+    strat_per_level, strat_n_adapt, strat_n_is_min :
+        The stratified run's ``n_per_level``, ``n_adapt`` and ``n_is_min``
+        (``stratified_importance``); ``n_is`` is shared.
     """
 
     name = "subset-is"
@@ -241,7 +490,11 @@ class SubsetISSampler(Sampler):
                  inflate: float = 1.3, n_adapt: int = 1500, adapt_rounds: int = 2,
                  n_centres: int = 300, max_seconds: float = 120.0,
                  min_probability: float = 1e-14, ess_target: float = 0.25,
-                 n_chains: int = 4) -> None:
+                 n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 500,
+                 strat_n_adapt: int = 1000, strat_n_is_min: int = 300,
+                 strat_split_side: bool = True) -> None:
+        if stratify not in ("auto", "always", "never"):
+            raise SamplerError(f"stratify: expected auto, always or never, got {stratify!r}")
         self.n_per_level = int(n_per_level)
         self.n_is = int(n_is)
         self.alpha = float(alpha)
@@ -253,6 +506,11 @@ class SubsetISSampler(Sampler):
         self.min_probability = float(min_probability)
         self.ess_target = float(ess_target)
         self.n_chains = int(n_chains)
+        self.stratify = stratify
+        self.strat_per_level = int(strat_per_level)
+        self.strat_n_adapt = int(strat_n_adapt)
+        self.strat_n_is_min = int(strat_n_is_min)
+        self.strat_split_side = bool(strat_split_side)
 
     def _limit_state(self, problem: Problem, rng: np.random.Generator) -> LimitState:
         limit_state = region_limit_state(problem.model, problem.region, rng)
@@ -263,25 +521,41 @@ class SubsetISSampler(Sampler):
 
         return counted
 
+    def _stratified(self, problem: Problem) -> bool:
+        if self.stratify == "always":
+            return True
+        if self.stratify == "never":
+            return False
+        return STRATIFY_AUTO(problem)
+
     def run(self, problem: Problem, rng: np.random.Generator,
-            keep_stage: list[ImportanceStage] | None = None) -> RareResult:
-        """P(A) of the problem's region (also used without samples)."""
+            keep_stage: list[ImportanceStage] | None = None,
+            keep_runs: list[StratumRun] | None = None) -> RareResult:
+        """P(A) of the problem's region (also used without samples). ``keep_stage``
+        receives the importance stage of an unstratified run, ``keep_runs`` the strata of
+        a stratified one."""
         limit_state = self._limit_state(problem, rng)
         seed = int(rng.integers(0, 2**31 - 1))
+        common = {"n_is": self.n_is, "alpha": self.alpha, "inflate": self.inflate,
+                  "adapt_rounds": self.adapt_rounds, "n_centres": self.n_centres,
+                  "max_seconds": self.max_seconds, "min_probability": self.min_probability}
+        if self._stratified(problem):
+            return stratified_importance(problem.model, limit_state, seed,
+                                         strata=make_strata(problem.model,
+                                                            self.strat_split_side),
+                                         n_per_level=self.strat_per_level,
+                                         n_adapt=self.strat_n_adapt,
+                                         n_is_min=self.strat_n_is_min, keep_runs=keep_runs,
+                                         **common)  # type: ignore[arg-type]
         return subset_importance(problem.model, limit_state, seed,
-                                 n_per_level=self.n_per_level, n_is=self.n_is,
-                                 alpha=self.alpha, inflate=self.inflate,
-                                 n_adapt=self.n_adapt, adapt_rounds=self.adapt_rounds,
-                                 n_centres=self.n_centres, max_seconds=self.max_seconds,
-                                 min_probability=self.min_probability, keep_stage=keep_stage)
+                                 n_per_level=self.n_per_level, n_adapt=self.n_adapt,
+                                 keep_stage=keep_stage, **common)  # type: ignore[arg-type]
 
-    def draw(self, problem: Problem, n: int, rng: np.random.Generator, pilot: Pilot,
-             progress: ProgressFn | None = None) -> Draw:
-        t_start = time.monotonic()
-        stages: list[ImportanceStage] = []
-        res = self.run(problem, rng, keep_stage=stages)
-        stage = stages[0]
-        warnings: list[str] = []
+    def _chains(self, stage: ImportanceStage, n: int, rng: np.random.Generator,
+                t_start: float, warnings: list[str], what: str
+                ) -> tuple[FloatArray, dict[str, Any]]:
+        """``n`` samples of the stage's restricted law from independence chains over its
+        draws (more draws until the chains' ESS reaches ``ess_target * n``)."""
         while True:
             states, acc = independence_chain(stage.log_w, rng, self.n_chains)
             zs = stage.z
@@ -290,12 +564,10 @@ class SubsetISSampler(Sampler):
             burn = min(math.ceil(2 * tau_max), states.shape[0] // 2)
             post = states[burn:]
             ess = post.size / tau_max
-            if progress is not None:
-                progress("subset-is", min(int(ess), n), n)
             if ess >= self.ess_target * n:
                 break
             if time.monotonic() - t_start > 0.8 * self.max_seconds:
-                warnings.append(f"time budget nearly spent with ESS {ess:.0f} < "
+                warnings.append(f"{what}time budget nearly spent with ESS {ess:.0f} < "
                                 f"{self.ess_target * n:.0f}: the samples are more correlated "
                                 "than asked")
                 break
@@ -303,16 +575,81 @@ class SubsetISSampler(Sampler):
             stage.add(int(min(max(need * 1.2, 2000), 8 * stage.n)), rng)
         flat = post.reshape(-1)  # time-major: consecutive entries are different chains
         pick = flat[np.linspace(0, flat.size - 1, n).round().astype(int)]
-        z = zs[pick]
-        res = _result(stage, res.subset, t_start, res.n_adapt, self.inflate)
+        return zs[pick], {"acceptance": acc, "tau": tau, "tau_max": tau_max, "burn_in": burn,
+                          "n_steps": int(states.shape[0]), "ess": ess,
+                          "n_distinct": int(np.unique(pick).size)}
+
+    def draw(self, problem: Problem, n: int, rng: np.random.Generator, pilot: Pilot,
+             progress: ProgressFn | None = None) -> Draw:
+        t_start = time.monotonic()
+        stages: list[ImportanceStage] = []
+        runs: list[StratumRun] = []
+        res = self.run(problem, rng, keep_stage=stages, keep_runs=runs)
+        warnings: list[str] = []
+        if not runs:
+            z, ch = self._chains(stages[0], n, rng, t_start, warnings, "")
+            res = _result(stages[0], res.subset, t_start, res.n_adapt, self.inflate)
+            diag = {"acceptance_fraction": ch["acceptance"].tolist(),
+                    "acceptance_mean": float(ch["acceptance"].mean()),
+                    "tau": ch["tau"].tolist(), "tau_max": ch["tau_max"],
+                    "burn_in": ch["burn_in"], "n_steps": ch["n_steps"],
+                    "ess": float(min(n, ch["ess"])), "ess_chain": float(ch["ess"]),
+                    "n_distinct": ch["n_distinct"]}
+        else:
+            # n samples from the strata in proportion to their estimated contributions
+            # (largest remainders), each stratum's by its own independence chains
+            contrib = np.array([r.stratum.mass * r.estimate()[0] for r in runs])
+            counts = _apportion(n, contrib)
+            parts: list[FloatArray] = []
+            per: list[dict[str, Any]] = []
+            for r, c in zip(runs, counts, strict=True):
+                if c == 0 or r.stage is None:
+                    continue
+                z_s, ch = self._chains(r.stage, int(c), rng, t_start, warnings,
+                                       f"{r.stratum.label}: ")
+                parts.append(z_s)
+                per.append({"stratum": r.stratum.label, "n": int(c),
+                            "acceptance_mean": float(ch["acceptance"].mean()),
+                            "tau_max": ch["tau_max"], "ess_chain": float(ch["ess"]),
+                            "n_distinct": ch["n_distinct"]})
+            z = np.concatenate(parts, axis=0)
+            # shuffled (deterministically) so that a prefix is not one stratum
+            z = z[rng.permutation(z.shape[0])]
+            res = _stratified_result(runs, t_start, self.inflate)
+            ess = sum(min(p["n"], p["ess_chain"]) for p in per)
+            w = np.array([p["n"] for p in per], dtype=float)
+            diag = {"acceptance_mean": float(np.average([p["acceptance_mean"] for p in per],
+                                                        weights=w)),
+                    "tau_max": float(max(p["tau_max"] for p in per)),
+                    "ess": float(min(n, ess)), "ess_chain": float(ess),
+                    "n_distinct": int(sum(p["n_distinct"] for p in per)), "strata": per}
+        if progress is not None:
+            progress("subset-is", n, n)
         diag = {"subset_is": res.summary(), "n_evaluations": problem.n_evals,
-                "acceptance_fraction": acc.tolist(), "acceptance_mean": float(acc.mean()),
-                "tau": tau.tolist(), "tau_max": tau_max, "burn_in": burn,
-                "n_steps": int(states.shape[0]), "n_chains": self.n_chains,
-                "ess": float(min(n, ess)), "ess_chain": float(ess),
-                "n_distinct": int(np.unique(pick).size), "warnings": warnings}
+                "n_chains": self.n_chains, **diag, "warnings": warnings}
         return Draw(z=np.ascontiguousarray(z), method=self.name, diagnostics=diag,
                     mc_draws=pilot.n_draws, mc_hits=pilot.n_hits, subset=res)
+
+
+def _apportion(n: int, weights: FloatArray) -> NDArray[np.int64]:
+    """``n`` split in proportion to ``weights`` (largest remainders; deterministic)."""
+    w = np.maximum(np.asarray(weights, dtype=np.float64), 0.0)
+    if not w.sum() > 0:
+        w = np.ones_like(w)
+    exact = n * w / w.sum()
+    out = np.floor(exact).astype(np.int64)
+    rest = n - int(out.sum())
+    if rest > 0:
+        out[np.argsort(-(exact - out), kind="stable")[:rest]] += 1
+    return out
+
+
+def _never(problem: Problem) -> bool:
+    return False
+
+
+#: whether ``stratify="auto"`` stratifies a problem
+STRATIFY_AUTO = _never
 
 
 def rare_probability(model: CutInGMM, constraints: Any, seed: int, *,

@@ -131,9 +131,15 @@ def mixture_from_normal(model: CutInGMM, u: FloatArray) -> FloatArray:
 
 def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
                       n_per_level: int = 2000, p0: float = 0.1, proposal_range: float = 2.0,
-                      max_seconds: float = 120.0, min_probability: float = 1e-14
+                      max_seconds: float = 120.0, min_probability: float = 1e-14,
+                      from_normal: Callable[[FloatArray], FloatArray] | None = None
                       ) -> SubsetResult:
     """Estimate ``P(limit_state(z) <= 0)`` under the model by subset simulation.
+
+    ``from_normal`` replaces the map from standard normal ``(n, d + 1)`` to z-space (default
+    ``mixture_from_normal``: the whole mixture); the probability is then under the image of
+    ``N(0, I)`` by that map (``sampler.strata``: one component, optionally restricted to a
+    half-space).
 
     Raises
     ------
@@ -157,6 +163,9 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         raise SamplerError("max_seconds, proposal_range and min_probability must be positive "
                            "(min_probability < 1)")
     d = model.n_features
+    to_z: Callable[[FloatArray], FloatArray] = (
+        from_normal if from_normal is not None
+        else (lambda u: mixture_from_normal(model, u)))
     state: dict[str, Any] = {"evals": 0, "best": math.inf, "stopped": False,
                              "exhausted": False}
     deadline = time.monotonic() + float(max_seconds)
@@ -174,7 +183,7 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
             state["exhausted"] = True
             raise _Stop
         u = np.asarray(u_sample, dtype=np.float64)
-        g = np.asarray(limit_state(mixture_from_normal(model, u)), dtype=np.float64)
+        g = np.asarray(limit_state(to_z(u)), dtype=np.float64)
         state["evals"] = int(state["evals"]) + u.shape[0]
         g = np.where(np.isfinite(g), g, _BIG)
         if g.size:
@@ -250,7 +259,7 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         cov_upper=float(sum(delta)),
         n_evaluations=int(state["evals"]),
         thresholds=thresholds, conditional=conditional, gamma=gamma, delta=delta,
-        z=mixture_from_normal(model, u_final) if u_final.size else np.zeros((0, d)),
+        z=to_z(u_final) if u_final.size else np.zeros((0, d)),
         n_per_level=n, seconds=time.monotonic() - t0)
 
 

@@ -18,9 +18,16 @@ from sampler.constraints import Region
 from sampler.importance import ImportanceStage, KernelProposal, independence_chain
 from sampler.model import CutInGMM
 from sampler.problem import Problem
-from sampler.rare import SubsetISSampler, rare_probability, subset_importance
+from sampler.rare import (
+    SubsetISSampler,
+    _apportion,
+    rare_probability,
+    stratified_importance,
+    subset_importance,
+)
 from sampler.samplers import make_sampler
 from sampler.sampleset import sample
+from sampler.strata import make_strata
 from tests.sampler.test_subset import _halfspace_exact, _two_component
 
 REPS = 25
@@ -216,3 +223,119 @@ def test_time_bound_and_bad_settings() -> None:
         subset_importance(model, g, 0, alpha=1.0)
     with pytest.raises(SamplerError, match="n_is"):
         subset_importance(model, g, 0, n_is=1)
+
+
+# ---------------------------------------------------------------- stratified subset-is
+
+
+def _sided_two_component(d: int = 8) -> CutInGMM:
+    """``_two_component`` with its first feature named ``p_y1`` (so the strata split it at
+    0: the cut-in side), identity transforms."""
+    ref = _two_component(d)
+    feats = ["p_y1"] + [f"f{i}" for i in range(1, d)]
+    return CutInGMM.from_dict({
+        "format": "scengen.cutin-gmm/1", "features": feats,
+        "transforms": [{"feature": f, "kind": "identity", "shift": 0.0, "loc": 0.0,
+                        "scale": 1.0} for f in feats],
+        "fixed": {name: 1.0 for name in ("p_v0", "p_a1", "p_a2", "p_a3", "p_t", "gap", "dv")},
+        "weights": ref.weights_.tolist(), "means": ref.means_.tolist(),
+        "covariances": ref.covariances_.tolist()})
+
+
+def test_strata_partition_the_model() -> None:
+    """Masses sum to 1 and equal E_p[pi_s p_s / p]; a stratum's draws follow its density
+    (the side coordinate against the closed-form truncated normal, KS)."""
+    model = _sided_two_component()
+    strata = make_strata(model)
+    assert len(strata) == 4
+    assert sum(s.mass for s in strata) == pytest.approx(1.0, abs=1e-12)
+    z = model.sample_z(200_000, np.random.default_rng(0))
+    lp = model.log_density_z(z)
+    for s in strata:
+        share = np.mean(np.exp(s.log_density_z(z) + s.log_mass - lp))
+        assert share == pytest.approx(s.mass, abs=0.004)
+        draws = s.sample_z(20_000, np.random.default_rng(1))
+        assert s.contains(draws).all()
+        mu = model.means_[s.k, 0]
+        sd = math.sqrt(model.covariances_[s.k, 0, 0])
+        lo, hi = (0.0, np.inf) if s.a is not None and s.a[0] < 0 else (-np.inf, 0.0)
+        law = stats.truncnorm((lo - mu) / sd, (hi - mu) / sd, loc=mu, scale=sd)
+        assert stats.kstest(draws[:, 0], law.cdf).pvalue > 0.01
+    # without a p_y1 feature: one stratum per component
+    assert [s.label for s in make_strata(_two_component())] == ["component 0", "component 1"]
+
+
+def test_two_mode_union_needs_the_strata() -> None:
+    """A = {z0 >= b1} or {z0 <= -b2}: two separated modes (both sides of p_y1 = 0, the
+    upper one mostly under the second component), disjoint, P(A) in closed form, 1e-5
+    with 20 % in the upper mode. One subset-is on the whole model under-covers the minor
+    mode (measured: 44 % of 25 seeds inside 2 reported CoV, mean 0.83 of P(A); 52 % before
+    the adaptation's centres kept their resampling multiplicity); one per stratum is inside
+    2 CoV in >= 90 % and unbiased."""
+    model = _sided_two_component()
+    sd = np.sqrt(model.covariances_[:, 0, 0])
+    mu = model.means_[:, 0]
+    w = model.weights_
+
+    def upper(b: float) -> float:
+        return float(np.sum(w * stats.norm.sf((b - mu) / sd)))
+
+    def lower(b: float) -> float:
+        return float(np.sum(w * stats.norm.cdf((-b - mu) / sd)))
+
+    b1 = float(brentq(lambda t: upper(t) - 2e-6, 0.0, 40.0))
+    b2 = float(brentq(lambda t: lower(t) - 8e-6, 0.0, 40.0))
+    p_true = upper(b1) + lower(b2)
+
+    def g(z: np.ndarray) -> np.ndarray:
+        return np.asarray(np.minimum(b1 - z[:, 0], z[:, 0] + b2), dtype=np.float64)
+
+    strat = [stratified_importance(model, g, seed) for seed in range(REPS)]
+    est = np.array([r.probability for r in strat])
+    cov = np.array([r.cov for r in strat])
+    assert np.mean(np.abs(est - p_true) <= 2.0 * cov * est) >= 0.9
+    assert abs(est.mean() - p_true) <= 3.0 * est.std(ddof=1) / math.sqrt(REPS)
+    for r in strat:
+        assert ((r.z[:, 0] >= b1) | (r.z[:, 0] <= -b2)).all()
+        assert r.n_evaluations == r.n_subset_evaluations + r.n_adapt + r.n_is
+        shares = {s["stratum"]: s["contribution"] / r.probability
+                  for s in r.proposal["strata"]}
+        assert sum(shares.values()) == pytest.approx(1.0)
+    plain = [subset_importance(model, g, seed) for seed in range(REPS)]
+    e0 = np.array([r.probability for r in plain])
+    c0 = np.array([r.cov for r in plain])
+    assert np.mean(np.abs(e0 - p_true) <= 2.0 * c0 * e0) < 0.75  # why the strata exist
+
+
+def test_apportion_by_hand() -> None:
+    assert _apportion(10, np.array([0.5, 0.3, 0.2])).tolist() == [5, 3, 2]
+    # 6.6, 1.7, 1.7: floors 6, 1, 1; the two largest remainders (0.7) get the rest
+    assert _apportion(10, np.array([0.66, 0.17, 0.17])).tolist() == [6, 2, 2]
+    assert _apportion(3, np.array([0.0, 0.0])).tolist() == [2, 1]
+
+
+def test_stratified_sampler_is_deterministic_and_inside(tno: CutInGMM) -> None:
+    strat = SubsetISSampler(stratify="always")
+    a = sample(tno, ["ttc<3", "btn>0.5"], 60, seed=2, method=strat)
+    b = sample(tno, ["ttc<3", "btn>0.5"], 60, seed=2, method=strat)
+    np.testing.assert_array_equal(a.params.to_numpy(), b.params.to_numpy())
+    assert a.p_region == b.p_region and a.method == "subset-is" and len(a) == 60
+    assert (a.derived["ttc"] < 3).all()
+    d = a.diagnostics
+    strata = d["subset_is"]["proposal"]["strata"]
+    assert len(strata) == 2 * tno.n_components_
+    assert sum(s["n"] for s in d["strata"]) == 60
+    assert sum(s["contribution"] for s in strata) == pytest.approx(a.p_region.p_joint)
+    assert "subset-is" in a.summary()
+    with pytest.raises(SamplerError, match="stratify"):
+        SubsetISSampler(stratify="sometimes")
+
+
+def test_stratified_time_bound() -> None:
+    model = _sided_two_component()
+
+    def g(z: np.ndarray) -> np.ndarray:
+        return np.asarray(4.0 - z[:, 0])
+
+    with pytest.raises(SamplerError, match="max_seconds"):
+        stratified_importance(model, g, 0, max_seconds=1e-9)
