@@ -37,7 +37,8 @@ the brute-force interval.
 
 Usage: ``.venv/bin/python benchmarks/bench_rare.py [--reps 20] [--naive 3e6]
 [--envelope 4e6] [--methods subset,subset-is,auto] [--regions 0,1,2]
-[--refs-cache /tmp/rare-refs.pkl]``
+[--refs-cache /tmp/rare-refs.pkl]``; ``BENCH_RARE_SETTINGS='{"strat_split_side": false}'``
+(JSON) passes settings to ``SubsetISSampler`` (experiments).
 """
 
 from __future__ import annotations
