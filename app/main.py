@@ -55,6 +55,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     ctx = ServiceContext.open(settings)
     jobs = JobManager(ctx.runner())
     jobs.start(resume=settings.resume_jobs)
+    ctx.executor.warm()  # in the background: the first request need not start the workers
     app.state.ctx = ctx
     app.state.jobs = jobs
     log.info("scengen %s ready (database %s, default model %s)", __version__,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
@@ -29,6 +30,10 @@ from sampler.record import ScenarioRecord, score_rows, score_vector
 #: seconds between two progress reports of a chunk being computed
 PROGRESS_EVERY = 0.25
 
+#: a cut-in that goes through the builder and every criticality kernel (``warm_worker``)
+_WARM_VECTOR = {"p_y1": 0.04, "p_t": 2.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
+                "p_v0": 25.0, "dv": 2.0, "gap": 12.0}
+
 #: spawn-key prefixes that keep the seed streams apart
 _CHUNK_KEY = 1
 _REGION_KEY = 3
@@ -37,6 +42,19 @@ _REGION_KEY = 3
 def _derive(seed: int, *key: int) -> int:
     state = np.random.SeedSequence(seed, spawn_key=key).generate_state(1, dtype=np.uint32)
     return int(state[0]) & 0x7FFFFFFF
+
+
+def warm_worker() -> int:
+    """Import the chunk machinery in this worker process and load its compiled kernels
+    (numba's on-disk cache) by scoring one vector and running the sampler's crossing
+    kinematics once, so that the first chunk or request does not pay for it (1-3 s on a
+    fresh worker). Returns the worker's pid."""
+    from sampler.kinematics import crossing_kinematics
+
+    score_vector(_WARM_VECTOR)
+    crossing_kinematics(np.array([[_WARM_VECTOR[k] for k in ("p_y1", "p_t", "p_a1", "p_a2",
+                                                             "p_a3", "p_v0")]]), 1.875)
+    return os.getpid()
 
 
 def chunk_seed(seed: int, index: int) -> int:

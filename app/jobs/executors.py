@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol, TypeVar
 
-from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk
+from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk, warm_worker
 from sampler.lifeline import die_with_parent, pool_keeper_thread
 
 log = logging.getLogger("scengen.jobs")
@@ -40,6 +40,8 @@ class ChunkExecutor(Protocol):
             cancel: Flag | None = None) -> Iterator[ChunkResult]: ...
 
     def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]: ...
+
+    def warm(self) -> Any: ...
 
     def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]: ...
 
@@ -68,6 +70,9 @@ class InlineExecutor:
     def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]:
         """``map`` run when the returned function is called (nothing runs in between)."""
         return lambda: self.map(fn, *args)
+
+    def warm(self) -> None:
+        """Nothing to start: chunks run in the calling thread."""
 
     def close(self) -> None:
         return None
@@ -148,6 +153,28 @@ class FuturesExecutor:
         futures = [executor.submit(fn, *a) for a in zip(*args, strict=True)]
         return lambda: [f.result() for f in futures]
 
+    def warm(self) -> threading.Thread:
+        """Start the workers and have each import the chunk machinery and load its compiled
+        kernels (``app.jobs.chunk.warm_worker``) in the background, so the first catalogue
+        or ``POST /scenarios`` after a start does not wait for that. Failures are logged
+        only: a worker that could not warm up does so at its first chunk."""
+
+        def run() -> None:
+            try:
+                self._warm_workers()
+            except Exception as exc:
+                log.warning("warming the %s workers failed: %s", self.name, exc)
+
+        thread = threading.Thread(target=run, name=f"scengen-warm-{self.name}", daemon=True)
+        thread.start()
+        return thread
+
+    def _warm_workers(self) -> None:
+        executor = self._get()
+        # the window is two tasks per worker: one warm-up each (an idle worker takes one)
+        for fut in [executor.submit(warm_worker) for _ in range(max(1, self._window() // 2))]:
+            fut.result()
+
     def close(self) -> None:
         with self._lock:
             executor, self._executor = self._executor, None
@@ -225,6 +252,10 @@ class DaskExecutor(FuturesExecutor):
 
     def _shutdown(self, executor: Executor) -> None:
         executor.shutdown(wait=False)  # the client's, not the cluster's
+
+    def _warm_workers(self) -> None:
+        self._get()
+        self.client.run(warm_worker)  # on every worker of the cluster
 
     def close(self) -> None:
         super().close()

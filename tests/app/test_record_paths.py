@@ -130,3 +130,30 @@ def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
     assert gathered == pooled == InlineExecutor().map_later(score_part, *args)()
     assert pooled == inline and [r.index for p in pooled for r in p] == [0, 1, 2, 3]
     assert all(r.class_ is not None for p in pooled for r in p)
+
+
+def loaded_kernels(_: object) -> int:
+    """In a pool worker: how many compiled signatures the batched Wagner kernel holds (0
+    until a scenario was scored in this process; for the test only)."""
+    from riskcore import _criticality_kernels
+
+    return len(_criticality_kernels.scene_risks.signatures)
+
+
+def test_warm_loads_the_kernels_in_the_pool_workers_and_inline_does_nothing() -> None:
+    from app.jobs.executors import InlineExecutor, LocalPoolExecutor
+
+    assert InlineExecutor().warm() is None
+    pool = LocalPoolExecutor(1)
+    try:
+        thread = pool.warm()
+        thread.join(timeout=120)
+        assert not thread.is_alive()
+        assert pool.map(loaded_kernels, [None]) == [1]
+    finally:
+        pool.close()
+    pool = LocalPoolExecutor(1)
+    try:  # without the warm-up a fresh worker has loaded nothing
+        assert pool.map(loaded_kernels, [None]) == [0]
+    finally:
+        pool.close()
