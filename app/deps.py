@@ -5,11 +5,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Query, Request
 from sqlalchemy.orm import Session
 
 from app.context import ServiceContext
 from app.jobs.manager import JobManager
+from app.schemas import SEED_MAX
 from app.settings import Settings, get_settings
 
 
@@ -36,3 +37,11 @@ def get_session(ctx: ContextDep) -> Iterator[Session]:
 
 
 SessionDep = Annotated[Session, Depends(get_session)]
+
+
+#: a region typed as one query string: constraints separated by ";" (default ttc<3)
+ConstraintsQuery = Annotated[str, Query(max_length=500, description="the region: "
+                                        "constraints separated by ';', e.g. 'ttc<3' or "
+                                        "'ttc<3; btn>0.7'")]
+#: a sampler seed in a query string
+SeedQuery = Annotated[int, Query(ge=0, le=SEED_MAX)]

@@ -391,6 +391,18 @@ def r157_critical(ahead: bool, g: float, clos: float,
 
 
 @njit(cache=True)
+def _conflict_state(t: float, t0: float, h: float, cs: FloatArray, es: FloatArray,
+                    ev: FloatArray, cv: FloatArray, cpsi: FloatArray,
+                    half_lengths: float) -> tuple[bool, float, float]:  # pragma: no cover
+    """At time t (arrays sampled every h from t0): is the cutter's centre ahead of the
+    ego's, the longitudinal gap g = cs - es - (L_c + L_e)/2, and the closing speed."""
+    x = _interp(cs, t0, h, t)
+    s = _interp(es, t0, h, t)
+    clos = _interp(ev, t0, h, t) - _interp(cv, t0, h, t) * math.cos(_interp(cpsi, t0, h, t))
+    return x > s, x - s - half_lengths, clos
+
+
+@njit(cache=True)
 def _r157_margin(g: float, clos: float, ttc_crit: float) -> float:  # pragma: no cover
     """A function of time that turns negative when :func:`r157_critical` becomes true
     (for a closing gap ahead): g - ttc_crit * clos, or -clos for ``ttc_crit = +inf``."""
@@ -417,12 +429,8 @@ def r157_reaction_start(t0: float, h: float, cs: FloatArray, cpsi: FloatArray,
     if k0 < 0:
         k0 = 0
     prev_t = t_p
-    x = _interp(cs, t0, h, t_p)
-    s = _interp(es, t0, h, t_p)
-    clos = _interp(ev, t0, h, t_p) - _interp(cv, t0, h, t_p) * math.cos(
-        _interp(cpsi, t0, h, t_p))
-    g = x - s - half_lengths
-    if r157_critical(x > s, g, clos, ttc_crit):
+    ahead, g, clos = _conflict_state(t_p, t0, h, cs, es, ev, cv, cpsi, half_lengths)
+    if r157_critical(ahead, g, clos, ttc_crit):
         return t_p
     prev_f = _r157_margin(g, clos, ttc_crit)
     for k in range(k0, n):
@@ -710,12 +718,8 @@ def r157_reaction_start_pruned(t0: float, d_s: float, r: int, cs: FloatArray,
     h = d_s / r
     n_s = cs.shape[0]
     i_end = (n_s - 1) * r
-    x = _interp(cs, t0, d_s, t_p)
-    s = _interp(es, t0, d_s, t_p)
-    clos = _interp(ev, t0, d_s, t_p) - _interp(cv, t0, d_s, t_p) * math.cos(
-        _interp(cpsi, t0, d_s, t_p))
-    g = x - s - half_lengths
-    if r157_critical(x > s, g, clos, ttc_crit):
+    ahead, g, clos = _conflict_state(t_p, t0, d_s, cs, es, ev, cv, cpsi, half_lengths)
+    if r157_critical(ahead, g, clos, ttc_crit):
         return t_p
     i0 = max(math.ceil((t_p - t0) / h - 1e-9), 0)
     prev_t = t_p

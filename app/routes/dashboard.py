@@ -25,11 +25,10 @@ from app.dashboard.schemas import (
     ShiftView,
 )
 from app.db import repository as repo
-from app.deps import ContextDep
+from app.deps import ConstraintsQuery, ContextDep, SeedQuery
 from app.errors import NotFound, ServiceError
 from app.limits import INDEX_MAX
 from app.rates import RegionReport
-from app.schemas import SEED_MAX
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
 
@@ -126,10 +125,9 @@ def model_fit(model_id: str, ctx: ContextDep,
 def model_shift(
     model_id: str,
     ctx: ContextDep,
-    constraints: Annotated[str, Query(max_length=500,
-                                      description="e.g. 'ttc<3; v_ego>=20'")] = "ttc<3",
+    constraints: ConstraintsQuery = "ttc<3",
     n: Annotated[int, Query(ge=1, le=views.PREVIEW_N_LIMIT)] = 1000,
-    seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
+    seed: SeedQuery = 0,
 ) -> ShiftView:
     return ShiftView.model_validate(views.shift_preview(ctx, model_id, constraints, n, seed))
 
@@ -140,9 +138,8 @@ def model_shift(
 def model_rates(
     model_id: str,
     ctx: ContextDep,
-    constraints: Annotated[str, Query(max_length=500,
-                                      description="e.g. 'ttc<3; btn>0.7'")] = "ttc<3",
-    seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
+    constraints: ConstraintsQuery = "ttc<3",
+    seed: SeedQuery = 0,
 ) -> RegionReport:
     return RegionReport.model_validate(
         jsonconv.encode(rates_views.region_rates(ctx, model_id, constraints, seed)))

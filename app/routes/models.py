@@ -13,11 +13,11 @@ from app.dashboard import rates_views
 from app.dashboard.views import PREVIEW_N_LIMIT
 from app.db import repository as repo
 from app.db.models import ModelRow
-from app.deps import ContextDep, SessionDep
+from app.deps import ConstraintsQuery, ContextDep, SeedQuery, SessionDep
 from app.errors import InvalidInput
 from app.limits import check_model_options
 from app.rates import ModelComparison
-from app.schemas import SEED_MAX, ApiModel
+from app.schemas import ApiModel
 
 router = APIRouter(prefix="/models", tags=["models"])
 
@@ -79,11 +79,10 @@ def compare(
     ctx: ContextDep,
     a: Annotated[str, Query(max_length=64, description="a model id ('default' too)")],
     b: Annotated[str, Query(max_length=64, description="another model id")],
-    constraints: Annotated[str, Query(max_length=500, description="the region, e.g. "
-                                     "'ttc<3' or 'ttc<3; v_ego>=20'")] = "ttc<3",
+    constraints: ConstraintsQuery = "ttc<3",
     n: Annotated[int, Query(ge=1, le=PREVIEW_N_LIMIT,
                             description="samples of each model in the region")] = 400,
-    seed: Annotated[int, Query(ge=0, le=SEED_MAX)] = 0,
+    seed: SeedQuery = 0,
 ) -> ModelComparison:
     return ModelComparison.model_validate(jsonconv.encode(
         rates_views.compare_models(ctx, a, b, constraints, n, seed)))
