@@ -34,7 +34,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from riskcore import _kernels
+from riskcore import _jit_cache, _kernels
+
+_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
 
 FloatArray = NDArray[np.float64]
 

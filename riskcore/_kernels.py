@@ -12,6 +12,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from riskcore import _jit_cache
+
+_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
+
 FloatArray = NDArray[np.float64]
 
 # Below this |φ| = |ω τ| the CTRA integrals use their Taylor series (truncation error of

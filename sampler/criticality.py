@@ -39,12 +39,14 @@ from numpy.typing import NDArray
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH
 from riskcore import _criticality_kernels as _ck
-from riskcore import _kernels
+from riskcore import _jit_cache, _kernels
 from riskcore.criticality import CriticalitySettings
 from riskcore.evasion import MANOEUVRES
 from riskcore.settings import RiskSettings
 from sampler._exceptions import SamplerError
 from sampler.builder import MAX_DURATION
+
+_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
 
 __all__ = ["CRITICALITY_QUANTITIES", "criticality_quantities"]
 
