@@ -207,6 +207,13 @@ def build_scenario(
             raise BuilderError(
                 f"duration: {duration} s ends before the conflict is resolved ({how}) at "
                 f"{t_res:.2f} s; ask for at least that or leave duration out (adaptive)")
+        if n_steps * dt < t_settle - 1e-9 * max(1.0, t_settle):
+            # after the end the motion is continued at constant velocity: a cut-off pulse
+            # would change what the reacting reference drivers of the criticality meet
+            raise BuilderError(
+                f"duration: {duration} s ends before the cutter's lane change and "
+                f"acceleration pulse are over at {t_settle:.2f} s; ask for at least that or "
+                "leave duration out (adaptive)")
     if n_steps * dt > MAX_DURATION or n_steps > 100_000:
         raise BuilderError(
             f"params: the conflict is resolved ({how}) only at {t_res:.1f} s; scenarios "

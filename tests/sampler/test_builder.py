@@ -102,6 +102,18 @@ def test_duration_ends_when_the_conflict_does() -> None:
         build_scenario(base_params(dv=-1.0), duration=7.0)
 
 
+def test_duration_must_cover_the_cutters_pulse() -> None:
+    # contact within a few seconds, but the cutter accelerates from 6 s to 10 s after the
+    # start of its lane change (2.5 s lead-in): the motion settles at 12.5 s
+    p = base_params(gap=3.0, dv=5.0, p_a1=0.5, p_a2=6.0, p_a3=4.0)
+    adaptive = build_scenario(p)
+    assert adaptive.provenance["resolution"] == "contact"
+    assert adaptive.provenance["t_resolved"] < 8.0 <= 12.5 <= adaptive.t[-1]
+    with pytest.raises(BuilderError, match=r"pulse are over at 12\.50 s"):
+        build_scenario(p, duration=8.0)
+    assert build_scenario(p, duration=12.5).t[-1] == pytest.approx(12.5)
+
+
 def test_cutter_left_behind() -> None:
     # a lane change that ends straddling the marking 1.85 m from the ego-lane centre does
     # not overlap the ego's 1.8 m wide box (half widths 0.9 + 0.9): closing at 3 m/s the
