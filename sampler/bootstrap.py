@@ -27,19 +27,27 @@ refits of their data model in their interval). Here:
 * ``pooled_interval(model, region, seed, rare)``, the "model" interval: the replicates'
   average density
   ``q = (1/B) sum_b p_b`` (one Gaussian mixture of B K components, the same transforms) is
-  sampled restricted to A and B (plain draws, or subset simulation when ``rare``), and
-  ``P_b(A and B) = Q(A and B) mean_i w_b(x_i)``, ``w_b = p_b / q <= B`` over those
+  sampled restricted to A and B (plain draws; when ``rare``, subset-is on q,
+  ``sampler.rare.rare_probability``, whose draws carry weights ``v_i = q / proposal``),
+  and ``P_b(A and B) = sum_i v_i w_b(x_i) / n_draws``, ``w_b = p_b / q <= B`` over those
   samples: the proposal covers every replicate (defensive mixture; Hesterberg 1995,
   Technometrics 37(2)), so no weight is unbounded and no replicate is out of support.
   Its limit is resolution: replicate b gets about ``n P_b(A) / (B Q(A))`` of the n
   samples, so replicates far below the pooled mass are seen by few samples; each
-  replicate's effective sample size ``(sum w)^2 / sum w^2`` is reported, and when more
+  replicate's effective sample size (Kish, of ``v_i w_b``) is reported, and when more
   replicates than the interval's tail share (2.5 %) have fewer than ``min_ess`` the lower
   end is flagged as not resolved (``lower_resolved: false``: estimates from few
   effective samples tend to be low, so that end is likely too low, i.e. conservative).
-  A balanced second pass (``alpha_b`` proportional to 1 / P_b of the first) was tried
-  on ``btn > 0.7`` and did not help: with a few hundred correlated subset samples the
-  spread of the weights only moved to other replicates.
+  ``per_replicate=True`` resolves it by one subset-is run per unresolved replicate
+  (docs/sampler.md: 0.4-1 s each on ``btn > 0.7``). The rare path was plain subset
+  simulation of q before: biased low 30-100x on ``btn > 0.7`` (its chains missed the
+  replicates whose tail lies elsewhere; checked against 10^6 plain draws of one
+  replicate), with effective sample sizes that looked fine because the chains'
+  duplicated states counted as distinct samples (still selectable: ``subset=`` a
+  ``SubsetSampler``).
+* ``bootstrap_ci``: the interval from the replicates, percentile (default), bias-corrected,
+  or basic / normal on log P; measured coverage in docs/sampler.md
+  (``benchmarks/bench_bootstrap_coverage.py``).
 """
 from __future__ import annotations
 
