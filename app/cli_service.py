@@ -163,7 +163,9 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
             bar.update(done - bar.n)
 
     try:
-        status = ctx.runner().run(catalogue_id, progress=progress)
+        status = ctx.runner().run(catalogue_id, progress=progress,
+                                  note=(lambda text: tqdm.write(text, file=sys.stderr))
+                                  if show_progress else None)
     except LookupError as exc:
         raise _in_store(exc) from None
     finally:

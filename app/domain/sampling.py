@@ -158,15 +158,18 @@ def _uncertainty_fields(report: dict[str, Any]) -> dict[str, Any]:
 
 def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
                        p_region: dict[str, Any],
-                       n_samples: int | None = None) -> dict[str, Any]:
+                       n_samples: int | None = None,
+                       per_replicate: bool = False) -> dict[str, Any]:
     """``p_region`` (a ``region_dict``) with the "model" interval beside the Monte Carlo one
     and the rates per hour / per 10^6 km with both, when the model has bootstrap replicates
-    and an exposure (``sampler.exposure.uncertainty_report``); unchanged otherwise."""
+    and an exposure (``sampler.exposure.uncertainty_report``); unchanged otherwise.
+    ``per_replicate``: see ``sampler.exposure.model_interval``."""
     if not (model.bootstrap_ or model.exposure_):
         return p_region
     region = Region.from_constraints(list(constraints), lane_width=model.lane_width_).bind(model)
     try:
-        report = uncertainty_report(model, region_of(p_region), region, n_samples=n_samples)
+        report = uncertainty_report(model, region_of(p_region), region, n_samples=n_samples,
+                                    per_replicate=per_replicate)
     except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
         raise _sampling_error(exc) from None
     return {**p_region, **_uncertainty_fields(report)}

@@ -28,9 +28,11 @@
     return what + " with " + (constraints.join(" and ") || "no constraint");
   }
 
-  function interval(ci, resolved) {
+  // zero: a lower end below what subset-is resolves (P(A) < 1e-14; its rate is near 0)
+  function interval(ci, resolved, zero) {
     if (!ci) return "–";
-    const low = resolved === false ? "lower end not resolved" : S.fmt(ci[0], 3);
+    const low = resolved === false ? "lower end not resolved"
+      : ci[0] === 0 && zero ? zero : S.fmt(ci[0], 3);
     return "[" + low + ", " + S.fmt(ci[1], 3) + "]";
   }
 
@@ -41,12 +43,12 @@
   function figureRows(p, rates) {
     const res = resolvedOf(p);
     const rows = [["P(A) (share of physical cut-ins)", S.fmt(p.estimate, 3),
-                   interval(p.mc_ci), interval(p.model_ci, res)]];
+                   interval(p.mc_ci), interval(p.model_ci, res, "< 1e-14")]];
     for (const [unit, words] of UNITS) {
       const r = rates && rates[unit];
       if (r) {
         rows.push(["rate " + words, S.fmt(r.estimate, 3), interval(r.mc_ci),
-                   interval(r.model_ci, r.model_lower_resolved)]);
+                   interval(r.model_ci, r.model_lower_resolved, "≈ 0")]);
       }
     }
     return rows;

@@ -204,3 +204,35 @@ def test_scenarios_done_counts_stored_chunks_and_reports(tmp_path: Path) -> None
     assert scenarios_done(12, 5, {0, 2}, tmp_path) == 10
     chunkfile.write_progress(tmp_path, 1, 9)  # more than the chunk holds: capped
     assert scenarios_done(12, 5, {0, 2}, tmp_path) == 12
+
+
+def test_an_unresolved_model_interval_is_refined_once_the_scenarios_are_stored(
+        tmp_path: Path) -> None:
+    from app.jobs.runner import refine_region
+
+    db = _db(tmp_path)
+    _catalogue(db, "r")
+    unresolved = {"estimate": 0.25, "ci": [0.2, 0.3],
+                  "model_interval": {"ci": [0.01, 0.9], "lower_resolved": False,
+                                     "upper_resolved": True}}
+    calls: list[tuple[int, dict[str, Any]]] = []
+
+    def refine(spec: CatalogueSpec, p_region: dict[str, Any]) -> dict[str, Any] | None:
+        with db.session() as s:
+            calls.append((repo.count_scenarios(s, "r"), p_region))
+        return {**p_region, "model_interval": {"ci": [0.0, 0.8], "lower_resolved": True,
+                                                "upper_resolved": True}}
+
+    runner = CatalogueRunner(db, tmp_path, InlineExecutor(fake_chunk),
+                             region=lambda spec: unresolved, refine=refine)
+    notes: list[str] = []
+    assert runner.run("r", note=notes.append) == "done"
+    assert calls == [(23, unresolved)]  # once, after all 23 scenarios were stored
+    assert len(notes) == 1 and "refining the model interval" in notes[0]
+    with db.session() as s:
+        assert repo.get_catalogue(s, "r").p_region["model_interval"]["ci"] == [0.0, 0.8]
+    # nothing to refine: no model interval, or both ends resolved (no domain code runs)
+    spec = CatalogueSpec(n=1, seed=0, chunk_size=1, model_json="{}", constraints=("ttc<3",))
+    assert refine_region(spec, {"estimate": 0.1, "ci": [0.0, 0.2]}) is None
+    assert refine_region(spec, {"estimate": 0.1, "model_interval": {
+        "lower_resolved": True, "upper_resolved": True}}) is None

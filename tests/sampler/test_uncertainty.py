@@ -318,3 +318,20 @@ def test_per_replicate_rare_estimates_match_the_closed_form() -> None:
     assert iv["replicates"] == pytest.approx(exact, rel=0.3)
     assert pooled_interval(model, region, 0, rare=True, per_replicate=True,
                            min_ess=1e12) == iv  # seeded
+
+
+def test_report_text_says_what_a_zero_lower_end_means() -> None:
+    from sampler.exposure import report_text
+
+    report = {"p_region": {"estimate": 2.5e-7, "mc_ci": [2.0e-7, 3.0e-7],
+                           "model_ci": [0.0, 1.6e-5]},
+              "model_interval": {"lower_resolved": True},
+              "rates": {"per_hour": {"estimate": 8.0e-7, "mc_ci": [6e-7, 1e-6],
+                                     "model_ci": [0.0, 5e-5]},
+                        "exposure": {"n_events": 208, "hours": 63.0, "km": None,
+                                     "source": "t"}}}
+    text = report_text(report)
+    assert "model [< 1e-14, 1.6e-05]" in text  # P(A): below subset-is's smallest level
+    assert "model [≈ 0, 5e-05]" in text  # its rate
+    report["model_interval"] = {"lower_resolved": False}
+    assert "lower end not resolved" in report_text(report)
