@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError, SamplerError
-from sampler.constraints import Region
+from sampler.constraints import OPERATORS, Region
 from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from sampler.model import CutInGMM
 from sampler.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
@@ -285,6 +285,35 @@ def _margin_scale(values: FloatArray) -> float:
     return s if s > 0 else 1.0
 
 
+#: quantities that hold one value over much of the model (the constant-speed ego never
+#: reaches the cutter): that value, and for ``ttr_true`` (+inf there) the finite stand-in
+#: the flat rows' margin starts from (s; finite TTRs of the data stay well below it)
+FLAT_VALUES: dict[str, float] = {"btn": 0.0, "a_req": 0.0, "r157_impact_speed": 0.0,
+                                 "ttr_true": math.inf}
+_TTR_FLAT_STANDIN = 10.0
+#: horizon (s) of the closeness proxy ``gap - horizon * dv`` that orders the flat rows
+FLAT_PROXY_HORIZON = 3.0
+
+
+def ttc_margin(gap: FloatArray, dv: FloatArray, op: str, value: float) -> FloatArray:
+    """A continuous margin of ``ttc op value`` (``ttc = gap / dv`` for ``dv > 0``, else
+    +inf), negative inside, positive outside (0 on the threshold): ``gap - value * dv``
+    for ``<``/``<=`` (``value * dv - gap`` for ``>``/``>=``) where ``dv > 0`` (there
+    ``gap / dv < value`` is ``gap - value dv < 0``); where ``dv <= 0`` (TTC +inf: outside
+    ``<``, inside ``>``) the same expression, pushed to the right sign when it has the
+    wrong one. ``ttc`` itself is +inf for every non-closing cut-in (most of the model), a
+    flat limit state on which subset levels cannot progress; this one is not."""
+    sgn = 1.0 if op in ("<", "<=") else -1.0
+    with np.errstate(invalid="ignore"):
+        m = sgn * (np.asarray(gap, dtype=np.float64) - value * np.asarray(dv, dtype=np.float64))
+        tiny = float(np.finfo(np.float64).tiny)
+        closing = np.asarray(dv) > 0
+        infinite_inside = sgn < 0  # ttc = +inf satisfies > and >=
+        fix = np.maximum(m, tiny) if not infinite_inside else np.minimum(m, -tiny)
+        out = np.where(closing | np.isnan(m), m, fix)
+    return np.asarray(out, dtype=np.float64)
+
+
 def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator,
                        n_scale: int = 4096) -> LimitState:
     """A limit state whose set ``g <= 0`` is the region (a strict constraint's threshold
@@ -298,6 +327,17 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     simulated), where a quantity is NaN, and farther than ``R_MAX`` = 15 Mahalanobis
     units from every component (mass ~1e-44 for d = 8; importance densities' tails
     reach such rows, whose closed-loop simulation would be meaningless and huge).
+
+    Flat quantities get continuous margins (the same set ``g <= 0``), so that subset levels
+    can progress through the large parts of the model where the quantity does not change
+    (a level whose ``p0``-quantile falls on a tie cannot shrink):
+
+    * ``ttc``: ``ttc_margin`` (``gap - v dv``, scaled by its spread), not ``ttc - v``;
+    * ``btn``, ``a_req``, ``r157_impact_speed`` at 0 and ``ttr_true`` at +inf
+      (``FLAT_VALUES``: the constant-speed ego never reaches the cutter) where that value
+      is outside the constraint: the margin of the flat value (+10 s for ``ttr_true``)
+      plus ``softplus((gap - 3 s dv) / s_h)`` (> 0, so still outside), which ranks the flat
+      rows by how close the cutter is to being reached.
     """
     cons = region.constraints
     if not cons:
@@ -307,7 +347,10 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     region = region.bind(model)  # its model quantities (density_pct) use the model
 
     crit = [name for name in names if name in CRITICALITY_QUANTITIES]
-    other = [name for name in names if name not in CRITICALITY_QUANTITIES]
+    flat = any(c.name in FLAT_VALUES for c in cons)
+    extra = ["gap", "dv"] if flat or "ttc" in names else []
+    other = sorted({*(n for n in names if n not in CRITICALITY_QUANTITIES and n != "ttc"),
+                    *extra})
     with_ttr = "ttr_true" in crit  # the TTR scan is the costliest part: only when asked
 
     def quantities(z: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
@@ -317,22 +360,42 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
             q.update(criticality_quantities(params, region.lane_width, with_ttr=with_ttr))
         return params, q
 
+    def raw(q: dict[str, FloatArray], c: Any) -> FloatArray:
+        """The constraint's unscaled margin (the continuous one for ttc)."""
+        if c.name == "ttc":
+            return ttc_margin(q["gap"], q["dv"], c.op, float(c.value))
+        sgn = 1.0 if c.op in ("<", "<=") else -1.0
+        return sgn * (q[c.name] - float(c.value))
+
     if len(names) > 1 or not crit:
         # criticality regions: half the draws (each is a closed-loop simulation)
         _, q0 = quantities(model.sample_z(int(n_scale) // (2 if crit else 1), rng))
-        scale = {name: _margin_scale(q0[name]) for name in names}
+        scale = [_margin_scale(raw(q0, c)) for c in cons]
+        proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
+                       if extra else 1.0)
     else:  # one criticality quantity: its scale does not change the sets g <= b
-        scale = {names[0]: 1.0}
-    signs = [(c.name, 1.0 if c.op in ("<", "<=") else -1.0, float(c.value), c.op in "<>")
-             for c in cons]
+        scale = [1.0 for _ in cons]
+        proxy_scale = 1.0
+        if extra:  # the proxy's spread needs no simulation
+            x0 = model.params_matrix(model.sample(int(n_scale), rng))
+            q0 = region.quantities(x0, ["gap", "dv"])
+            proxy_scale = _margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
     tiny = float(np.finfo(np.float64).tiny)
 
-    def margin(q: dict[str, FloatArray], name: str, sgn: float, v: float,
-               strict: bool) -> FloatArray:
-        m = sgn * (q[name] - v) / scale[name]
+    def margin(q: dict[str, FloatArray], c: Any, s: float) -> FloatArray:
+        m = raw(q, c) / s
+        if c.name in FLAT_VALUES:
+            fv = FLAT_VALUES[c.name]
+            at_flat = q[c.name] == fv
+            sgn = 1.0 if c.op in ("<", "<=") else -1.0
+            base = sgn * ((_TTR_FLAT_STANDIN if math.isinf(fv) else fv) - float(c.value)) / s
+            outside = at_flat & ~OPERATORS[c.op](np.full(1, fv), float(c.value))[0]
+            if outside.any():
+                h = (q["gap"] - FLAT_PROXY_HORIZON * q["dv"]) / proxy_scale
+                m = np.where(outside, max(base, 0.0) + np.logaddexp(0.0, h), m)
         # a strict constraint excludes its threshold (discrete quantities such as ttr_true,
         # a multiple of the step, put mass on it): margin 0 counts as outside
-        return np.where(m == 0.0, tiny, m) if strict else m
+        return np.where(m == 0.0, tiny, m) if c.op in "<>" else m
 
     def g(z: FloatArray) -> FloatArray:
         out = np.full(z.shape[0], np.inf)
@@ -344,8 +407,9 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         if ok.size == 0:
             return out
         _, q = quantities(z[ok])
-        with np.errstate(invalid="ignore"):
-            m = np.max(np.stack([margin(q, *sig) for sig in signs]), axis=0)
+        with np.errstate(invalid="ignore", over="ignore"):
+            m = np.max(np.stack([margin(q, c, s) for c, s in zip(cons, scale, strict=True)]),
+                       axis=0)
         out[ok] = np.where(np.isnan(m), np.inf, m)
         return out
 

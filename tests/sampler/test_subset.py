@@ -187,3 +187,52 @@ def test_empty_region_ends_in_bounded_work(tno: CutInGMM) -> None:
     """gap < 5 and gap > 6: g never reaches 0; the level cap ends it with EmptyRegionError."""
     with pytest.raises(EmptyRegionError, match="did not reach the region"):
         sample(tno, ["gap<5", "gap>6"], 10, seed=0, method="subset")
+
+
+@pytest.mark.parametrize("op", ["<", "<=", ">", ">="])
+def test_ttc_margin_sign_is_membership_by_hand(op: str) -> None:
+    """``gap - c dv`` (``c dv - gap`` for > / >=): its sign is TTC membership for closing
+    (dv > 0), standing (dv = 0) and opening (dv < 0) cut-ins, on both sides of the
+    threshold and on it."""
+    from datasets.cutin_model import ttc_from_gap_dv
+    from sampler.constraints import OPERATORS
+    from sampler.subset import ttc_margin
+
+    c = 2.0
+    #            closing: ttc 1, 2 (threshold), 4 | standing | opening | gap <= 0
+    gap = np.array([10.0, 20.0, 40.0, 10.0, 10.0, 0.0, -5.0, -5.0, -5.0])
+    dv = np.array([10.0, 10.0, 10.0, 0.0, -3.0, 5.0, 5.0, 0.0, -1.0])
+    ttc = np.array([1.0, 2.0, 4.0, math.inf, math.inf, 0.0, -1.0, math.inf, math.inf])
+    np.testing.assert_array_equal(ttc_from_gap_dv(gap, dv), ttc)  # the hand values
+    inside = OPERATORS[op](ttc, c)
+    m = ttc_margin(gap, dv, op, c)
+    assert np.isfinite(m).all()
+    got = m < 0 if op in ("<", ">") else m <= 0
+    np.testing.assert_array_equal(got, inside)
+    # continuous in the closing part: the margin is gap - c dv there, by hand
+    sgn = 1.0 if op in ("<", "<=") else -1.0
+    np.testing.assert_allclose(m[:3], sgn * np.array([-10.0, 0.0, 20.0]))
+    # the non-closing rows are not all one value (ttc is +inf on all of them)
+    assert np.unique(m[3:5]).size == 2
+
+
+@pytest.mark.parametrize("cons", [["ttc<2"], ["ttc>=2.5", "gap<30"], ["btn>0.15"],
+                                  ["ttc<3", "btn>0.5"], ["ttr_true<2.8"]])
+def test_region_limit_state_is_the_region_and_not_flat(tno: CutInGMM,
+                                                       cons: list[str]) -> None:
+    """g <= 0 exactly on the region's rows; and g takes distinct values over the
+    physical rows where the quantities themselves are flat (ttc +inf, btn 0, ttr_true
+    +inf for every cut-in the constant-speed ego never reaches), so subset levels can
+    shrink there."""
+    from sampler.subset import region_limit_state
+
+    region = Region.from_constraints(cons, lane_width=tno.lane_width_)
+    z = tno.sample_z(6000, np.random.default_rng(3))
+    x = tno.params_matrix(tno.from_z(z))
+    g = region_limit_state(tno, region, np.random.default_rng(0))(z)
+    np.testing.assert_array_equal(g <= 0, region.contains(x))
+    fin = g[np.isfinite(g)]
+    assert fin.size == int(region.in_bounds(x).sum())  # finite on every physical row
+    # ttr_true is a multiple of its scan step where finite: ties there, not in the flat part
+    share = 0.7 if "ttr_true<2.8" in cons else 0.99
+    assert np.unique(fin).size >= share * fin.size
