@@ -225,7 +225,7 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
              n_per_level: int, alpha: float, inflate: float, p0: float, n_adapt: int,
              adapt_rounds: int, n_centres: int, nu: float, n_is: int, max_seconds: float,
              min_probability: float, deadline: float | None = None,
-             weighted_centres: bool = False) -> _Explored:
+             weighted_centres: bool = False, sub: SubsetResult | None = None) -> _Explored:
     if not 0.0 < alpha < 1.0:
         raise SamplerError(f"alpha: must be in (0, 1), got {alpha!r}")
     if n_is < 2 or n_adapt < 2 or not inflate > 0 or adapt_rounds < 0 or n_centres < 2:
@@ -236,10 +236,11 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
     base: ZDensity = model if stratum is None else stratum
     if stratum is not None:
         limit_state = _in_stratum(stratum, limit_state)
-    sub = subset_simulation(model, limit_state, seed, n_per_level=n_per_level, p0=p0,
-                            max_seconds=max(deadline - time.monotonic(), 1e-9),
-                            min_probability=min_probability,
-                            from_normal=None if stratum is None else stratum.from_normal)
+    if sub is None:
+        sub = subset_simulation(model, limit_state, seed, n_per_level=n_per_level, p0=p0,
+                                max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                min_probability=min_probability,
+                                from_normal=None if stratum is None else stratum.from_normal)
     pts = np.unique(sub.z, axis=0)
     d = model.n_features
     if pts.shape[0] < d + 2:
@@ -327,18 +328,35 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           inflate: float = 1.3, p0: float = 0.1, n_adapt: int = 1000,
                           adapt_rounds: int = 2, n_centres: int = 300, nu: float = 5.0,
                           max_seconds: float = 120.0, min_probability: float = 1e-14,
+                          n_probe: int = 200, rel_floor: float = 1e-3,
+                          adapt_share: float = 0.01,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
     x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
 
-    Every stratum gets its subset levels (``n_per_level``) and adaptation rounds; the
-    final importance draws, ``n_is`` in all, are allocated in proportion to the strata's
-    estimated contributions ``pi_s P_s`` from the last adaptation round (Neyman's
-    allocation when the per-draw CoV is the same), at least ``n_is_min`` each: a small
-    contribution judged from the adaptation still gets an unbiased estimate of its own.
-    A stratum whose subset levels go below ``min_probability`` without reaching A counts 0
-    (its bound ``pi_s min_probability`` is in the result). The estimate is unbiased given
-    the strata's proposals; its variance is ``sum pi_s^2 var_s``.
+    Budget by what each stratum's first levels reveal:
+
+    1. ``n_probe`` exact draws per stratum order the strata by their limit state's lower
+       decile (the strata nearest the region first; the probe draws count as evaluations
+       and do not enter the estimate);
+    2. in that order, each stratum's subset levels (``n_per_level``) run down to
+       ``max(min_probability, rel_floor * T / pi_s)``, ``T`` the sum of the contributions
+       ``pi_s P_s`` the levels of the strata before it found. A stratum cut there without
+       reaching A is bounded, not estimated: ``pi_s P_s(A) <= pi_s P_s(g <= b)``, its
+       levels' last probability (an estimate of an upper bound; below ``rel_floor`` of
+       the running total); its bound is reported (``neglected_upper``, per stratum
+       ``empty_upper`` and ``empty_reason``) and it counts 0;
+    3. adaptation rounds (``adapt_rounds`` of ``n_adapt``) only for the strata whose
+       levels' contribution is at least ``adapt_share`` of the total; the others keep the
+       kernel density on their final level (still unbiased, at most a share
+       ``adapt_share`` each of the variance budget);
+    4. the final importance draws, ``n_is`` in all, in proportion to the strata's
+       estimated contributions (last adaptation round, else the levels), at least
+       ``n_is_min`` each: every stratum that reached A gets an unbiased estimate of its
+       own.
+
+    The estimate is unbiased given the strata's proposals, up to the reported bounds of
+    the cut strata; its variance is ``sum pi_s^2 var_s``.
 
     Raises
     ------
@@ -354,47 +372,96 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
         raise SamplerError("stratified subset-is: no stratum (the model has no component)")
     if n_is_min < 2 or n_is < n_is_min:
         raise SamplerError("n_is_min must be >= 2 and n_is >= n_is_min")
-    runs: list[StratumRun] = []
-    explored: list[_Explored | None] = []
-    for i, st in enumerate(strata):
+    if n_probe < 0 or not 0.0 <= rel_floor < 1.0 or not 0.0 <= adapt_share <= 1.0:
+        raise SamplerError("n_probe >= 0, 0 <= rel_floor < 1, 0 <= adapt_share <= 1")
+    # 1. probes: the strata nearest the region first (so that T is known early)
+    near = np.zeros(len(strata))
+    n_probe_evals = [0] * len(strata)
+    if n_probe > 0:
+        for i, st in enumerate(strata):
+            rng_p = np.random.default_rng([int(seed) % (2**32), 11, i])
+            gp = np.asarray(_in_stratum(st, limit_state)(st.sample_z(int(n_probe), rng_p)))
+            n_probe_evals[i] = int(n_probe)
+            near[i] = float(np.quantile(np.where(np.isfinite(gp), gp, 1e300), 0.1))
+    order = sorted(range(len(strata)), key=lambda i: (near[i], -strata[i].mass))
+    # 2. subset levels, down to a floor relative to what the strata before found
+    runs: list[StratumRun | None] = [None] * len(strata)
+    subs: list[SubsetResult | None] = [None] * len(strata)
+    total = 0.0
+    for i in order:
+        st = strata[i]
         if time.monotonic() > deadline:
             raise SamplerError(f"stratified subset-is: stopped after max_seconds="
                                f"{max_seconds:g} s exploring stratum {i + 1} of {len(strata)} "
                                f"({st.label}); raise max_seconds")
+        floor = min_probability
+        if total > 0 and st.mass > 0:
+            floor = min(max(min_probability, rel_floor * total / st.mass), 0.5)
+        try:
+            sub = subset_simulation(model, _in_stratum(st, limit_state), _stratum_seed(seed, i),
+                                    n_per_level=n_per_level, p0=p0,
+                                    max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                    min_probability=floor, from_normal=st.from_normal)
+        except EmptyRegionError as exc:
+            why = str(exc).splitlines()[0]
+            if floor > min_probability:
+                why = (f"cut at {floor:.3g} = rel_floor x the running total / pi_s: "
+                       f"contribution below {rel_floor:g} of the strata before it ({why})")
+            runs[i] = StratumRun(st, None, None, int(exc.n_draws) + n_probe_evals[i],
+                                 float(exc.p_upper) if math.isfinite(exc.p_upper) else floor,
+                                 why)
+            continue
+        subs[i] = sub
+        total += st.mass * sub.probability
+    live = [i for i in range(len(strata)) if subs[i] is not None]
+    if not live:
+        done = [r for r in runs if r is not None]
+        raise EmptyRegionError(
+            f"stratified subset-is: the subset levels reached the region in none of the "
+            f"{len(strata)} strata", n_draws=sum(r.n_evaluations for r in done), n_hits=0,
+            p_upper=sum(r.stratum.mass * r.p_upper for r in done))
+    # 3. adaptation where the contribution is worth it
+    explored: dict[int, _Explored] = {}
+    for i in live:
+        st, sub = strata[i], subs[i]
+        assert sub is not None
+        big = total > 0 and st.mass * sub.probability >= adapt_share * total
         try:
             ex = _explore(model, limit_state, _stratum_seed(seed, i), stratum=st,
                           n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
-                          n_adapt=n_adapt, adapt_rounds=adapt_rounds, n_centres=n_centres,
-                          nu=nu, n_is=n_is, max_seconds=max_seconds,
+                          n_adapt=n_adapt, adapt_rounds=adapt_rounds if big else 0,
+                          n_centres=n_centres, nu=nu, n_is=n_is, max_seconds=max_seconds,
                           min_probability=min_probability, deadline=deadline,
-                          weighted_centres=True)
+                          weighted_centres=True, sub=sub)
         except EmptyRegionError as exc:
-            runs.append(StratumRun(st, None, None, int(exc.n_draws),
-                                   float(exc.p_upper) if math.isfinite(exc.p_upper)
-                                   else min_probability, str(exc).splitlines()[0]))
-            explored.append(None)
+            runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
+                                 sub.probability, str(exc).splitlines()[0])
             continue
-        runs.append(StratumRun(st, None, ex.sub, ex.sub.n_evaluations + ex.n_adapt))
-        explored.append(ex)
-    live = [i for i, ex in enumerate(explored) if ex is not None]
-    if not live:
+        explored[i] = ex
+        runs[i] = StratumRun(st, None, ex.sub,
+                             n_probe_evals[i] + ex.sub.n_evaluations + ex.n_adapt)
+    if not explored:
+        done = [r for r in runs if r is not None]
         raise EmptyRegionError(
-            f"stratified subset-is: the subset levels reached the region in none of the "
-            f"{len(strata)} strata", n_draws=sum(r.n_evaluations for r in runs), n_hits=0,
-            p_upper=sum(r.stratum.mass * r.p_upper for r in runs))
-    contrib = np.array([runs[i].stratum.mass * max(ex.pilot[0], 0.0)
-                        for i, ex in enumerate(explored) if ex is not None])
-    share = contrib / contrib.sum() if contrib.sum() > 0 else np.full(len(live), 1 / len(live))
-    for i, sh in zip(live, share, strict=True):
+            "stratified subset-is: no stratum's final subset level held enough distinct "
+            "points inside the region for an importance density; raise n_per_level",
+            n_draws=sum(r.n_evaluations for r in done), n_hits=0)
+    # 4. the final importance draws, by estimated contribution
+    keys = list(explored)
+    contrib = np.array([strata[i].mass * max(explored[i].pilot[0], 0.0) for i in keys])
+    share = contrib / contrib.sum() if contrib.sum() > 0 else np.full(len(keys), 1 / len(keys))
+    for i, sh in zip(keys, share, strict=True):
         ex_i = explored[i]
-        assert ex_i is not None
         stage = ImportanceStage(ex_i.base, ex_i.limit_state, ex_i.proposal, deadline,
                                 max_seconds)
         stage.add(max(int(n_is_min), round(n_is * float(sh))), ex_i.rng)
-        runs[i].stage = stage
+        run_i = runs[i]
+        assert run_i is not None
+        run_i.stage = stage
+    out = [r for r in runs if r is not None]
     if keep_runs is not None:
-        keep_runs.extend(runs)
-    return _stratified_result(runs, t0, inflate)
+        keep_runs.extend(out)
+    return _stratified_result(out, t0, inflate)
 
 
 def _stratum_seed(seed: int, i: int) -> int:
