@@ -328,8 +328,8 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           inflate: float = 1.3, p0: float = 0.1, n_adapt: int = 1000,
                           adapt_rounds: int = 2, n_centres: int = 300, nu: float = 5.0,
                           max_seconds: float = 120.0, min_probability: float = 1e-14,
-                          n_probe: int = 200, rel_floor: float = 1e-3,
-                          adapt_share: float = 0.01,
+                          n_probe: int = 200, rel_floor: float = 1e-2,
+                          adapt_share: float = 0.01, n_per_level_rest: int = 200,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
     x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
@@ -339,7 +339,8 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
     1. ``n_probe`` exact draws per stratum order the strata by their limit state's lower
        decile (the strata nearest the region first; the probe draws count as evaluations
        and do not enter the estimate);
-    2. in that order, each stratum's subset levels (``n_per_level``) run down to
+    2. in that order, each stratum's subset levels (``n_per_level``; ``n_per_level_rest``
+       once a stratum before it has reached A) run down to
        ``max(min_probability, rel_floor * T / pi_s)``, ``T`` the sum of the contributions
        ``pi_s P_s`` the levels of the strata before it found. A stratum cut there without
        reaching A is bounded, not estimated: ``pi_s P_s(A) <= pi_s P_s(g <= b)``, its
@@ -398,8 +399,11 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
         if total > 0 and st.mass > 0:
             floor = min(max(min_probability, rel_floor * total / st.mass), 0.5)
         try:
+            # once a stratum has reached A, the others' levels only have to show that
+            # they are negligible or find A for their kernel density: fewer points
             sub = subset_simulation(model, _in_stratum(st, limit_state), _stratum_seed(seed, i),
-                                    n_per_level=n_per_level, p0=p0,
+                                    n_per_level=n_per_level if total == 0 else n_per_level_rest,
+                                    p0=p0,
                                     max_seconds=max(deadline - time.monotonic(), 1e-9),
                                     min_probability=floor, from_normal=st.from_normal)
         except EmptyRegionError as exc:
@@ -557,8 +561,8 @@ class SubsetISSampler(Sampler):
                  inflate: float = 1.3, n_adapt: int = 1500, adapt_rounds: int = 2,
                  n_centres: int = 300, max_seconds: float = 120.0,
                  min_probability: float = 1e-14, ess_target: float = 0.25,
-                 n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 500,
-                 strat_n_adapt: int = 1000, strat_n_is_min: int = 300,
+                 n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 1000,
+                 strat_n_adapt: int = 1500, strat_n_is_min: int = 300,
                  strat_split_side: bool = True) -> None:
         if stratify not in ("auto", "always", "never"):
             raise SamplerError(f"stratify: expected auto, always or never, got {stratify!r}")
@@ -711,12 +715,17 @@ def _apportion(n: int, weights: FloatArray) -> NDArray[np.int64]:
     return out
 
 
-def _never(problem: Problem) -> bool:
-    return False
+def _several_strata(problem: Problem) -> bool:
+    """Stratify whenever the model has more than one stratum (measured in
+    ``docs/sampler.md``: with the continuous limit states and the budget by stratum, the
+    stratified run is within the targets on the single-mode regions too, and only it is
+    on the multi-mode ones)."""
+    model = problem.model
+    return int(np.count_nonzero(model.weights_ > 0)) > 1 or "p_y1" in model.features_
 
 
 #: whether ``stratify="auto"`` stratifies a problem
-STRATIFY_AUTO = _never
+STRATIFY_AUTO = _several_strata
 
 
 def rare_probability(model: CutInGMM, constraints: Any, seed: int, *,
