@@ -25,7 +25,8 @@ within 2 reported CoV of the reference; whether the mean lies inside the referen
 interval, and the share of single estimates that do.
 
 Methods: ``subset`` (plain subset simulation, 2,000 points per level), ``subset-is``
-(``sampler.rare`` defaults: ``stratify="auto"``), ``subset-is-plain`` (one subset-is on
+(``sampler.rare`` defaults: ``stratify="auto"``, which stratifies the TNO model),
+``subset-is-plain`` (one subset-is on
 the whole model, ``stratify="never"``), ``subset-is-strat`` (one per stratum of the model,
 component x cut-in side, ``stratify="always"``), ``auto``
 (``sample(model, constraints, 100, seed)``: its P(A and B); evaluations counted through

@@ -39,16 +39,20 @@ budget.
 **Stratified** (``stratified_importance``, ``SubsetISSampler(stratify="always")``): the
 model is a mixture, so ``P(A) = sum_s pi_s P_s(A)`` over its strata (``sampler.strata``:
 component x cut-in side, ``pi_s`` exact, ``P_s`` sampled exactly); one subset-is per
-stratum (500 points per level, two adaptation rounds of 1,000 whose resampled centres keep
-their multiplicity), the final ``n_is`` draws allocated in proportion to the strata's
-estimated contributions (at least ``n_is_min`` each), variance ``sum pi_s^2 var_s``; the
-samples are drawn from the strata in proportion to their estimated contributions, each
-stratum's by its own independence chains. A region's separate modes (sides, components)
-then no longer depend on one Markov chain or kernel density finding them all. A stratum
-whose subset levels do not reach A counts 0: correct when it holds less than
-``min_probability``, not when its limit state is flat there (``ttc`` is +inf for every
-non-closing cut-in, most of a component: measured in ``docs/sampler.md``). ``auto`` does
-not stratify (``STRATIFY_AUTO``; the measurements behind that are in the docs).
+stratum, budgeted by what its first levels reveal (strata probed and ordered nearest
+first; levels of 1,000 points for the first stratum that reaches A, 200 for the others,
+each cut at ``rel_floor`` (0.1 %) of the running total / ``pi_s`` with that bound reported;
+two adaptation rounds of 1,500 whose resampled centres keep their multiplicity, only for
+strata holding >= 1 % of the total), the final ``n_is`` draws allocated in proportion to
+the strata's estimated contributions (at least ``n_is_min`` each), variance
+``sum pi_s^2 var_s``; the samples are drawn from the strata in proportion to their
+estimated contributions, each stratum's by its own independence chains. A region's
+separate modes (sides, components) then no longer depend on one Markov chain or kernel
+density finding them all. The levels need a limit state that is not flat where the
+quantity is (``ttc`` +inf for every non-closing cut-in, ``btn`` 0 wherever the ego never
+reaches the cutter): ``region_limit_state`` gives continuous margins there. ``auto``
+stratifies whenever the model has more than one stratum (``STRATIFY_AUTO``; measured in
+``docs/sampler.md``).
 
 ``subset_importance(model, limit_state, seed)`` is the estimator as a function (any
 vectorised z-space limit state, ``sampler.subset.region_limit_state`` for a region);
@@ -323,12 +327,12 @@ class StratumRun:
 
 
 def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
-                          strata: list[Stratum] | None = None, n_per_level: int = 500,
+                          strata: list[Stratum] | None = None, n_per_level: int = 1000,
                           n_is: int = 4000, n_is_min: int = 300, alpha: float = 0.1,
-                          inflate: float = 1.3, p0: float = 0.1, n_adapt: int = 1000,
+                          inflate: float = 1.3, p0: float = 0.1, n_adapt: int = 1500,
                           adapt_rounds: int = 2, n_centres: int = 300, nu: float = 5.0,
                           max_seconds: float = 120.0, min_probability: float = 1e-14,
-                          n_probe: int = 200, rel_floor: float = 1e-2,
+                          n_probe: int = 200, rel_floor: float = 1e-3,
                           adapt_share: float = 0.01, n_per_level_rest: int = 200,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
@@ -427,8 +431,9 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
     # 3. adaptation where the contribution is worth it
     explored: dict[int, _Explored] = {}
     for i in live:
-        st, sub = strata[i], subs[i]
-        assert sub is not None
+        st, found = strata[i], subs[i]
+        assert found is not None
+        sub = found
         big = total > 0 and st.mass * sub.probability >= adapt_share * total
         try:
             ex = _explore(model, limit_state, _stratum_seed(seed, i), stratum=st,
