@@ -106,7 +106,9 @@ class RareResult:
     ess_weights : float
         Kish's effective sample size of the weights of the final draws inside A.
     z, log_w : ndarray
-        The importance draws inside A (z-space) and their ``log p - log q``, in draw order.
+        The importance draws inside A (z-space) and their ``log p - log q``, in draw order
+        (stratified: ``log(pi_s p_s / q_s * n_is / n_s)``, on the same scale: in both,
+        ``P = sum(exp(log_w)) / n_is``).
     subset : SubsetResult
         The stage that found the region (its own estimate included).
     proposal : dict
@@ -512,8 +514,9 @@ def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> Rar
             info["n_is"] = r.stage.n
             info["n_hits"] = int(inside.sum())
             zs.append(r.stage.z[inside])
-            # weights relative to the whole model: pi_s p_s / q_s per draw of q_s, divided
-            # by that stratum's draw count (each stratum's draws estimate pi_s P_s)
+            # weights relative to the whole model, on the plain result's scale:
+            # P = sum(exp(log_w)) / n_is as there (each stratum's draws estimate pi_s P_s:
+            # pi_s p_s / q_s / n_s per draw, times the total n_is)
             lws.append(lw[inside] + math.log(pi) - math.log(r.stage.n))
             if r.sub is not None and (best is None or pi * ps > best[0]):
                 best = (pi * ps, r.sub)
@@ -522,7 +525,7 @@ def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> Rar
         raise EmptyRegionError("stratified subset-is: no importance draw fell inside the "
                                "region in any stratum; raise n_is",
                                n_draws=n_sub + n_adapt + n_is, n_hits=0)
-    lw_all = np.concatenate(lws)
+    lw_all = np.concatenate(lws) + math.log(max(n_is, 1))
     return RareResult(
         probability=p, cov=math.sqrt(var) / p, n_evaluations=n_sub + n_adapt + n_is,
         n_subset_evaluations=n_sub, n_adapt=n_adapt, n_is=n_is, n_hits=n_hits,
@@ -720,13 +723,21 @@ def _apportion(n: int, weights: FloatArray) -> NDArray[np.int64]:
     return out
 
 
+#: ``auto`` stratifies models with 2 .. this many strata (a fitted scenario model: K <= 8
+#: components x 2 sides); not e.g. the pooled bootstrap replicates (B x K components),
+#: where one subset-is per stratum would cost hundreds of runs
+MAX_AUTO_STRATA = 16
+
+
 def _several_strata(problem: Problem) -> bool:
-    """Stratify whenever the model has more than one stratum (measured in
+    """Stratify whenever the model has 2 .. ``MAX_AUTO_STRATA`` strata (measured in
     ``docs/sampler.md``: with the continuous limit states and the budget by stratum, the
     stratified run is within the targets on the single-mode regions too, and only it is
     on the multi-mode ones)."""
     model = problem.model
-    return int(np.count_nonzero(model.weights_ > 0)) > 1 or "p_y1" in model.features_
+    k = int(np.count_nonzero(model.weights_ > 0))
+    n = k * (2 if "p_y1" in model.features_ else 1)
+    return 2 <= n <= MAX_AUTO_STRATA
 
 
 #: whether ``stratify="auto"`` stratifies a problem

@@ -62,6 +62,8 @@ def _check_repetitions(model: CutInGMM, a: np.ndarray, b: float, p_true: float) 
     for r in res:
         assert (r.z @ a >= b).all()  # every importance draw kept lies inside A
         assert r.n_evaluations == r.n_subset_evaluations + r.n_adapt + r.n_is
+        # the plain result's scale (sampler.bootstrap reads P as sum(exp(log_w)) / n_is)
+        assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
 
 
 @pytest.mark.parametrize("p_true", [1e-4, 1e-5, 1e-6, 1e-7])
@@ -299,6 +301,8 @@ def test_two_mode_union_needs_the_strata() -> None:
     for r in strat:
         assert ((r.z[:, 0] >= b1) | (r.z[:, 0] <= -b2)).all()
         assert r.n_evaluations == r.n_subset_evaluations + r.n_adapt + r.n_is
+        # the plain result's scale (sampler.bootstrap reads P as sum(exp(log_w)) / n_is)
+        assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
         shares = {s["stratum"]: s["contribution"] / r.probability
                   for s in r.proposal["strata"]}
         assert sum(shares.values()) == pytest.approx(1.0)
@@ -381,6 +385,13 @@ def test_auto_stratifies_mixtures(tno: CutInGMM) -> None:
     assert SubsetISSampler()._stratified(Problem(tno, region, use_envelope=False))
     one = CutInGMM.from_dict({**_two_component().to_dict(), "weights": [1.0, 0.0]})
     assert not SubsetISSampler()._stratified(Problem(one, region, use_envelope=False))
+    # 9 components x 2 sides = 18 strata > MAX_AUTO_STRATA (e.g. pooled bootstrap
+    # replicates): plain
+    many = CutInGMM.from_dict({**tno.to_dict(), "weights": [1.0 / 9] * 9,
+                               "means": [tno.means_[k % 3].tolist() for k in range(9)],
+                               "covariances": [tno.covariances_[k % 3].tolist()
+                                               for k in range(9)]})
+    assert not SubsetISSampler()._stratified(Problem(many, region, use_envelope=False))
     assert not SubsetISSampler(stratify="never")._stratified(
         Problem(tno, region, use_envelope=False))
 
