@@ -23,6 +23,7 @@ from app.db.models import DatasetRow, ModelRow
 from app.errors import ServiceUnavailable
 from app.jobs.executors import ChunkExecutor, make_executor
 from app.jobs.runner import CatalogueRunner
+from app.schemas import DEFAULT_CONSTRAINTS
 from app.settings import Settings
 
 log = logging.getLogger("scengen.app")
@@ -168,6 +169,26 @@ class ServiceContext:
 
     def runner(self) -> CatalogueRunner:
         return CatalogueRunner(self.db, self.data_dir, self.executor)
+
+    def warm_start(self) -> threading.Thread:
+        """In the background: start the executor's workers and load their kernels
+        (``ChunkExecutor.warm``), and estimate what a first request with the default model
+        and region would (P(B) and the model interval are memoised on the model object,
+        ``sampler.memo``). Failures are logged only. Returns the thread of the latter."""
+        self.executor.warm()
+
+        def run() -> None:
+            try:
+                if self.default_model_id is None:
+                    return
+                model = self.model(self.default_model_id)
+                domain.sample(model, domain.parse_constraints(DEFAULT_CONSTRAINTS), 1, 0)
+            except Exception as exc:
+                log.warning("warming the default model's region failed: %s", exc)
+
+        thread = threading.Thread(target=run, name="scengen-warm-region", daemon=True)
+        thread.start()
+        return thread
 
     def close(self) -> None:
         with self._lock:

@@ -55,7 +55,8 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     ctx = ServiceContext.open(settings)
     jobs = JobManager(ctx.runner())
     jobs.start(resume=settings.resume_jobs)
-    ctx.executor.warm()  # in the background: the first request need not start the workers
+    if settings.warm_start:
+        ctx.warm_start()  # in the background: the first request need not wait
     app.state.ctx = ctx
     app.state.jobs = jobs
     log.info("scengen %s ready (database %s, default model %s)", __version__,

@@ -20,6 +20,9 @@ __all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord
 #: (JavaScript's Number.MAX_SAFE_INTEGER), so a seed survives any client unchanged
 SEED_MAX = 2**53 - 1
 
+#: the region a request gets when it names none
+DEFAULT_CONSTRAINTS: tuple[str, ...] = ("ttc<3",)
+
 SamplerName = Literal["auto", "rejection", "mcmc", "subset", "subset-is"]
 
 
@@ -40,7 +43,7 @@ class SamplingRequest(BaseModel):
 
     model: str = Field(default="default", description="model id ('default': the embedded "
                        "data's model)")
-    constraints: list[str] = Field(default_factory=lambda: ["ttc<3"],
+    constraints: list[str] = Field(default_factory=lambda: list(DEFAULT_CONSTRAINTS),
                                    description="risk-region constraints, e.g. 'ttc<3'")
     seed: int = Field(default=0, ge=0, le=SEED_MAX, description="random seed of the sampler")
     sampler: SamplerName = Field(default="auto", description="rejection, mcmc, or auto "

@@ -102,6 +102,10 @@ class Settings(BaseSettings):
     resume_jobs: bool = Field(
         default=True, description="resume unfinished catalogue jobs when the service starts"
     )
+    warm_start: bool = Field(
+        default=True, description="at start, in the background: start the pool's workers "
+        "and load their compiled kernels, and estimate the default model's P(B) and the "
+        "model interval of the default region, so the first request does not wait for them")
 
     @property
     def resolved_database_url(self) -> str:

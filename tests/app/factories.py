@@ -35,7 +35,8 @@ TEST_MODEL_OPTIONS: dict[str, Any] = {"n_init": 1, "cv_folds": 2, "n_report_samp
 def make_settings(data_dir: Path, **overrides: Any) -> Settings:
     """Settings for a private store under ``data_dir`` (SQLite unless database_url given)."""
     values: dict[str, Any] = {"data_dir": data_dir, "local_workers": 0, "chunk_size": 5,
-                              "default_model_options": TEST_MODEL_OPTIONS}
+                              "default_model_options": TEST_MODEL_OPTIONS,
+                              "warm_start": False}
     values.update(overrides)
     return Settings(**values)
 

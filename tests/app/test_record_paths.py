@@ -157,3 +157,23 @@ def test_warm_loads_the_kernels_in_the_pool_workers_and_inline_does_nothing() ->
         assert pool.map(loaded_kernels, [None]) == [0]
     finally:
         pool.close()
+
+
+def test_warm_start_estimates_the_default_regions_model_figures(model_cache_dir: Path,
+                                                                tmp_path: Path) -> None:
+    from app.context import ServiceContext
+    from tests.app.factories import copy_model_cache, make_settings
+
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    ctx = ServiceContext.open(make_settings(data_dir))
+    try:
+        assert ctx.default_model_id is not None
+        model = ctx.model(ctx.default_model_id)
+        assert "_scengen_memo" not in model.__dict__  # nothing estimated yet
+        ctx.warm_start().join(timeout=300)
+        kinds = {key[0] for key in model.__dict__["_scengen_memo"]}
+        assert model.bootstrap_  # the default model has replicates (n_bootstrap 100) ...
+        assert {"p_bounds", "pooled_interval"} <= kinds  # ... so its model interval too
+    finally:
+        ctx.close()
