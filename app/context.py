@@ -184,7 +184,7 @@ class ServiceContext:
                 model = self.model(self.default_model_id)
                 domain.sample(model, domain.parse_constraints(DEFAULT_CONSTRAINTS), 1, 0)
             except Exception as exc:
-                log.warning("warming the default model's region failed: %s", exc)
+                log.warning("warming the default model's region failed: %r", exc)
 
         thread = threading.Thread(target=run, name="scengen-warm-region", daemon=True)
         thread.start()

@@ -163,7 +163,7 @@ class FuturesExecutor:
             try:
                 self._warm_workers()
             except Exception as exc:
-                log.warning("warming the %s workers failed: %s", self.name, exc)
+                log.warning("warming the %s workers failed: %r", self.name, exc)
 
         thread = threading.Thread(target=run, name=f"scengen-warm-{self.name}", daemon=True)
         thread.start()
