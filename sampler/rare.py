@@ -42,6 +42,8 @@ component x cut-in side, ``pi_s`` exact, ``P_s`` sampled exactly); one subset-is
 stratum, budgeted by what its first levels reveal (strata probed and ordered nearest
 first; levels of 1,000 points for the first stratum that reaches A, 200 for the others,
 each cut at ``rel_floor`` (0.1 %) of the running total / ``pi_s`` with that bound reported;
+a later stratum that holds more than all before it, i.e. was ordered wrongly, gets its
+levels re-run with 1,000 points;
 two adaptation rounds of 1,500 whose resampled centres keep their multiplicity, only for
 strata holding >= 1 % of the total), the final ``n_is`` draws allocated in proportion to
 the strata's estimated contributions (at least ``n_is_min`` each), variance
@@ -336,6 +338,7 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           max_seconds: float = 120.0, min_probability: float = 1e-14,
                           n_probe: int = 200, rel_floor: float = 1e-3,
                           adapt_share: float = 0.01, n_per_level_rest: int = 200,
+                          weighted_centres: bool = True,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
     x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
@@ -348,15 +351,21 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
     2. in that order, each stratum's subset levels (``n_per_level``; ``n_per_level_rest``
        once a stratum before it has reached A) run down to
        ``max(min_probability, rel_floor * T / pi_s)``, ``T`` the sum of the contributions
-       ``pi_s P_s`` the levels of the strata before it found. A stratum cut there without
-       reaching A is bounded, not estimated: ``pi_s P_s(A) <= pi_s P_s(g <= b)``, its
-       levels' last probability (an estimate of an upper bound; below ``rel_floor`` of
-       the running total); its bound is reported (``neglected_upper``, per stratum
-       ``empty_upper`` and ``empty_reason``) and it counts 0;
+       ``pi_s P_s`` the levels of the strata before it found. A stratum run with
+       ``n_per_level_rest`` whose levels find more than ``T`` (the probes ordered it
+       wrongly: it is the main one) is re-run with ``n_per_level`` (its kernel density's
+       centres come from its final level; the discarded levels are counted). A stratum
+       cut at the floor without reaching A is bounded, not estimated:
+       ``pi_s P_s(A) <= pi_s P_s(g <= b)``, its levels' last probability (an estimate of an
+       upper bound; below ``rel_floor`` of the running total); its bound is reported
+       (``neglected_upper``, per stratum ``empty_upper`` and ``empty_reason``) and it
+       counts 0;
     3. adaptation rounds (``adapt_rounds`` of ``n_adapt``) only for the strata whose
        levels' contribution is at least ``adapt_share`` of the total; the others keep the
        kernel density on their final level (still unbiased, at most a share
-       ``adapt_share`` each of the variance budget);
+       ``adapt_share`` each of the variance budget); with ``weighted_centres`` the
+       resampled centres keep their multiplicity (else the distinct ones, as the plain
+       run; measured against each other in ``docs/sampler.md``);
     4. the final importance draws, ``n_is`` in all, in proportion to the strata's
        estimated contributions (last adaptation round, else the levels), at least
        ``n_is_min`` each: every stratum that reached A gets an unbiased estimate of its
@@ -404,6 +413,7 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
         floor = min_probability
         if total > 0 and st.mass > 0:
             floor = min(max(min_probability, rel_floor * total / st.mass), 0.5)
+        rerun_evals = 0
         try:
             # once a stratum has reached A, the others' levels only have to show that
             # they are negligible or find A for their kernel density: fewer points
@@ -412,16 +422,30 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                                     p0=p0,
                                     max_seconds=max(deadline - time.monotonic(), 1e-9),
                                     min_probability=floor, from_normal=st.from_normal)
+            if total > 0 and n_per_level_rest < n_per_level and st.mass * sub.probability > total:
+                # the probes ordered it wrongly: it holds more than all strata before it,
+                # so its kernel density needs the full levels (from n_per_level_rest points
+                # the final level has too few distinct centres: measured 0.47 and 4e-8 of
+                # the reference on `ttc<3 & btn>0.5`, seeds 1014 and 1026)
+                rerun_evals = sub.n_evaluations
+                sub = subset_simulation(model, _in_stratum(st, limit_state),
+                                        _stratum_seed(seed, i), n_per_level=n_per_level,
+                                        p0=p0,
+                                        max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                        min_probability=min_probability,
+                                        from_normal=st.from_normal)
         except EmptyRegionError as exc:
             why = str(exc).splitlines()[0]
-            if floor > min_probability:
+            if floor > min_probability and not rerun_evals:
                 why = (f"cut at {floor:.3g} = rel_floor x the running total / pi_s: "
                        f"contribution below {rel_floor:g} of the strata before it ({why})")
-            runs[i] = StratumRun(st, None, None, int(exc.n_draws) + n_probe_evals[i],
+            runs[i] = StratumRun(st, None, None,
+                                 int(exc.n_draws) + n_probe_evals[i] + rerun_evals,
                                  float(exc.p_upper) if math.isfinite(exc.p_upper) else floor,
                                  why)
             continue
         subs[i] = sub
+        n_probe_evals[i] += rerun_evals  # counted with the probes (not in sub)
         total += st.mass * sub.probability
     live = [i for i in range(len(strata)) if subs[i] is not None]
     if not live:
@@ -443,7 +467,7 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           n_adapt=n_adapt, adapt_rounds=adapt_rounds if big else 0,
                           n_centres=n_centres, nu=nu, n_is=n_is, max_seconds=max_seconds,
                           min_probability=min_probability, deadline=deadline,
-                          weighted_centres=True, sub=sub)
+                          weighted_centres=weighted_centres, sub=sub)
         except EmptyRegionError as exc:
             runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
                                  sub.probability, str(exc).splitlines()[0])
@@ -571,7 +595,7 @@ class SubsetISSampler(Sampler):
                  min_probability: float = 1e-14, ess_target: float = 0.25,
                  n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 1000,
                  strat_n_adapt: int = 1500, strat_n_is_min: int = 300,
-                 strat_split_side: bool = True) -> None:
+                 strat_split_side: bool = True, strat_weighted_centres: bool = True) -> None:
         if stratify not in ("auto", "always", "never"):
             raise SamplerError(f"stratify: expected auto, always or never, got {stratify!r}")
         self.n_per_level = int(n_per_level)
@@ -590,6 +614,7 @@ class SubsetISSampler(Sampler):
         self.strat_n_adapt = int(strat_n_adapt)
         self.strat_n_is_min = int(strat_n_is_min)
         self.strat_split_side = bool(strat_split_side)
+        self.strat_weighted_centres = bool(strat_weighted_centres)
 
     def _limit_state(self, problem: Problem, rng: np.random.Generator) -> LimitState:
         limit_state = region_limit_state(problem.model, problem.region, rng)
@@ -624,7 +649,9 @@ class SubsetISSampler(Sampler):
                                                             self.strat_split_side),
                                          n_per_level=self.strat_per_level,
                                          n_adapt=self.strat_n_adapt,
-                                         n_is_min=self.strat_n_is_min, keep_runs=keep_runs,
+                                         n_is_min=self.strat_n_is_min,
+                                         weighted_centres=self.strat_weighted_centres,
+                                         keep_runs=keep_runs,
                                          **common)  # type: ignore[arg-type]
         return subset_importance(problem.model, limit_state, seed,
                                  n_per_level=self.n_per_level, n_adapt=self.n_adapt,

@@ -95,7 +95,10 @@ def test_halfspace_under_the_mixture_matches_closed_form() -> None:
 def test_real_model_against_brute_force(tno: CutInGMM) -> None:
     """ttc < 3 and btn > 0.3 (the simulated criticality) on the TNO model, P(A and B) ~
     5e-5: the reference is naive Monte Carlo restricted to the exact half-space envelope
-    of ttc < 3 (P(S) exact), thousands of hits."""
+    of ttc < 3 (P(S) exact), thousands of hits. Measured: 27 of seeds 0-29 inside 2 CoV
+    (the same with and without the re-run of a late main stratum; seeds 0-9 alone: 9 and
+    7), so 30 seeds and >= 80 % (fails with probability ~3 % at a true rate of 90 %; 10
+    seeds and >= 90 % failed with probability 26 %)."""
     region = Region.from_constraints(["ttc<3", "btn>0.3"], lane_width=tno.lane_width_)
     ref_problem = Problem(tno, region)
     assert ref_problem.envelope is not None
@@ -106,14 +109,14 @@ def test_real_model_against_brute_force(tno: CutInGMM) -> None:
     p_ref = ref_problem.envelope.mass * k / n_ref
     rel_ref = 1.0 / math.sqrt(k)
     est, cov = [], []
-    for seed in range(10):
+    for seed in range(30):
         r = rare_probability(tno, region, seed)
         est.append(r.probability)
         cov.append(r.cov)
     e, c = np.array(est), np.array(cov)
     assert 1e-5 < p_ref < 2e-4
     tol = np.sqrt((c * e) ** 2 + (rel_ref * p_ref) ** 2)
-    assert np.mean(np.abs(e - p_ref) <= 2.0 * tol) >= 0.9
+    assert np.mean(np.abs(e - p_ref) <= 2.0 * tol) >= 0.8
     assert abs(e.mean() - p_ref) <= 3.0 * e.std(ddof=1) / math.sqrt(len(e)) + 3 * rel_ref * p_ref
 
 
@@ -376,6 +379,40 @@ def test_negligible_strata_are_cut_and_bounded() -> None:
         return sum(s["n_evaluations"] for s in res.proposal["strata"] if s["stratum"] in other)
 
     assert cost(r) < 0.75 * cost(full)  # they stop well before min_probability
+
+
+def test_dominant_stratum_found_late_gets_full_levels() -> None:
+    """A = {z0 >= b} at 1e-5 lies almost wholly (99.998 %, closed form) under the second
+    component's ``p_y1 > 0`` stratum. Without probes the strata run by mass, so the first
+    component's left stratum (mass 0.35) goes first and reaches A with a tiny contribution;
+    the dominant stratum then starts with ``n_per_level_rest`` points per level. Holding
+    more than every stratum before it, its levels are re-run with ``n_per_level`` (its
+    kernel density's centres come from them; on the TNO model 200-point levels there gave
+    0.47 and 4e-8 of the reference), the discarded levels still counted."""
+    model = _sided_two_component()
+    sd = np.sqrt(model.covariances_[:, 0, 0])
+    mu = model.means_[:, 0]
+    w = model.weights_
+    b = float(brentq(lambda t: float(np.sum(w * stats.norm.sf((t - mu) / sd))) - 1e-5,
+                     0.0, 40.0))
+    assert w[1] * stats.norm.sf((b - mu[1]) / sd[1]) > 0.999e-5
+
+    def g(z: np.ndarray) -> np.ndarray:
+        return np.asarray(b - z[:, 0], dtype=np.float64)
+
+    for seed in range(2):
+        r = stratified_importance(model, g, seed, n_probe=0, n_per_level=1000,
+                                  n_per_level_rest=200)
+        strata = r.proposal["strata"]
+        assert strata[0]["stratum"] == "component 0, p_y1 > 0"
+        assert strata[0]["contribution"] > 0  # it reached A first: the others start at 200
+        main = max(strata, key=lambda s: s["contribution"])
+        assert main["stratum"] == "component 1, p_y1 > 0"
+        assert r.subset.n_per_level == 1000  # the dominant stratum's levels, re-run
+        # its evaluations: 200-point levels (discarded) + 1000-point levels + the rest
+        assert main["n_evaluations"] > 1000 * main["subset_levels"] + 200
+        assert r.n_evaluations == r.n_subset_evaluations + r.n_adapt + r.n_is
+        assert abs(r.probability - 1e-5) <= 2.0 * r.cov * r.probability
 
 
 def test_auto_stratifies_mixtures(tno: CutInGMM) -> None:
