@@ -24,48 +24,28 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
-from typing import Any
+from pathlib import Path
 
 import numpy as np
-import pandas as pd
 from scipy import stats
 
-from sampler.bootstrap import INTERVALS, bootstrap_ci, bootstrap_fit, pooled_interval
-from sampler.constraints import Region
-from sampler.model import CutInGMM
-from tests.sampler.factories import base_params
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the checkout this script is in (and its tests/)
 
-TRUE_W = np.array([0.6, 0.4])
-TRUE_MU = np.array([[30.0, -1.0], [16.0, 2.0]])
-TRUE_SD = np.array([[6.0, 1.5], [4.0, 1.0]])
+from sampler.bootstrap import INTERVALS, bootstrap_ci, bootstrap_fit, pooled_interval  # noqa: E402
+from sampler.constraints import Region  # noqa: E402
+from sampler.model import CutInGMM  # noqa: E402
+from tests.sampler.factories import base_params, closed_form, draw_table, true_p  # noqa: E402
+
 CUTS = ((9.0, False), (3.0, True))
 
 
-def true_p(cut: float) -> float:
-    return float(sum(w * stats.norm.cdf((cut - m[0]) / s[0])
-                     for w, m, s in zip(TRUE_W, TRUE_MU, TRUE_SD, strict=True)))
-
-
-def draw_table(n: int, rng: np.random.Generator) -> pd.DataFrame:
-    lab = rng.random(n) < TRUE_W[1]
-    mu, sd = TRUE_MU[lab.astype(int)], TRUE_SD[lab.astype(int)]
-    x = mu + sd * rng.standard_normal((n, 2))
-    return pd.DataFrame({"gap": x[:, 0], "dv": x[:, 1]})
-
-
-def closed_form(weights: Any, means: Any, covs: Any, z_cut: float) -> float:
-    """P(z_gap < z_cut) of a mixture in z (gap is feature 0)."""
-    return float(sum(w * stats.norm.cdf((z_cut - m[0]) / math.sqrt(c[0][0]))
-                     for w, m, c in zip(weights, means, covs, strict=True)))
-
-
 def wilson(k: int, n: int) -> tuple[float, float]:
-    z = 1.959964
-    p = k / n
-    c = (p + z * z / (2 * n)) / (1 + z * z / n)
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return c - h, c + h
+    """Wilson 95 % interval of a coverage share k / n (scipy's binomtest)."""
+    ci = stats.binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return float(ci.low), float(ci.high)
 
 
 def main() -> None:

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from datasets.cutin_model import PARAM_NAMES
 
@@ -41,3 +45,30 @@ def base_params(**overrides: float) -> dict[str, float]:
          "dv": 2.0, "gap": 12.0}
     p.update(overrides)
     return p
+
+
+# A known mixture of (gap, dv) that the bootstrap-coverage test and benchmark draw their data
+# sets from: P(gap < c) under it and under any fitted mixture are closed forms.
+TRUE_W = np.array([0.6, 0.4])
+TRUE_MU = np.array([[30.0, -1.0], [16.0, 2.0]])
+TRUE_SD = np.array([[6.0, 1.5], [4.0, 1.0]])
+
+
+def true_p(cut: float) -> float:
+    """P(gap < cut) under the known mixture."""
+    return float(sum(w * stats.norm.cdf((cut - m[0]) / s[0])
+                     for w, m, s in zip(TRUE_W, TRUE_MU, TRUE_SD, strict=True)))
+
+
+def draw_table(n: int, rng: np.random.Generator) -> pd.DataFrame:
+    """n rows (gap, dv) drawn from the known mixture."""
+    lab = rng.random(n) < TRUE_W[1]
+    mu, sd = TRUE_MU[lab.astype(int)], TRUE_SD[lab.astype(int)]
+    x = mu + sd * rng.standard_normal((n, 2))
+    return pd.DataFrame({"gap": x[:, 0], "dv": x[:, 1]})
+
+
+def closed_form(weights: Any, means: Any, covs: Any, z_cut: float) -> float:
+    """P(z_gap < z_cut) of a mixture in z (gap is feature 0): a half-space."""
+    return float(sum(w * stats.norm.cdf((z_cut - m[0]) / math.sqrt(c[0][0]))
+                     for w, m, c in zip(weights, means, covs, strict=True)))

@@ -7,7 +7,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 from scipy import stats
 
@@ -25,30 +24,13 @@ from sampler.exposure import (
 )
 from sampler.model import CutInGMM
 from sampler.sampleset import sample
-from tests.sampler.factories import base_params, synthetic_parameter_table
-
-# the known mixture of (gap, dv) the coverage test draws its data sets from
-TRUE_W = np.array([0.6, 0.4])
-TRUE_MU = np.array([[30.0, -1.0], [16.0, 2.0]])
-TRUE_SD = np.array([[6.0, 1.5], [4.0, 1.0]])
-
-
-def _true_p(cut: float) -> float:
-    return float(sum(w * stats.norm.cdf((cut - m[0]) / s[0])
-                     for w, m, s in zip(TRUE_W, TRUE_MU, TRUE_SD, strict=True)))
-
-
-def _draw_table(n: int, rng: np.random.Generator) -> pd.DataFrame:
-    lab = rng.random(n) < TRUE_W[1]
-    mu, sd = TRUE_MU[lab.astype(int)], TRUE_SD[lab.astype(int)]
-    x = mu + sd * rng.standard_normal((n, 2))
-    return pd.DataFrame({"gap": x[:, 0], "dv": x[:, 1]})
-
-
-def _closed_form(weights: object, means: object, covs: object, z_cut: float) -> float:
-    """P(z_gap < z_cut) of a mixture in z (gap is feature 0): a half-space."""
-    return float(sum(w * stats.norm.cdf((z_cut - m[0]) / math.sqrt(c[0][0]))
-                     for w, m, c in zip(weights, means, covs, strict=True)))  # type: ignore[call-overload]
+from tests.sampler.factories import (
+    base_params,
+    closed_form,
+    draw_table,
+    synthetic_parameter_table,
+    true_p,
+)
 
 
 @pytest.mark.slow
@@ -63,10 +45,10 @@ def test_bootstrap_interval_covers_the_true_probability() -> None:
     fixed = {k: v for k, v in base_params().items() if k not in ("gap", "dv")}
     covered: dict[float, list[bool]] = {9.0: [], 3.0: []}
     width: dict[float, list[float]] = {9.0: [], 3.0: []}
-    assert 0.01 < _true_p(9.0) < 0.03 and 1e-4 < _true_p(3.0) < 5e-4
+    assert 0.01 < true_p(9.0) < 0.03 and 1e-4 < true_p(3.0) < 5e-4
     for rep in range(20):
         rng = np.random.default_rng(1000 + rep)
-        table = _draw_table(250, rng)
+        table = draw_table(250, rng)
         model = CutInGMM(features=["gap", "dv"], transforms={"gap": "identity"},
                          k_range=(2, 2), n_init=2, n_report_samples=200, cv_folds=2,
                          fixed=fixed).fit(table)
@@ -76,16 +58,16 @@ def test_bootstrap_interval_covers_the_true_probability() -> None:
             region = Region.from_constraints([f"gap<{cut}"], physical_bounds=False)
             iv = pooled_interval(model, region, rep, rare=rare)
             lo, hi = iv["ci"]
-            covered[cut].append(lo <= _true_p(cut) <= hi)
+            covered[cut].append(lo <= true_p(cut) <= hi)
             width[cut].append(hi / lo)
             assert iv["lower_resolved"] and iv["upper_resolved"], iv
             z_cut = (cut - tr.loc) / tr.scale
-            exact = np.array([_closed_form(w, m, c, z_cut) for w, m, c in
+            exact = np.array([closed_form(w, m, c, z_cut) for w, m, c in
                               zip(boot["weights"], boot["means"], boot["covariances"],
                                   strict=True)])
             err = np.abs(np.log(np.asarray(iv["replicates"]) / exact))
             assert np.median(err) < 0.15, (cut, rep, np.median(err))
-            fit_exact = _closed_form(model.weights_, model.means_, model.covariances_, z_cut)
+            fit_exact = closed_form(model.weights_, model.means_, model.covariances_, z_cut)
             assert iv["fitted"] == pytest.approx(fit_exact, rel=0.3)
     # nominal 95 %; percentile bootstrap intervals of tail probabilities from 250 rows
     # undercover a little (docs/sampler.md: 90-92 % over 40 other data sets with B = 100,
@@ -101,7 +83,7 @@ def test_pooled_interval_reweights_exactly_when_the_replicates_agree() -> None:
     """Hand-made case: every replicate equals the fitted mixture, so every weight
     p_b / q is 1 and each replicate's P(A) is the pooled estimate itself (a single value;
     the interval is a point), with the full effective sample size."""
-    table = _draw_table(300, np.random.default_rng(5))
+    table = draw_table(300, np.random.default_rng(5))
     fixed = {k: v for k, v in base_params().items() if k not in ("gap", "dv")}
     model = CutInGMM(features=["gap", "dv"], transforms={"gap": "identity"},
                      k_range=(2, 2), n_init=1, n_report_samples=200, cv_folds=2,
@@ -304,7 +286,7 @@ def test_per_replicate_rare_estimates_match_the_closed_form() -> None:
     """``per_replicate``: each replicate's P(gap < 3 m) by its own subset-is run equals its
     closed form (a half-space in z) within the runs' noise."""
     fixed = {k: v for k, v in base_params().items() if k not in ("gap", "dv")}
-    table = _draw_table(250, np.random.default_rng(1000))
+    table = draw_table(250, np.random.default_rng(1000))
     model = CutInGMM(features=["gap", "dv"], transforms={"gap": "identity"},
                      k_range=(2, 2), n_init=2, n_report_samples=200, cv_folds=2,
                      fixed=fixed).fit(table)
@@ -313,7 +295,7 @@ def test_per_replicate_rare_estimates_match_the_closed_form() -> None:
     iv = pooled_interval(model, region, 0, rare=True, per_replicate=True, min_ess=1e12)
     assert iv["n_per_replicate"] == 4
     tr = model.transforms_[0]
-    exact = [_closed_form(w, m, c, (3.0 - tr.loc) / tr.scale) for w, m, c in
+    exact = [closed_form(w, m, c, (3.0 - tr.loc) / tr.scale) for w, m, c in
              zip(boot["weights"], boot["means"], boot["covariances"], strict=True)]
     assert iv["replicates"] == pytest.approx(exact, rel=0.3)
     assert pooled_interval(model, region, 0, rare=True, per_replicate=True,
