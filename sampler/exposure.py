@@ -258,13 +258,9 @@ def model_interval(model: Any, region: Any, *, rare: bool, n_plain: int = 8192,
     key = ("pooled_interval", region, bool(rare), int(n_plain), float(confidence),
            bool(per_replicate), boot.get("seed"), boot.get("n_boot"),
            len(boot.get("weights", ())))
-    # the per-replicate runs plain (unstratified): measured on btn>0.7 with the TNO model,
-    # stratified runs left the lower end unresolved (51 replicates refined, 55 s) where
-    # plain ones resolve it (docs/sampler.md)
     found = memoised(model, key, lambda: pooled_interval(
         model, region, MODEL_SEED, rare=rare, n_plain=n_plain, confidence=confidence,
-        per_replicate=per_replicate,
-        subset={"stratify": "never"} if per_replicate else None))
+        per_replicate=per_replicate))
     out = copy.deepcopy(found)
     if out["ci"][0] == 0.0 and out.get("lower_resolved", True):
         out["note"] = ("lower end 0: more than the tail share of the replicates put P(A) "

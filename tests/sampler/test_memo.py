@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-import pytest
 
 from sampler import memo
 from sampler.bootstrap import bootstrap_fit
@@ -76,26 +75,3 @@ def test_model_interval_is_memoised_per_region_and_replicate_set() -> None:
     r3 = region_report(model, ss1)
     assert r3["model_interval"]["n_boot"] == 12
     assert r3["model_interval"]["replicates"] != r2["model_interval"]["replicates"]
-
-
-def test_model_interval_refines_replicates_with_plain_subset_is(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    # per-replicate runs unstratified (stratified ones left btn>0.7's lower end unresolved
-    # on the TNO model; docs/sampler.md); the pooled stage keeps its own default
-    import sampler.bootstrap as bootstrap
-    from sampler.constraints import Region
-    from sampler.exposure import model_interval
-
-    seen: list[object] = []
-
-    def fake(model: object, region: object, seed: int, **kwargs: object) -> dict[str, object]:
-        seen.append(kwargs.get("subset"))
-        return {"ci": [1e-9, 1e-6], "lower_resolved": True}
-
-    monkeypatch.setattr(bootstrap, "pooled_interval", fake)
-    model, table = _model()
-    bootstrap_fit(model, table, 4, seed=0)
-    region = Region.from_constraints(["ttc<8"])
-    model_interval(model, region, rare=True, per_replicate=True)
-    model_interval(model, region, rare=True)
-    assert seen == [{"stratify": "never"}, None]

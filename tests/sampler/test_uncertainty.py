@@ -282,9 +282,21 @@ def test_bootstrap_ci_methods_hand_computed() -> None:
         bootstrap_ci(r, 40.0, "bca")
 
 
-def test_per_replicate_rare_estimates_match_the_closed_form() -> None:
+def test_per_replicate_rare_estimates_match_the_closed_form(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """``per_replicate``: each replicate's P(gap < 3 m) by its own subset-is run equals its
-    closed form (a half-space in z) within the runs' noise."""
+    closed form (a half-space in z) within the runs' noise; the runs are plain subset-is
+    unless the caller's settings say otherwise."""
+    import sampler.rare as rare
+
+    asked: list[object] = []
+    real = rare.rare_probability
+
+    def spy(*args: object, **kwargs: object) -> object:
+        asked.append(kwargs.get("stratify"))
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(rare, "rare_probability", spy)
     fixed = {k: v for k, v in base_params().items() if k not in ("gap", "dv")}
     table = draw_table(250, np.random.default_rng(1000))
     model = CutInGMM(features=["gap", "dv"], transforms={"gap": "identity"},
@@ -294,12 +306,16 @@ def test_per_replicate_rare_estimates_match_the_closed_form() -> None:
     region = Region.from_constraints(["gap<3"], physical_bounds=False)
     iv = pooled_interval(model, region, 0, rare=True, per_replicate=True, min_ess=1e12)
     assert iv["n_per_replicate"] == 4
+    assert asked[-4:] == ["never"] * 4  # the replicates' own runs
     tr = model.transforms_[0]
     exact = [closed_form(w, m, c, (3.0 - tr.loc) / tr.scale) for w, m, c in
              zip(boot["weights"], boot["means"], boot["covariances"], strict=True)]
     assert iv["replicates"] == pytest.approx(exact, rel=0.3)
     assert pooled_interval(model, region, 0, rare=True, per_replicate=True,
                            min_ess=1e12) == iv  # seeded
+    pooled_interval(model, region, 0, rare=True, per_replicate=True, min_ess=1e12,
+                    subset={"stratify": "always"})
+    assert asked[-4:] == ["always"] * 4
 
 
 def test_report_text_says_what_a_zero_lower_end_means() -> None:
