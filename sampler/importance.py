@@ -16,7 +16,8 @@ from sampler._exceptions import EmptyRegionError, SamplerError
 from sampler.problem import FloatArray
 from sampler.subset import LimitState
 
-__all__ = ["ImportanceStage", "KernelProposal", "ZDensity", "independence_chain", "kish_ess"]
+__all__ = ["ImportanceStage", "KernelMixture", "KernelProposal", "Proposal", "ZDensity",
+           "independence_chain", "kish_ess"]
 
 
 class ZDensity(Protocol):
@@ -29,6 +30,17 @@ class ZDensity(Protocol):
     def log_density_z(self, z: FloatArray) -> FloatArray: ...
 
     def sample_z(self, n: int, rng: np.random.Generator) -> FloatArray: ...
+
+
+class Proposal(Protocol):
+    """An importance density in z-space: ``KernelProposal`` or ``KernelMixture``."""
+
+    alpha: float
+    k: int
+
+    def log_q(self, z: FloatArray) -> FloatArray: ...
+
+    def draw(self, n: int, rng: np.random.Generator) -> FloatArray: ...
 
 
 class KernelProposal:
@@ -79,12 +91,56 @@ class KernelProposal:
                           dtype=np.float64)
 
     def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
-        d = self.centres.shape[1]
         from_model = rng.random(n) < self.alpha
+        out = self.draw_g(n, rng)
+        n_m = int(from_model.sum())
+        if n_m:
+            out[from_model] = self.model.sample_z(n_m, rng)
+        return np.asarray(out, dtype=np.float64)
+
+    def draw_g(self, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` draws of the kernel mixture ``g`` alone."""
+        d = self.centres.shape[1]
         idx = rng.integers(0, self.k, size=n)
         e = rng.standard_normal((n, d)) @ self.chol.T
         scale = np.sqrt(self.nu / rng.chisquare(self.nu, size=n))
-        out = self.centres[idx] + e * scale[:, None]
+        return np.asarray(self.centres[idx] + e * scale[:, None], dtype=np.float64)
+
+
+class KernelMixture:
+    """``q = (1 - alpha) sum_j s_j g_j + alpha p``: several kernel densities ``g_j`` (the
+    kernel mixtures of ``KernelProposal`` objects, each with its own centres and bandwidth;
+    their own ``alpha`` is not used) in fixed shares ``s_j`` (normalised) beside the model
+    ``p`` with share ``alpha`` (weights ``p / q <= 1 / alpha`` as there)."""
+
+    def __init__(self, model: ZDensity, parts: list[KernelProposal], shares: list[float],
+                 alpha: float) -> None:
+        s = np.asarray(shares, dtype=np.float64)
+        self.model = model
+        self.parts = parts
+        self.shares = s / s.sum()
+        self.alpha = float(alpha)
+        self.k = sum(p.k for p in parts)
+        self.centres = np.concatenate([p.centres for p in parts], axis=0)
+
+    def log_g(self, z: FloatArray) -> FloatArray:
+        return np.asarray(logsumexp(np.stack([math.log(s) + p.log_g(z) for p, s
+                                              in zip(self.parts, self.shares, strict=True)]),
+                                    axis=0), dtype=np.float64)
+
+    def log_q(self, z: FloatArray) -> FloatArray:
+        return np.asarray(np.logaddexp(math.log(self.alpha) + self.model.log_density_z(z),
+                                       math.log1p(-self.alpha) + self.log_g(z)),
+                          dtype=np.float64)
+
+    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
+        from_model = rng.random(n) < self.alpha
+        part = rng.choice(len(self.parts), size=n, p=self.shares)
+        out = np.empty((n, self.centres.shape[1]))
+        for j, p in enumerate(self.parts):
+            sel = part == j
+            if sel.any():
+                out[sel] = p.draw_g(int(sel.sum()), rng)
         n_m = int(from_model.sum())
         if n_m:
             out[from_model] = self.model.sample_z(n_m, rng)
@@ -94,7 +150,7 @@ class KernelProposal:
 class ImportanceStage:
     """Draws of the defensive proposal q with their limit state: P(A) and its CoV so far."""
 
-    def __init__(self, model: ZDensity, limit_state: LimitState, proposal: KernelProposal,
+    def __init__(self, model: ZDensity, limit_state: LimitState, proposal: Proposal,
                  deadline: float, max_seconds: float) -> None:
         self.model = model
         self.limit_state = limit_state
@@ -178,3 +234,4 @@ def independence_chain(log_w: FloatArray, rng: np.random.Generator, n_chains: in
                 accepted[c] += 1
             states[t, c] = s
     return states, accepted / max(steps, 1)
+

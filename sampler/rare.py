@@ -74,7 +74,9 @@ from numpy.typing import NDArray
 from sampler._exceptions import EmptyRegionError, SamplerError
 from sampler.importance import (
     ImportanceStage,
+    KernelMixture,
     KernelProposal,
+    Proposal,
     ZDensity,
     independence_chain,
     kish_ess,
@@ -154,7 +156,7 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
                       nu: float = 5.0,
                       max_seconds: float = 120.0, min_probability: float = 1e-14,
                       keep_stage: list[ImportanceStage] | None = None,
-                      stratum: Stratum | None = None) -> RareResult:
+                      stratum: Stratum | None = None, level_share: float = 0.0) -> RareResult:
     """Estimate ``P(limit_state(z) <= 0)`` under the model: subset levels, then importance
     sampling from a defensive kernel density (module docstring).
 
@@ -191,7 +193,8 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
     ex = _explore(model, limit_state, seed, stratum=stratum, n_per_level=n_per_level,
                   alpha=alpha, inflate=inflate, p0=p0, n_adapt=n_adapt,
                   adapt_rounds=adapt_rounds, n_centres=n_centres, nu=nu, n_is=n_is,
-                  max_seconds=max_seconds, min_probability=min_probability)
+                  max_seconds=max_seconds, min_probability=min_probability,
+                  level_share=level_share)
     stage = ImportanceStage(ex.base, ex.limit_state, ex.proposal, ex.deadline, max_seconds)
     stage.add(int(n_is), ex.rng)
     if keep_stage is not None:
@@ -206,7 +209,7 @@ class _Explored:
     base: ZDensity
     limit_state: LimitState
     sub: SubsetResult
-    proposal: KernelProposal
+    proposal: Proposal
     n_adapt: int
     rng: np.random.Generator
     deadline: float
@@ -233,7 +236,8 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
              n_per_level: int, alpha: float, inflate: float, p0: float, n_adapt: int,
              adapt_rounds: int, n_centres: int, nu: float, n_is: int, max_seconds: float,
              min_probability: float, deadline: float | None = None,
-             weighted_centres: bool = False, sub: SubsetResult | None = None) -> _Explored:
+             weighted_centres: bool = False, sub: SubsetResult | None = None,
+             level_share: float = 0.0) -> _Explored:
     if not 0.0 < alpha < 1.0:
         raise SamplerError(f"alpha: must be in (0, 1), got {alpha!r}")
     if n_is < 2 or n_adapt < 2 or not inflate > 0 or adapt_rounds < 0 or n_centres < 2:
@@ -257,7 +261,9 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
             "the region, too few to fit an importance density; raise n_per_level",
             n_draws=sub.n_evaluations, n_hits=int(pts.shape[0]), p_upper=sub.probability)
     rng = np.random.default_rng([int(seed) % (2**32), 1])
-    proposal = KernelProposal(base, pts, inflate, alpha, nu)
+    first = KernelProposal(base, pts, inflate, alpha, nu)
+    proposal: Proposal = first
+    rounds: list[KernelProposal] = [first]
     n_adapt_evals = 0
     pilot = (sub.probability, sub.cov)
     for _ in range(adapt_rounds):
@@ -278,12 +284,18 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
             # the previous q under-covered, whose draws carry large weights, gets more
             # kernels), the bandwidth from the distinct ones; else the distinct centres
             if weighted_centres:
-                proposal = KernelProposal(base, zi[pick], inflate, alpha, nu,
-                                          shape=zi[pick],
-                                          n_bandwidth=int(np.unique(pick).size))
+                nxt = KernelProposal(base, zi[pick], inflate, alpha, nu, shape=zi[pick],
+                                     n_bandwidth=int(np.unique(pick).size))
             else:
-                proposal = KernelProposal(base, zi[np.unique(pick)], inflate, alpha, nu,
-                                          shape=zi[pick])
+                nxt = KernelProposal(base, zi[np.unique(pick)], inflate, alpha, nu,
+                                     shape=zi[pick])
+            rounds.append(nxt)
+            proposal = nxt
+    if level_share > 0 and len(rounds) > 1:
+        # the kernel density on the subset levels' final points keeps a share: the
+        # adaptation's resampling can lose a part of A that the levels found
+        proposal = KernelMixture(base, [rounds[-1], rounds[0]],
+                                 [1.0 - level_share, level_share], alpha)
     return _Explored(base, limit_state, sub, proposal, n_adapt_evals, rng, deadline, pilot)
 
 
@@ -338,7 +350,7 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           max_seconds: float = 120.0, min_probability: float = 1e-14,
                           n_probe: int = 200, rel_floor: float = 1e-3,
                           adapt_share: float = 0.01, n_per_level_rest: int = 200,
-                          weighted_centres: bool = True,
+                          weighted_centres: bool = True, level_share: float = 0.0,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
     x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
@@ -467,7 +479,8 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           n_adapt=n_adapt, adapt_rounds=adapt_rounds if big else 0,
                           n_centres=n_centres, nu=nu, n_is=n_is, max_seconds=max_seconds,
                           min_probability=min_probability, deadline=deadline,
-                          weighted_centres=weighted_centres, sub=sub)
+                          weighted_centres=weighted_centres, sub=sub,
+                          level_share=level_share)
         except EmptyRegionError as exc:
             runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
                                  sub.probability, str(exc).splitlines()[0])
@@ -595,7 +608,8 @@ class SubsetISSampler(Sampler):
                  min_probability: float = 1e-14, ess_target: float = 0.25,
                  n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 1000,
                  strat_n_adapt: int = 1500, strat_n_is_min: int = 300,
-                 strat_split_side: bool = True, strat_weighted_centres: bool = True) -> None:
+                 strat_split_side: bool = True, strat_weighted_centres: bool = True,
+                 level_share: float = 0.0) -> None:
         if stratify not in ("auto", "always", "never"):
             raise SamplerError(f"stratify: expected auto, always or never, got {stratify!r}")
         self.n_per_level = int(n_per_level)
@@ -615,6 +629,9 @@ class SubsetISSampler(Sampler):
         self.strat_n_is_min = int(strat_n_is_min)
         self.strat_split_side = bool(strat_split_side)
         self.strat_weighted_centres = bool(strat_weighted_centres)
+        if not 0.0 <= level_share < 1.0:
+            raise SamplerError(f"level_share: must be in [0, 1), got {level_share!r}")
+        self.level_share = float(level_share)
 
     def _limit_state(self, problem: Problem, rng: np.random.Generator) -> LimitState:
         limit_state = region_limit_state(problem.model, problem.region, rng)
@@ -642,7 +659,8 @@ class SubsetISSampler(Sampler):
         seed = int(rng.integers(0, 2**31 - 1))
         common = {"n_is": self.n_is, "alpha": self.alpha, "inflate": self.inflate,
                   "adapt_rounds": self.adapt_rounds, "n_centres": self.n_centres,
-                  "max_seconds": self.max_seconds, "min_probability": self.min_probability}
+                  "max_seconds": self.max_seconds, "min_probability": self.min_probability,
+                  "level_share": self.level_share}
         if self._stratified(problem):
             return stratified_importance(problem.model, limit_state, seed,
                                          strata=make_strata(problem.model,
