@@ -16,13 +16,17 @@ Silverman's bandwidth factor squared times ``inflate**2``:
 
 1. subset simulation with ``n_per_level`` points per level; its final level's samples
    inside A are the first centres;
-2. adaptation (``adapt_rounds``, default 1): ``n_adapt`` draws of that q; those inside A,
+2. adaptation (``adapt_rounds``, default 2): ``n_adapt`` draws of that q; those inside A,
    resampled by their weights (so they follow the model restricted to A rather than the
    subset chains' coverage of it), are the centres of the next q;
 3. ``n_is`` draws of the final q give the estimate and its CoV (sample standard error /
-   estimate). Only this stage's draws enter the estimate (its proposal is fixed given the
-   earlier stages, so the estimate is unbiased); every limit-state evaluation of all
-   three stages is counted in ``n_evaluations``.
+   estimate); with ``level_share`` > 0 the final q's kernel part is a ``KernelMixture``
+   of the adapted kernel density and, in that share, the one on the subset levels' final
+   points (the adaptation's resampling can lose a part of A the levels found; off by
+   default, measured in ``docs/sampler.md``). Only this stage's draws enter the
+   estimate (its proposal is fixed given the earlier stages, so the estimate is
+   unbiased); every limit-state evaluation of all three stages is counted in
+   ``n_evaluations``.
 
 With g close to the model restricted to A the per-draw squared CoV is about
 ``alpha / (1 - alpha)`` whatever P(A) is; measured figures are in ``docs/sampler.md``.
@@ -181,6 +185,9 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
     stratum : Stratum, optional
         Estimate under this stratum of the model (``sampler.strata``: one component,
         optionally one side) instead of the whole model: ``P_s(A)``.
+    level_share : float
+        Share of the final kernel density kept on the subset levels' final points, in
+        [0, 1) (0: the adapted one alone; used only after adaptation rounds).
 
     Raises
     ------
@@ -240,6 +247,8 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
              level_share: float = 0.0) -> _Explored:
     if not 0.0 < alpha < 1.0:
         raise SamplerError(f"alpha: must be in (0, 1), got {alpha!r}")
+    if not 0.0 <= level_share < 1.0:
+        raise SamplerError(f"level_share: must be in [0, 1), got {level_share!r}")
     if n_is < 2 or n_adapt < 2 or not inflate > 0 or adapt_rounds < 0 or n_centres < 2:
         raise SamplerError("n_is and n_adapt must be >= 2, inflate > 0, adapt_rounds >= 0, "
                            "n_centres >= 2")
@@ -377,7 +386,8 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
        kernel density on their final level (still unbiased, at most a share
        ``adapt_share`` each of the variance budget); with ``weighted_centres`` the
        resampled centres keep their multiplicity (else the distinct ones, as the plain
-       run; measured against each other in ``docs/sampler.md``);
+       run; measured against each other in ``docs/sampler.md``); ``level_share`` as in
+       ``subset_importance``;
     4. the final importance draws, ``n_is`` in all, in proportion to the strata's
        estimated contributions (last adaptation round, else the levels), at least
        ``n_is_min`` each: every stratum that reached A gets an unbiased estimate of its
@@ -598,6 +608,8 @@ class SubsetISSampler(Sampler):
     strat_per_level, strat_n_adapt, strat_n_is_min :
         The stratified run's ``n_per_level``, ``n_adapt`` and ``n_is_min``
         (``stratified_importance``); ``n_is`` is shared.
+    level_share : float
+        See ``subset_importance`` (both paths; per stratum in the stratified one).
     """
 
     name = "subset-is"

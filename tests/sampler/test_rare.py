@@ -240,6 +240,8 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
     assert abs(est.mean() - p_true) <= 3.0 * est.std(ddof=1) / math.sqrt(REPS)
     with pytest.raises(SamplerError, match="level_share"):
         SubsetISSampler(level_share=1.0)
+    with pytest.raises(SamplerError, match="level_share"):
+        subset_importance(model, g, 0, level_share=-0.1)
 
 
 def test_sample_with_subset_is_deterministic_and_inside(tno: CutInGMM) -> None:
