@@ -22,8 +22,9 @@ Silverman's bandwidth factor squared times ``inflate**2``:
 3. ``n_is`` draws of the final q give the estimate and its CoV (sample standard error /
    estimate); with ``level_share`` > 0 the final q's kernel part is a ``KernelMixture``
    of the adapted kernel density and, in that share, the one on the subset levels' final
-   points (the adaptation's resampling can lose a part of A the levels found; off by
-   default, measured in ``docs/sampler.md``). Only this stage's draws enter the
+   points (the adaptation's resampling can lose a part of A the levels found and then
+   meets it only through rare heavy weights; 0.3 by default, measured in
+   ``docs/sampler.md``). Only this stage's draws enter the
    estimate (its proposal is fixed given the earlier stages, so the estimate is
    unbiased); every limit-state evaluation of all three stages is counted in
    ``n_evaluations``.
@@ -160,7 +161,7 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
                       nu: float = 5.0,
                       max_seconds: float = 120.0, min_probability: float = 1e-14,
                       keep_stage: list[ImportanceStage] | None = None,
-                      stratum: Stratum | None = None, level_share: float = 0.0) -> RareResult:
+                      stratum: Stratum | None = None, level_share: float = 0.3) -> RareResult:
     """Estimate ``P(limit_state(z) <= 0)`` under the model: subset levels, then importance
     sampling from a defensive kernel density (module docstring).
 
@@ -187,7 +188,8 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
         optionally one side) instead of the whole model: ``P_s(A)``.
     level_share : float
         Share of the final kernel density kept on the subset levels' final points, in
-        [0, 1) (0: the adapted one alone; used only after adaptation rounds).
+        [0, 1) (0: the adapted one alone; used only after adaptation rounds; default 0.3,
+        measured in ``docs/sampler.md``).
 
     Raises
     ------
@@ -244,7 +246,7 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
              adapt_rounds: int, n_centres: int, nu: float, n_is: int, max_seconds: float,
              min_probability: float, deadline: float | None = None,
              weighted_centres: bool = False, sub: SubsetResult | None = None,
-             level_share: float = 0.0) -> _Explored:
+             level_share: float = 0.3) -> _Explored:
     if not 0.0 < alpha < 1.0:
         raise SamplerError(f"alpha: must be in (0, 1), got {alpha!r}")
     if not 0.0 <= level_share < 1.0:
@@ -359,7 +361,7 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           max_seconds: float = 120.0, min_probability: float = 1e-14,
                           n_probe: int = 200, rel_floor: float = 1e-3,
                           adapt_share: float = 0.01, n_per_level_rest: int = 200,
-                          weighted_centres: bool = True, level_share: float = 0.0,
+                          weighted_centres: bool = True, level_share: float = 0.3,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.strata``: component
     x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
@@ -621,7 +623,7 @@ class SubsetISSampler(Sampler):
                  n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 1000,
                  strat_n_adapt: int = 1500, strat_n_is_min: int = 300,
                  strat_split_side: bool = True, strat_weighted_centres: bool = True,
-                 level_share: float = 0.0) -> None:
+                 level_share: float = 0.3) -> None:
         if stratify not in ("auto", "always", "never"):
             raise SamplerError(f"stratify: expected auto, always or never, got {stratify!r}")
         self.n_per_level = int(n_per_level)

@@ -212,9 +212,10 @@ def test_kernel_mixture_by_hand_and_normalised() -> None:
 
 
 def test_level_share_keeps_the_levels_kernel_density() -> None:
-    """level_share > 0: the final proposal is the adapted kernel density and the one on
-    the subset levels' final points in those shares; the estimate stays unbiased (25
-    seeds on a half-space at 1e-5, closed form); bad values are refused."""
+    """level_share > 0 (default 0.3): the final proposal is the adapted kernel density and
+    the one on the subset levels' final points in those shares (0: the adapted one alone);
+    the estimate stays unbiased (25 seeds on a half-space at 1e-5, closed form); bad
+    values are refused."""
     model = _two_component()
     a = np.zeros(model.n_features)
     a[0] = 1.0
@@ -232,8 +233,9 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
     assert isinstance(q, KernelMixture)
     np.testing.assert_allclose(q.shares, [0.7, 0.3])
     plain: list[ImportanceStage] = []
-    subset_importance(model, g, 0, keep_stage=plain)
+    subset_importance(model, g, 0, keep_stage=plain, level_share=0.0)
     assert isinstance(plain[0].proposal, KernelProposal)
+    assert SubsetISSampler().level_share == 0.3  # the default (measured in docs/sampler.md)
     est = np.array([r.probability for r in res])
     cov = np.array([r.cov for r in res])
     assert np.mean(np.abs(est - p_true) <= 2.0 * cov * est) >= 0.9
