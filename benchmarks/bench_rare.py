@@ -74,6 +74,8 @@ REGIONS: list[tuple[list[str], float, str]] = [
     # standalone (not inside ttc<3) at ~1e-5: naive references need --naive 1e7
     (["btn>0.4"], 1e-5, "naive"),
     (["ttr_true<2"], 1e-5, "naive"),
+    # the careful driver cannot prevent it (~1e-8): needs --envelope 6e7 (~300 hits)
+    (["ttc<3", "btn>=1"], 1e-8, "envelope"),
 ]
 
 _COUNT = {"rows": 0}
