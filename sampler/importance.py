@@ -43,7 +43,33 @@ class Proposal(Protocol):
     def draw(self, n: int, rng: np.random.Generator) -> FloatArray: ...
 
 
-class KernelProposal:
+class _Defensive:
+    """``q = (1 - alpha) g + alpha p`` given ``g`` (``log_g``, ``draw_g``) and ``p``."""
+
+    model: ZDensity
+    alpha: float
+
+    def log_g(self, z: FloatArray) -> FloatArray:
+        raise NotImplementedError
+
+    def draw_g(self, n: int, rng: np.random.Generator) -> FloatArray:
+        raise NotImplementedError
+
+    def log_q(self, z: FloatArray) -> FloatArray:
+        return np.asarray(np.logaddexp(math.log(self.alpha) + self.model.log_density_z(z),
+                                       math.log1p(-self.alpha) + self.log_g(z)),
+                          dtype=np.float64)
+
+    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
+        from_model = rng.random(n) < self.alpha
+        out = self.draw_g(n, rng)
+        n_m = int(from_model.sum())
+        if n_m:
+            out[from_model] = self.model.sample_z(n_m, rng)
+        return np.asarray(out, dtype=np.float64)
+
+
+class KernelProposal(_Defensive):
     """Defensive kernel density ``q = (1 - alpha) g + alpha p`` in the model's z-space.
 
     ``g`` is an equal mixture of multivariate Student-t kernels (``nu`` degrees of freedom:
@@ -85,19 +111,6 @@ class KernelProposal:
         return np.asarray(self._log_norm + logsumexp(
             -0.5 * (self.nu + d) * np.log1p(d2 / self.nu), axis=1), dtype=np.float64)
 
-    def log_q(self, z: FloatArray) -> FloatArray:
-        return np.asarray(np.logaddexp(math.log(self.alpha) + self.model.log_density_z(z),
-                                       math.log1p(-self.alpha) + self.log_g(z)),
-                          dtype=np.float64)
-
-    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
-        from_model = rng.random(n) < self.alpha
-        out = self.draw_g(n, rng)
-        n_m = int(from_model.sum())
-        if n_m:
-            out[from_model] = self.model.sample_z(n_m, rng)
-        return np.asarray(out, dtype=np.float64)
-
     def draw_g(self, n: int, rng: np.random.Generator) -> FloatArray:
         """``n`` draws of the kernel mixture ``g`` alone."""
         d = self.centres.shape[1]
@@ -107,7 +120,7 @@ class KernelProposal:
         return np.asarray(self.centres[idx] + e * scale[:, None], dtype=np.float64)
 
 
-class KernelMixture:
+class KernelMixture(_Defensive):
     """``q = (1 - alpha) sum_j s_j g_j + alpha p``: several kernel densities ``g_j`` (the
     kernel mixtures of ``KernelProposal`` objects, each with its own centres and bandwidth;
     their own ``alpha`` is not used) in fixed shares ``s_j`` (normalised) beside the model
@@ -128,23 +141,14 @@ class KernelMixture:
                                               in zip(self.parts, self.shares, strict=True)]),
                                     axis=0), dtype=np.float64)
 
-    def log_q(self, z: FloatArray) -> FloatArray:
-        return np.asarray(np.logaddexp(math.log(self.alpha) + self.model.log_density_z(z),
-                                       math.log1p(-self.alpha) + self.log_g(z)),
-                          dtype=np.float64)
-
-    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
-        from_model = rng.random(n) < self.alpha
+    def draw_g(self, n: int, rng: np.random.Generator) -> FloatArray:
         part = rng.choice(len(self.parts), size=n, p=self.shares)
         out = np.empty((n, self.centres.shape[1]))
         for j, p in enumerate(self.parts):
             sel = part == j
             if sel.any():
                 out[sel] = p.draw_g(int(sel.sum()), rng)
-        n_m = int(from_model.sum())
-        if n_m:
-            out[from_model] = self.model.sample_z(n_m, rng)
-        return np.asarray(out, dtype=np.float64)
+        return out
 
 
 class ImportanceStage:
