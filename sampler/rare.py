@@ -273,8 +273,7 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
             n_draws=sub.n_evaluations, n_hits=int(pts.shape[0]), p_upper=sub.probability)
     rng = np.random.default_rng([int(seed) % (2**32), 1])
     first = KernelProposal(base, pts, inflate, alpha, nu)
-    proposal: Proposal = first
-    rounds: list[KernelProposal] = [first]
+    proposal = first
     n_adapt_evals = 0
     pilot = (sub.probability, sub.cov)
     for _ in range(adapt_rounds):
@@ -295,19 +294,23 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
             # the previous q under-covered, whose draws carry large weights, gets more
             # kernels), the bandwidth from the distinct ones; else the distinct centres
             if weighted_centres:
-                nxt = KernelProposal(base, zi[pick], inflate, alpha, nu, shape=zi[pick],
-                                     n_bandwidth=int(np.unique(pick).size))
+                proposal = KernelProposal(base, zi[pick], inflate, alpha, nu, shape=zi[pick],
+                                          n_bandwidth=int(np.unique(pick).size))
             else:
-                nxt = KernelProposal(base, zi[np.unique(pick)], inflate, alpha, nu,
-                                     shape=zi[pick])
-            rounds.append(nxt)
-            proposal = nxt
-    if level_share > 0 and len(rounds) > 1:
+                proposal = KernelProposal(base, zi[np.unique(pick)], inflate, alpha, nu,
+                                          shape=zi[pick])
+    final: Proposal = proposal
+    if level_share > 0 and proposal is not first:
         # the kernel density on the subset levels' final points keeps a share: the
         # adaptation's resampling can lose a part of A that the levels found
-        proposal = KernelMixture(base, [rounds[-1], rounds[0]],
-                                 [1.0 - level_share, level_share], alpha)
-    return _Explored(base, limit_state, sub, proposal, n_adapt_evals, rng, deadline, pilot)
+        final = KernelMixture(base, [proposal, first], [1.0 - level_share, level_share],
+                              alpha)
+    return _Explored(base, limit_state, sub, final, n_adapt_evals, rng, deadline, pilot)
+
+
+def _level_share(prop: Proposal) -> float:
+    """The share of the subset levels' kernel density in a final proposal (0 without)."""
+    return float(prop.shares[1]) if isinstance(prop, KernelMixture) else 0.0
 
 
 def _result(stage: ImportanceStage, sub: SubsetResult, t0: float, n_adapt: int,
@@ -328,6 +331,7 @@ def _result(stage: ImportanceStage, sub: SubsetResult, t0: float, n_adapt: int,
         ess_weights=kish_ess(lw[inside]), z=stage.z[inside], log_w=lw[inside], subset=sub,
         proposal={"kind": "defensive-kernel-density", "centres": prop.k,
                   "alpha": prop.alpha, "inflate": inflate,
+                  "level_share": _level_share(prop),
                   "centres_from": ("importance draws inside A resampled by weight"
                                    if n_adapt else "final subset level")},
         seconds=time.monotonic() - t0)
@@ -561,6 +565,7 @@ def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> Rar
             inside = np.isfinite(lw)
             n_hits += int(inside.sum())
             info["n_is"] = r.stage.n
+            info["level_share"] = _level_share(r.stage.proposal)
             info["n_hits"] = int(inside.sum())
             zs.append(r.stage.z[inside])
             # weights relative to the whole model, on the plain result's scale:

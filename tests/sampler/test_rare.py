@@ -226,7 +226,7 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
         return np.asarray(b - z @ a, dtype=np.float64)
 
     res = [subset_importance(model, g, seed, level_share=0.3) for seed in range(REPS)]
-    assert {r.proposal["kind"] for r in res} == {"defensive-kernel-density"}
+    assert {r.proposal["level_share"] for r in res} == {0.3}  # reported with the result
     stages: list[ImportanceStage] = []
     subset_importance(model, g, 0, level_share=0.3, keep_stage=stages)
     q = stages[0].proposal
@@ -235,6 +235,13 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
     plain: list[ImportanceStage] = []
     subset_importance(model, g, 0, keep_stage=plain, level_share=0.0)
     assert isinstance(plain[0].proposal, KernelProposal)
+    assert subset_importance(model, g, 0, level_share=0.0).proposal["level_share"] == 0.0
+    # without adaptation rounds there is no adapted density to mix: the levels' one alone
+    assert subset_importance(model, g, 0, adapt_rounds=0).proposal["level_share"] == 0.0
+    # stratified: per stratum, on the strata that were adapted
+    strat = stratified_importance(_sided_two_component(), g, 0)
+    shares = [s["level_share"] for s in strat.proposal["strata"] if "level_share" in s]
+    assert shares and set(shares) <= {0.0, 0.3} and 0.3 in shares
     assert SubsetISSampler().level_share == 0.3  # the default (measured in docs/sampler.md)
     est = np.array([r.probability for r in res])
     cov = np.array([r.cov for r in res])
