@@ -32,7 +32,7 @@ from scipy.special import log_ndtr, logsumexp, ndtri_exp
 from sampler.model import CutInGMM
 from sampler.problem import FloatArray
 
-__all__ = ["SIDE_FEATURE", "Stratum", "make_strata"]
+__all__ = ["SIDE_FEATURE", "Stratum", "halfspace_strata", "make_strata"]
 
 #: the feature whose sign is the cut-in side (+: towards the left)
 SIDE_FEATURE = "p_y1"
@@ -138,6 +138,26 @@ def make_strata(model: CutInGMM, split_side: bool = True) -> list[Stratum]:
                            f"component {k}, {SIDE_FEATURE} > 0"))
         out.append(Stratum(model, k, e.copy(), c, float(log_ndtr((c - mu) / sd)),
                            f"component {k}, {SIDE_FEATURE} < 0"))
+    return out
+
+
+def halfspace_strata(model: CutInGMM, a: FloatArray, b: float, source: str = "") -> list[Stratum]:
+    """One stratum per component with positive weight, each restricted to the half-space
+    ``{a.z <= b}`` (a region's envelope, ``sampler.envelope``: the region lies inside it).
+    Their masses sum to P(S), not 1: ``P(A) = sum_s pi_s P_s(A)`` still holds for any A
+    inside S, and each ``P_s(A)`` is a conditional probability given S, far less rare than
+    P(A) when S is tight (``ttc<3``: P(S) = 2e-3)."""
+    model._check_fitted()
+    a = np.asarray(a, dtype=np.float64)
+    out: list[Stratum] = []
+    where = f"{source} envelope" if source else "envelope"
+    for k in range(model.n_components_):
+        if not model.weights_[k] > 0:
+            continue
+        sd = math.sqrt(float(a @ model.covariances_[k] @ a))
+        m = float(a @ model.means_[k])
+        out.append(Stratum(model, k, a.copy(), float(b), float(log_ndtr((float(b) - m) / sd)),
+                           f"component {k}, {where}"))
     return out
 
 

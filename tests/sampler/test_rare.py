@@ -15,6 +15,7 @@ from scipy.optimize import brentq
 from datasets.embedded import default_parameter_table
 from sampler import SamplerError
 from sampler.constraints import Region
+from sampler.envelope import find_envelope
 from sampler.importance import (
     ImportanceStage,
     KernelMixture,
@@ -33,7 +34,7 @@ from sampler.rare import (
 )
 from sampler.samplers import make_sampler
 from sampler.sampleset import sample
-from sampler.strata import make_strata
+from sampler.strata import halfspace_strata, make_strata
 from tests.sampler.test_subset import _halfspace_exact, _two_component
 
 REPS = 25
@@ -404,7 +405,9 @@ def test_stratified_sampler_is_deterministic_and_inside(tno: CutInGMM) -> None:
     assert (a.derived["ttc"] < 3).all()
     d = a.diagnostics
     strata = d["subset_is"]["proposal"]["strata"]
-    assert len(strata) == 2 * tno.n_components_
+    # ttc<3 has a half-space envelope: one stratum per component inside it
+    assert len(strata) == tno.n_components_
+    assert all(s["stratum"].endswith("ttc<3 envelope") for s in strata)
     assert sum(s["n"] for s in d["strata"]) == 60
     assert sum(s["contribution"] for s in strata) == pytest.approx(a.p_region.p_joint)
     assert "subset-is" in a.summary()
@@ -527,3 +530,96 @@ def test_stratified_ttc_region_reaches_every_mode(tno: CutInGMM) -> None:
     e = np.array(est)
     se = math.sqrt(float(np.mean(cov)) ** 2 / len(e) + 1.0 / k) * p_ref
     assert abs(e.mean() - p_ref) <= 2.5 * se
+
+
+# ------------------------------------------------- strata inside the region's envelope
+
+
+def test_halfspace_strata_hold_the_envelope() -> None:
+    """Component x half-space strata: masses sum to the closed-form P(S); a stratum's
+    draws lie in S and its projection on ``a`` follows the closed-form truncated normal
+    (KS); its density is the component's over P_k(S) on S (closed form), 0 outside."""
+    model = _two_component()
+    a = np.array([0.5, -0.3, 0.2, 0.0, 0.6, -0.4, 0.1, 0.3])
+    a /= np.linalg.norm(a)
+    t = _threshold(model, a, 1e-3)  # S = {a.z >= t} = {(-a).z <= -t}, P(S) = 1e-3
+    strata = halfspace_strata(model, -a, -t, "test")
+    assert [s.label for s in strata] == ["component 0, test envelope",
+                                         "component 1, test envelope"]
+    assert sum(s.mass for s in strata) == pytest.approx(_halfspace_exact(model, a, t),
+                                                        rel=1e-9)
+    rng = np.random.default_rng(3)
+    for s in strata:
+        draws = s.sample_z(20_000, rng)
+        assert (draws @ a >= t - 1e-9).all()
+        mu = float(a @ model.means_[s.k])
+        sd = math.sqrt(float(a @ model.covariances_[s.k] @ a))
+        law = stats.truncnorm((t - mu) / sd, np.inf, loc=mu, scale=sd)
+        assert stats.kstest(draws @ a, law.cdf).pvalue > 0.01
+        # on S the density is the component's divided by P_k(S) (closed form), 0 outside
+        lk = stats.multivariate_normal(model.means_[s.k], model.covariances_[s.k]).logpdf
+        pk = stats.norm.sf((t - mu) / sd)
+        assert s.log_density_z(draws[:50]) == pytest.approx(lk(draws[:50]) - math.log(pk),
+                                                             rel=1e-9)
+        outside = draws[:50] - np.outer(draws[:50] @ a - t + 1.0, a)  # moved out of S
+        assert np.isneginf(s.log_density_z(outside)).all()
+
+
+def test_envelope_strata_estimate_a_region_inside_the_envelope() -> None:
+    """A = {a.z >= t2} inside S = {a.z >= t1}: P(A) = 1e-6 in closed form, P(S) = 1e-3,
+    so each stratum's levels only go down to P(A | S) ~ 1e-3. Inside 2 reported CoV of
+    the exact value in >= 90 % of the seeds, unbiased, every kept draw inside A, and no
+    limit-state row outside S. Measured over 60 seeds: with the adaptation's 3,000 draws
+    (``strat_env_n_adapt``) spread 0.024 against a reported CoV 0.028, 58 of 60 in 2 CoV;
+    with 1,500 spread 0.037 against 0.029, 52 of 60."""
+    model = _two_component()
+    a = np.array([0.2, 0.4, -0.5, 0.3, 0.0, 0.5, -0.2, 0.4])
+    a /= np.linalg.norm(a)
+    t1, t2 = _threshold(model, a, 1e-3), _threshold(model, a, 1e-6)
+    p_true = _halfspace_exact(model, a, t2)
+    strata = halfspace_strata(model, -a, -t1)
+    seen: list[np.ndarray] = []
+
+    def g(z: np.ndarray) -> np.ndarray:
+        seen.append(z @ a)
+        return np.asarray(t2 - z @ a, dtype=np.float64)
+
+    n_adapt = SubsetISSampler().strat_env_n_adapt  # the sampler's setting inside S
+    res = [stratified_importance(model, g, seed, strata=strata, n_adapt=n_adapt)
+           for seed in range(REPS)]
+    est = np.array([r.probability for r in res])
+    cov = np.array([r.cov for r in res])
+    assert np.mean(np.abs(est - p_true) <= 2.0 * cov * est) >= 0.9
+    assert abs(est.mean() - p_true) <= 3.0 * est.std(ddof=1) / math.sqrt(REPS)
+    assert np.concatenate(seen).min() >= t1 - 1e-9  # nothing simulated outside S
+    for r in res:
+        assert (r.z @ a >= t2).all()
+        assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
+
+
+def test_sampler_stratifies_inside_the_envelope(tno: CutInGMM) -> None:
+    """``ttc<3`` has a half-space envelope: the sampler's strata are component x S (their
+    masses sum to P(S)); ``strat_envelope=False`` (or a region without envelope) keeps
+    component x side; P(A) of ``ttc<3 & btn>0.5`` is the same quantity either way (within
+    the two runs' reported CoV)."""
+    region = Region.from_constraints(["ttc<3", "btn>0.5"], lane_width=tno.lane_width_)
+    problem = Problem(tno, region, use_envelope=False)
+    env = find_envelope(tno, region)
+    assert env is not None
+    strata, inside = SubsetISSampler()._strata(problem)
+    assert inside
+    assert sum(s.mass for s in strata) == pytest.approx(env.mass, rel=1e-9)
+    assert all("envelope" in s.label for s in strata)
+    side, inside = SubsetISSampler(strat_envelope=False)._strata(problem)
+    assert not inside
+    assert sum(s.mass for s in side) == pytest.approx(1.0, abs=1e-12)
+    btn = Region.from_constraints(["btn>0.5"], lane_width=tno.lane_width_)
+    strata, inside = SubsetISSampler()._strata(Problem(tno, btn, use_envelope=False))
+    assert not inside
+    assert sum(s.mass for s in strata) == pytest.approx(1.0, abs=1e-12)
+    r_env = rare_probability(tno, region, 4)
+    r_side = rare_probability(tno, region, 4, strat_envelope=False)
+    assert all("envelope" in s["stratum"] for s in r_env.proposal["strata"])
+    se = math.hypot(r_env.cov * r_env.probability, r_side.cov * r_side.probability)
+    assert abs(r_env.probability - r_side.probability) <= 3.0 * se
+    assert r_env.n_evaluations < r_side.n_evaluations  # nothing simulated outside S
