@@ -338,6 +338,16 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
       is outside the constraint: the margin of the flat value (+10 s for ``ttr_true``)
       plus ``softplus((gap - 3 s dv) / s_h)`` (> 0, so still outside), which ranks the flat
       rows by how close the cutter is to being reached.
+
+    **Layered** when the region has both kinematic constraints (``ttc``, ``thw``, model
+    features: no simulation) and criticality ones (``btn``, ``ttr_true``, ...: one
+    closed-loop simulation per row): a row outside the kinematic ones gets ``LAYER`` + their
+    largest margin and is not simulated; a row inside them gets the largest criticality
+    margin (clipped to ``LAYER``). The set ``g <= 0`` is the same; the levels first close
+    in on the kinematic part (often a large share of a stratum inside its envelope:
+    ``ttc<3`` holds 38 % of its envelope) and then rank only rows inside it, and neither
+    the levels nor the importance draws simulate a row the kinematic constraints already
+    exclude. Only several criticality quantities need simulated draws for their scales.
     """
     cons = region.constraints
     if not cons:
@@ -352,6 +362,11 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     other = sorted({*(n for n in names if n not in CRITICALITY_QUANTITIES and n != "ttc"),
                     *extra})
     with_ttr = "ttr_true" in crit  # the TTR scan is the costliest part: only when asked
+    kin_cons = [c for c in cons if c.name not in CRITICALITY_QUANTITIES]
+    crit_cons = [c for c in cons if c.name in CRITICALITY_QUANTITIES]
+    # kinematic and criticality constraints together: layered (module docstring of
+    # ``region_limit_state``), so that no row outside the kinematic ones is simulated
+    layered = bool(kin_cons) and bool(crit_cons)
 
     def quantities(z: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
         params = model.params_matrix(model.from_z(z))
@@ -367,14 +382,38 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         sgn = 1.0 if c.op in ("<", "<=") else -1.0
         return sgn * (q[c.name] - float(c.value))
 
-    if len(names) > 1 or not crit:
+    def spread(group: list[Any], q0: dict[str, FloatArray]) -> list[float]:
+        """Robust spreads of a group's margins (1 when the group names one quantity:
+        then the scale changes none of the sets g <= b)."""
+        if len({c.name for c in group}) < 2:
+            return [1.0 for _ in group]
+        return [_margin_scale(raw(q0, c)) for c in group]
+
+    scale: dict[int, float] = {}
+    if layered:
+        # kinematic margins are compared among themselves, criticality margins among
+        # themselves: only several criticality quantities need simulated scale draws
+        x0 = model.params_matrix(model.sample(int(n_scale), rng))
+        q0 = region.quantities(x0, other)
+        kin_scale = spread(kin_cons, q0)
+        crit_scale = [1.0 for _ in crit_cons]
+        if len(set(crit)) > 1:
+            _, q1 = quantities(model.sample_z(int(n_scale) // 2, rng))
+            crit_scale = spread(crit_cons, q1)
+        for c, sc in zip([*kin_cons, *crit_cons], [*kin_scale, *crit_scale], strict=True):
+            scale[id(c)] = sc
+        proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
+                       if flat else 1.0)
+    elif len(names) > 1 or not crit:
         # criticality regions: half the draws (each is a closed-loop simulation)
         _, q0 = quantities(model.sample_z(int(n_scale) // (2 if crit else 1), rng))
-        scale = [_margin_scale(raw(q0, c)) for c in cons]
+        for c in cons:
+            scale[id(c)] = _margin_scale(raw(q0, c))
         proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
                        if extra else 1.0)
     else:  # one criticality quantity: its scale does not change the sets g <= b
-        scale = [1.0 for _ in cons]
+        for c in cons:
+            scale[id(c)] = 1.0
         proxy_scale = 1.0
         if extra:  # the proxy's spread needs no simulation
             x0 = model.params_matrix(model.sample(int(n_scale), rng))
@@ -382,7 +421,8 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
             proxy_scale = _margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
     tiny = float(np.finfo(np.float64).tiny)
 
-    def margin(q: dict[str, FloatArray], c: Any, s: float) -> FloatArray:
+    def margin(q: dict[str, FloatArray], c: Any) -> FloatArray:
+        s = scale[id(c)]
         m = raw(q, c) / s
         if c.name in FLAT_VALUES:
             fv = FLAT_VALUES[c.name]
@@ -397,23 +437,44 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         # a multiple of the step, put mass on it): margin 0 counts as outside
         return np.where(m == 0.0, tiny, m) if c.op in "<>" else m
 
+    def largest(q: dict[str, FloatArray], group: list[Any]) -> FloatArray:
+        with np.errstate(invalid="ignore", over="ignore"):
+            m = np.max(np.stack([margin(q, c) for c in group]), axis=0)
+        return np.asarray(np.where(np.isnan(m), np.inf, m), dtype=np.float64)
+
     def g(z: FloatArray) -> FloatArray:
         out = np.full(z.shape[0], np.inf)
         # rows farther than R_MAX Mahalanobis units from every component hold no mass worth
         # simulating (an importance density's tails reach them: lane changes lasting hours)
         ok = np.flatnonzero(_near(model, z))
+        params = model.params_matrix(model.from_z(z[ok])) if ok.size else None
         if ok.size and region.physical_bounds:  # simulate physical cut-ins only
-            ok = ok[region.in_bounds(model.params_matrix(model.from_z(z[ok])))]
-        if ok.size == 0:
+            assert params is not None
+            keep = region.in_bounds(params)
+            ok, params = ok[keep], params[keep]
+        if ok.size == 0 or params is None:
             return out
-        _, q = quantities(z[ok])
-        with np.errstate(invalid="ignore", over="ignore"):
-            m = np.max(np.stack([margin(q, c, s) for c, s in zip(cons, scale, strict=True)]),
-                       axis=0)
-        out[ok] = np.where(np.isnan(m), np.inf, m)
+        if not layered:
+            _, q = quantities(z[ok])
+            out[ok] = largest(q, list(cons))
+            return out
+        q = region.quantities(params, other)
+        m_kin = largest(q, kin_cons)
+        inside = m_kin <= 0
+        out[ok[~inside]] = LAYER + m_kin[~inside]
+        if inside.any():
+            qc = {name: v[inside] for name, v in q.items()}
+            qc.update(criticality_quantities(params[inside], region.lane_width,
+                                             with_ttr=with_ttr))
+            out[ok[inside]] = np.minimum(largest(qc, crit_cons), LAYER)
         return out
 
     return g
+
+
+#: a layered limit state's offset for rows outside the kinematic constraints (above every
+#: criticality margin, which is clipped to it)
+LAYER = 1e6
 
 
 class SubsetSampler(Sampler):

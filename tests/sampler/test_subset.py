@@ -217,7 +217,9 @@ def test_ttc_margin_sign_is_membership_by_hand(op: str) -> None:
 
 
 @pytest.mark.parametrize("cons", [["ttc<2"], ["ttc>=2.5", "gap<30"], ["btn>0.15"],
-                                  ["ttc<3", "btn>0.5"], ["ttr_true<2.8"]])
+                                  ["ttc<3", "btn>0.5"], ["ttr_true<2.8"],
+                                  ["thw<1.5", "btn>0.2"], ["ttc<4", "btn>0.1", "btn<1"],
+                                  ["ttc<5", "gap<40", "ttr_true<3", "btn>0.05"]])
 def test_region_limit_state_is_the_region_and_not_flat(tno: CutInGMM,
                                                        cons: list[str]) -> None:
     """g <= 0 exactly on the region's rows; and g takes distinct values over the
@@ -236,3 +238,44 @@ def test_region_limit_state_is_the_region_and_not_flat(tno: CutInGMM,
     # ttr_true is a multiple of its scan step where finite: ties there, not in the flat part
     share = 0.7 if "ttr_true<2.8" in cons else 0.99
     assert np.unique(fin).size >= share * fin.size
+
+
+@pytest.mark.parametrize("cons", [["ttc<3", "btn>0.3"], ["ttc<3", "btn>0.2", "btn<0.6"],
+                                  ["ttc<3", "ttr_true<2.5", "btn>0.1"]])
+def test_layered_limit_state_simulates_only_inside_the_kinematic_part(
+        tno: CutInGMM, cons: list[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Kinematic and criticality constraints together: on draws of the ``ttc<3``
+    envelope (38 % inside ``ttc<3``), ``g <= 0`` is exactly the region, every row outside
+    ``ttc<3`` gets a value above every row inside it (the levels close in on the
+    kinematic part first), and no row outside ``ttc<3`` is simulated, not even for the
+    margins' scales (one criticality quantity) or for them (two: only model draws)."""
+    import sampler.subset as ss
+    from sampler.constraints import derive
+    from sampler.envelope import find_envelope
+
+    region = Region.from_constraints(cons, lane_width=tno.lane_width_)
+    env = find_envelope(tno, region)
+    assert env is not None
+    z = env.sample_z(tno, 4000, np.random.default_rng(8))
+    x = tno.params_matrix(tno.from_z(z))
+    simulated: list[np.ndarray] = []
+    original = ss.criticality_quantities
+
+    def counted(params: np.ndarray, *args: object, **kwargs: object) -> object:
+        simulated.append(np.asarray(params))
+        return original(params, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(ss, "criticality_quantities", counted)
+    g = ss.region_limit_state(tno, region, np.random.default_rng(0))
+    n_scale_rows = sum(p.shape[0] for p in simulated)
+    assert n_scale_rows == (2048 if len({c.name for c in region.constraints}) > 2 else 0)
+    simulated.clear()
+    values = g(z)
+    np.testing.assert_array_equal(values <= 0, region.contains(x))
+    ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
+    kin = (ttc < 3) & region.in_bounds(x)
+    assert 0.2 < kin.mean() < 0.6
+    assert values[~kin & np.isfinite(values)].min() > values[kin].max()
+    rows = np.concatenate(simulated)
+    assert rows.shape[0] == int(kin.sum())  # exactly the rows inside ttc<3, once each
+    assert (derive(rows, ["ttc"], lane_width=tno.lane_width_)["ttc"] < 3).all()
