@@ -43,7 +43,10 @@ budget.
 
 **Stratified** (``stratified_importance``, ``SubsetISSampler(stratify="always")``): the
 model is a mixture, so ``P(A) = sum_s pi_s P_s(A)`` over its strata (``sampler.strata``:
-component x cut-in side, ``pi_s`` exact, ``P_s`` sampled exactly); one subset-is per
+component x cut-in side, or component x the region's half-space envelope S when it has
+one, ``SubsetISSampler(strat_envelope=True)``: then A lies inside S, the masses sum to
+P(S) and each ``P_s`` is conditional on S; ``pi_s`` exact, ``P_s`` sampled exactly); one
+subset-is per
 stratum, budgeted by what its first levels reveal (strata probed and ordered nearest
 first; levels of 1,000 points for the first stratum that reaches A, 200 for the others,
 each cut at ``rel_floor`` (0.1 %) of the running total / ``pi_s`` with that bound reported;
@@ -611,8 +614,8 @@ class SubsetISSampler(Sampler):
         Independence chains the proposals are dealt to.
     stratify : {"auto", "always", "never"}
         ``always``: ``stratified_importance`` (one subset-is per stratum of the model:
-        component x cut-in side); ``never``: one subset-is on the whole model; ``auto``:
-        see ``STRATIFY_AUTO``.
+        component x cut-in side, or component x envelope, ``strat_envelope``);
+        ``never``: one subset-is on the whole model; ``auto``: see ``STRATIFY_AUTO``.
     strat_per_level, strat_n_adapt, strat_n_is_min :
         The stratified run's ``n_per_level``, ``n_adapt`` and ``n_is_min``
         (``stratified_importance``); ``n_is`` is shared.
