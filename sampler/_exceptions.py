@@ -7,7 +7,8 @@ Hierarchy (every one is a ``ValueError``, so the CLI reports it as one line, exi
     ├── ModelError           fitting, loading or using the GMM failed (bad table, bad JSON)
     │   └── NotFittedError   a method needs a fitted model
     ├── BuilderError         a parameter vector cannot become a concrete scenario
-    └── EmptyRegionError     the region has (practically) no probability mass
+    ├── EmptyRegionError     the region has (practically) no probability mass
+    └── LevelsNotConvergedError  subset levels met the region but could not converge on it
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ __all__ = [
     "BuilderError",
     "ConstraintError",
     "EmptyRegionError",
+    "LevelsNotConvergedError",
     "ModelError",
     "NotFittedError",
     "SamplerError",
@@ -72,3 +74,22 @@ class EmptyRegionError(SamplerError):
         self.n_draws = n_draws
         self.n_hits = n_hits
         self.p_upper = p_upper
+
+
+class LevelsNotConvergedError(SamplerError):
+    """Subset simulation evaluated rows inside the region, but its levels did not converge
+    on it (their Markov chains barely move: a thin region). Unlike ``EmptyRegionError``
+    this bounds nothing: the region may hold much mass.
+
+    Attributes
+    ----------
+    n_draws : int
+        Limit-state evaluations spent.
+    n_hits : int
+        Evaluated rows inside the region.
+    """
+
+    def __init__(self, message: str, *, n_draws: int = 0, n_hits: int = 0) -> None:
+        super().__init__(message, field="constraints", problem="levels did not converge")
+        self.n_draws = n_draws
+        self.n_hits = n_hits

@@ -217,7 +217,7 @@ def _per_replicate(model: Any, region: Any, seed: int, which: Any,
     (``sampler.rare.rare_probability``): ``{b: (P_b(A and B), Kish ESS)}``; a replicate
     whose levels do not reach the region above ``min_probability`` gets 0.0 and ESS inf
     (resolved as "below min_probability")."""
-    from sampler._exceptions import EmptyRegionError
+    from sampler._exceptions import EmptyRegionError, LevelsNotConvergedError
     from sampler.rare import rare_probability
 
     children = np.random.SeedSequence([int(seed), 12]).spawn(len(model.bootstrap_["weights"]))
@@ -229,6 +229,8 @@ def _per_replicate(model: Any, region: Any, seed: int, which: Any,
             out[int(b)] = (float(rr.probability), float(rr.ess_weights))
         except EmptyRegionError:
             out[int(b)] = (0.0, math.inf)
+        except LevelsNotConvergedError:  # no estimate and no bound: an unresolved replicate
+            out[int(b)] = (0.0, 0.0)
     return out
 
 

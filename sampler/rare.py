@@ -79,7 +79,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sampler._exceptions import EmptyRegionError, SamplerError
+from sampler._exceptions import EmptyRegionError, LevelsNotConvergedError, SamplerError
 from sampler.envelope import find_envelope
 from sampler.importance import (
     ImportanceStage,
@@ -466,6 +466,25 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                                         max_seconds=max(deadline - time.monotonic(), 1e-9),
                                         min_probability=min_probability,
                                         from_normal=st.from_normal)
+        except LevelsNotConvergedError as exc:
+            # the levels met A but could not converge on it (a thin region): once more with
+            # THIN_RETRY times the points per level, else refuse (the stratum may hold
+            # most of P(A); counting it 0 would be silently wrong)
+            try:
+                sub = subset_simulation(model, _in_stratum(st, limit_state),
+                                        _stratum_seed(seed, i),
+                                        n_per_level=THIN_RETRY * n_per_level, p0=p0,
+                                        max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                        min_probability=floor, from_normal=st.from_normal)
+            except LevelsNotConvergedError as again:
+                raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
+            except EmptyRegionError as below:
+                runs[i] = StratumRun(st, None, None, int(exc.n_draws) + int(below.n_draws)
+                                     + n_probe_evals[i],
+                                     float(below.p_upper) if math.isfinite(below.p_upper)
+                                     else floor, str(below).splitlines()[0])
+                continue
+            rerun_evals += int(exc.n_draws)
         except EmptyRegionError as exc:
             why = str(exc).splitlines()[0]
             if floor > min_probability and not rerun_evals:
@@ -502,9 +521,29 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                           weighted_centres=weighted_centres, sub=sub,
                           level_share=level_share)
         except EmptyRegionError as exc:
-            runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
-                                 sub.probability, str(exc).splitlines()[0])
-            continue
+            if st.mass * sub.probability < rel_floor * total:  # negligible: bounded
+                runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
+                                     sub.probability, str(exc).splitlines()[0])
+                continue
+            # too few distinct points in a stratum that matters (a thin region: the final
+            # level's chains barely moved): its levels once more with more points
+            n_probe_evals[i] += sub.n_evaluations
+            try:
+                sub = subset_simulation(model, _in_stratum(st, limit_state),
+                                        _stratum_seed(seed, i),
+                                        n_per_level=THIN_RETRY * n_per_level, p0=p0,
+                                        max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                        min_probability=min_probability,
+                                        from_normal=st.from_normal)
+                ex = _explore(model, limit_state, _stratum_seed(seed, i), stratum=st,
+                              n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
+                              n_adapt=n_adapt, adapt_rounds=adapt_rounds if big else 0,
+                              n_centres=n_centres, nu=nu, n_is=n_is,
+                              max_seconds=max_seconds, min_probability=min_probability,
+                              deadline=deadline, weighted_centres=weighted_centres, sub=sub,
+                              level_share=level_share)
+            except (EmptyRegionError, LevelsNotConvergedError) as again:
+                raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
         explored[i] = ex
         runs[i] = StratumRun(st, None, ex.sub,
                              n_probe_evals[i] + ex.sub.n_evaluations + ex.n_adapt)
@@ -530,6 +569,23 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
     if keep_runs is not None:
         keep_runs.extend(out)
     return _stratified_result(out, t0, inflate)
+
+
+#: a stratum whose levels met the region but could not converge on it, or whose final
+#: level held too few distinct points for its kernel density while it matters, gets its
+#: levels once more with this many times the points per level (a thin region: measured on
+#: `ttc<3 & ttc>2.9 & btn>0.4`, docs/sampler.md); if that fails too, the run refuses
+THIN_RETRY = 4
+
+
+def _unconverged(st: Stratum, exc: Exception, n: int) -> LevelsNotConvergedError:
+    """The refusal of a stratum that matters but could not be estimated."""
+    return LevelsNotConvergedError(
+        f"stratified subset-is: stratum {st.label}: {str(exc).splitlines()[0]}; also with "
+        f"{n} points per level. Leaving it out would make P(A) silently too small, so no "
+        "estimate: widen the region (a narrow band of a kinematic quantity such as ttc is "
+        "the usual cause) or choose method=mcmc or rejection",
+        n_draws=int(getattr(exc, "n_draws", 0)), n_hits=int(getattr(exc, "n_hits", 0)))
 
 
 def _stratum_seed(seed: int, i: int) -> int:

@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from sampler._exceptions import EmptyRegionError, SamplerError
+from sampler._exceptions import EmptyRegionError, LevelsNotConvergedError, SamplerError
 from sampler.constraints import OPERATORS, Region
 from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from sampler.model import CutInGMM
@@ -167,7 +167,7 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         from_normal if from_normal is not None
         else (lambda u: mixture_from_normal(model, u)))
     state: dict[str, Any] = {"evals": 0, "best": math.inf, "stopped": False,
-                             "exhausted": False}
+                             "exhausted": False, "inside": 0}
     deadline = time.monotonic() + float(max_seconds)
 
     # levels needed to go below min_probability, plus slack: a region that the levels
@@ -188,6 +188,7 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         g = np.where(np.isfinite(g), g, _BIG)
         if g.size:
             state["best"] = min(float(state["best"]), float(g.min()))
+            state["inside"] = int(state["inside"]) + int(np.count_nonzero(g <= 0))
         return g[:, None]
 
     fun = ot.PythonFunction(d + 1, 1, func_sample=g_u)
@@ -212,6 +213,16 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
                     f"({state['evals']} evaluations, lowest g so far {state['best']:.3g}); "
                     "raise max_seconds or n_per_level's budget") from None
             if state["exhausted"]:
+                if int(state["inside"]) > 0:
+                    # rows inside A were met, but the thresholds never reached 0: the
+                    # levels' chains barely move (a thin region); their product of
+                    # conditional probabilities is then no bound on P(A)
+                    raise LevelsNotConvergedError(
+                        f"subset simulation met the region ({state['inside']} evaluated rows "
+                        f"inside it) but its levels did not converge on it in {max_levels} "
+                        f"levels ({state['evals']} evaluations): the region is probably too "
+                        "thin for the levels' Markov chains (e.g. a narrow ttc band)",
+                        n_draws=int(state["evals"]), n_hits=int(state["inside"])) from None
                 raise EmptyRegionError(
                     f"subset simulation did not reach the region in {max_levels} levels "
                     f"({state['evals']} evaluations, lowest g {state['best']:.3g} > 0): it is "

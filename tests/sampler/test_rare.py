@@ -623,3 +623,70 @@ def test_sampler_stratifies_inside_the_envelope(tno: CutInGMM) -> None:
     se = math.hypot(r_env.cov * r_env.probability, r_side.cov * r_side.probability)
     assert abs(r_env.probability - r_side.probability) <= 3.0 * se
     assert r_env.n_evaluations < r_side.n_evaluations  # nothing simulated outside S
+
+
+# ------------------------------------------------------- thin regions: no silent drops
+
+
+def test_thin_band_is_not_dropped(tno: CutInGMM) -> None:
+    """``2.9 < ttc < 3 & btn > 0.4``: a thin band, where the levels' chains barely move.
+    Before, a stratum holding nearly all of P(A) could end with too few distinct points
+    (or levels that never converged) and was counted 0: seeds 4 and 5 gave 6.5e-12 and
+    2.9e-11 with CoVs of 0.17 and 0.11 against the brute-force 1.06e-7. Now such a
+    stratum's levels are re-run with more points; the estimates stay within a factor 2
+    of a brute force computed here (envelope draws, only the band's rows simulated)."""
+    from sampler.constraints import derive
+
+    cons = ["ttc<3", "ttc>2.9", "btn>0.4"]
+    region = Region.from_constraints(cons, lane_width=tno.lane_width_)
+    problem = Problem(tno, region)
+    assert problem.envelope is not None
+    rng = np.random.default_rng(17)
+    n_ref, hits = 2_000_000, 0
+    for _ in range(4):
+        x = problem.params(problem.draw_z(n_ref // 4, rng))
+        ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
+        band = x[(ttc > 2.9) & (ttc < 3) & region.in_bounds(x)]
+        hits += int(region.contains(band).sum())
+    assert hits > 50
+    p_ref = problem.envelope.mass * hits / n_ref
+    for seed in (4, 5):
+        r = rare_probability(tno, cons, seed)
+        assert 0.5 * p_ref < r.probability < 2.0 * p_ref
+
+
+def test_unconverged_stratum_is_retried_then_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stratum whose levels met the region but did not converge is re-run with
+    ``THIN_RETRY`` times the points per level; when that fails too, the run refuses with
+    ``LevelsNotConvergedError`` naming the stratum instead of counting it 0."""
+    import sampler.rare as rare
+    from sampler import LevelsNotConvergedError
+
+    model = _two_component()
+    a = np.zeros(model.n_features)
+    a[0] = 1.0
+    b = _threshold(model, a, 1e-5)
+
+    def g(z: np.ndarray) -> np.ndarray:
+        return np.asarray(b - z @ a, dtype=np.float64)
+
+    calls: list[int] = []
+    failures = {"left": 1}
+    real = rare.subset_simulation
+
+    def flaky(*args: object, n_per_level: int, **kw: object) -> object:
+        calls.append(n_per_level)
+        if failures["left"] > 0:
+            failures["left"] -= 1
+            raise LevelsNotConvergedError("levels stuck (test)", n_draws=7, n_hits=3)
+        return real(*args, n_per_level=n_per_level, **kw)  # type: ignore[arg-type]
+
+    strata = make_strata(model)[:1]  # one stratum: its first levels fail once
+    monkeypatch.setattr(rare, "subset_simulation", flaky)
+    r = stratified_importance(model, g, 0, strata=strata, n_probe=0)
+    assert calls == [1000, rare.THIN_RETRY * 1000]
+    assert r.probability > 0 and r.proposal["strata"][0]["n_is"] > 0
+    calls.clear()
+    failures["left"] = 2  # the retry fails too
+    with pytest.raises(LevelsNotConvergedError, match=r"component 0.*also with 4000 points"):
+        stratified_importance(model, g, 0, strata=strata, n_probe=0)
