@@ -90,6 +90,9 @@ class UncertainP(ApiModel):
     model_ci: list[float] | None
     method: str | None = None
     model_interval: ModelInterval | None = None
+    model_interval_error: str | None = Field(
+        default=None, description="why there is no model interval although the model has "
+        "bootstrap replicates (their estimate failed, e.g. on a thin region)")
 
 
 class RegionReport(ApiModel):

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from sampler._exceptions import ModelError
+from sampler._exceptions import ModelError, SamplerError
 from sampler.memo import MODEL_SEED, memoised
 
 __all__ = ["TNO_HOURS", "Exposure", "cutin_rate", "highd_exposure", "model_interval",
@@ -217,12 +217,21 @@ def uncertainty_report(model: Any, p_region: Any, region: Any,
         # rare when the region needed subset simulation (plain or with importance
         # sampling) under the fitted model: plain draws of the replicates' average do not
         # reach it either
-        model_iv = model_interval(model, region, rare=p.method in ("subset", "subset-is"),
-                                  n_plain=n_plain, confidence=confidence,
-                                  per_replicate=per_replicate)
-        out["p_region"]["model_ci"] = model_iv["ci"]
-        out["model_interval"] = dict(model_iv)
-        out["model_interval"]["replicates_quantiles"] = _quantiles(model_iv["replicates"])
+        try:
+            model_iv = model_interval(model, region,
+                                      rare=p.method in ("subset", "subset-is"),
+                                      n_plain=n_plain, confidence=confidence,
+                                      per_replicate=per_replicate)
+        except SamplerError as exc:
+            # P(A) under the fitted model is known; only the replicates' estimate failed
+            # (e.g. a thin band their subset levels do not reach): no model interval, and
+            # why, instead of failing the whole answer with a misleading "empty region"
+            out["p_region"]["model_interval_error"] = (
+                "no model interval: " + str(exc).splitlines()[0])
+        else:
+            out["p_region"]["model_ci"] = model_iv["ci"]
+            out["model_interval"] = dict(model_iv)
+            out["model_interval"]["replicates_quantiles"] = _quantiles(model_iv["replicates"])
     exp = getattr(model, "exposure_", None)
     if exp:
         rates = region_rates(Exposure.from_dict(exp), p, model_iv, seed=MODEL_SEED,

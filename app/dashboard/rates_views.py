@@ -34,7 +34,8 @@ def _uncertain(p_region: dict[str, Any]) -> dict[str, Any]:
     p = jsonconv.decode(p_region)
     return {"estimate": p.get("estimate"), "mc_ci": p.get("mc_ci") or p.get("ci"),
             "model_ci": p.get("model_ci"), "method": p.get("method"),
-            "model_interval": p.get("model_interval")}
+            "model_interval": p.get("model_interval"),
+            "model_interval_error": p.get("model_interval_error")}
 
 
 def region_rates(ctx: ServiceContext, model_id: str, constraint_text: str,

@@ -146,9 +146,12 @@ def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
 
 def _uncertainty_fields(report: dict[str, Any]) -> dict[str, Any]:
     """The keys a P(A) dict gets from ``uncertainty_report``: ``mc_ci``, ``model_ci``,
-    ``model_interval`` and ``rates`` (JSON-encoded)."""
+    ``model_interval`` and ``rates`` (JSON-encoded); ``model_interval_error`` when the
+    model interval could not be estimated."""
     out: dict[str, Any] = {"mc_ci": report["p_region"]["mc_ci"],
                            "model_ci": report["p_region"]["model_ci"]}
+    if "model_interval_error" in report["p_region"]:
+        out["model_interval_error"] = report["p_region"]["model_interval_error"]
     for key in ("model_interval", "rates"):
         if key in report:
             out[key] = report[key]

@@ -333,3 +333,31 @@ def test_report_text_says_what_a_zero_lower_end_means() -> None:
     assert "model [≈ 0, 5e-05]" in text  # its rate
     report["model_interval"] = {"lower_resolved": False}
     assert "lower end not resolved" in report_text(report)
+
+
+def test_failed_model_interval_is_reported_not_raised(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When the replicates' estimate fails (e.g. a thin band their subset levels never
+    reach: the API then answered 422 "empty region" for a region whose P(A) it had just
+    estimated at 1.0e-7), the report keeps P(A), the Monte Carlo interval and the rates,
+    has no model interval, and says why."""
+    import sampler.exposure as exposure
+    from sampler import EmptyRegionError
+
+    table = synthetic_parameter_table(300, seed=0)
+    model = CutInGMM(k_range=(2, 2), n_init=1, n_report_samples=500).fit(table)
+    bootstrap_fit(model, table, 20, seed=0)
+    model.exposure_ = Exposure(n_events=300, hours=25.0, km=2500.0, source="t").to_dict()
+    ss = sample(model, ["ttc<8"], 50, seed=1)
+
+    def fails(*args: object, **kwargs: object) -> object:
+        raise EmptyRegionError("subset simulation did not reach the region (test)")
+
+    monkeypatch.setattr(exposure, "model_interval", fails)
+    rep = region_report(model, ss)
+    assert rep["p_region"]["estimate"] == ss.p_region.estimate
+    assert rep["p_region"]["model_ci"] is None and "model_interval" not in rep
+    assert rep["p_region"]["model_interval_error"] == (
+        "no model interval: subset simulation did not reach the region (test)")
+    assert rep["rates"]["per_hour"]["estimate"] == pytest.approx(
+        300 / 25.0 * ss.p_region.estimate)
+    assert rep["rates"]["per_hour"].get("model_ci") is None
