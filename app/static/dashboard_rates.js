@@ -93,10 +93,11 @@
       const mi = p.model_interval;
       note.textContent = "How often real drivers produce " + regionWords(view.constraints) +
         ", by model " + view.model + ". Monte Carlo: the estimator's own 95 % interval. " +
-        "Model: the 95 % interval over " + (mi ? mi.n_boot : 0) + " bootstrap refits of " +
+        "Model: " + (mi ? "the 95 % interval over " + mi.n_boot + " bootstrap refits of " +
         "the model to its data (what the few recorded events leave open; usually much " +
-        "wider). Exposure: " + exposureWords(view.exposure) + "." +
-        (p.model_interval_error ? " " + p.model_interval_error + "." : "");
+        "wider)" : p.model_interval_error ? p.model_interval_error
+          : "none (the model has no bootstrap refits)") +
+        ". Exposure: " + exposureWords(view.exposure) + ".";
       let html = "<h3>Region " + S.esc(view.constraints.join(" and ")) + " under model " +
         S.esc(view.model) + "</h3>" +
         grid(["", "estimate", "Monte Carlo 95 %", "model 95 %"], figureRows(p, view.rates));
