@@ -136,7 +136,10 @@
     const p = view.p_region;
     const reps = ((p.model_interval || {}).replicates || []).filter((v) => v > 0);
     if (!reps.length) {
-      S.clearPlot(div, "The model has no bootstrap refits (fit with n_bootstrap > 0).");
+      S.clearPlot(div, p.model_interval_error
+        ? "No refits to draw: " + p.model_interval_error + "."
+        : p.model_interval ? "No refit puts any mass in this region."
+          : "The model has no bootstrap refits (fit with n_bootstrap > 0).");
       return;
     }
     const logs = reps.map((v) => Math.log10(v));
