@@ -436,6 +436,22 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
     runs: list[StratumRun | None] = [None] * len(strata)
     subs: list[SubsetResult | None] = [None] * len(strata)
     total = 0.0
+    def levels(i: int, n: int, floor: float) -> SubsetResult:
+        """Stratum i's subset levels with n points per level, down to floor."""
+        return subset_simulation(model, _in_stratum(strata[i], limit_state),
+                                 _stratum_seed(seed, i), n_per_level=n, p0=p0,
+                                 max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                 min_probability=floor, from_normal=strata[i].from_normal)
+
+    def explore(i: int, sub: SubsetResult, rounds: int) -> _Explored:
+        """Stratum i's adaptation from its levels (rounds: 0 keeps the levels' density)."""
+        return _explore(model, limit_state, _stratum_seed(seed, i), stratum=strata[i],
+                        n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
+                        n_adapt=n_adapt, adapt_rounds=rounds, n_centres=n_centres, nu=nu,
+                        n_is=n_is, max_seconds=max_seconds, min_probability=min_probability,
+                        deadline=deadline, weighted_centres=weighted_centres, sub=sub,
+                        level_share=level_share)
+
     for i in order:
         st = strata[i]
         if time.monotonic() > deadline:
@@ -449,33 +465,20 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
         try:
             # once a stratum has reached A, the others' levels only have to show that
             # they are negligible or find A for their kernel density: fewer points
-            sub = subset_simulation(model, _in_stratum(st, limit_state), _stratum_seed(seed, i),
-                                    n_per_level=n_per_level if total == 0 else n_per_level_rest,
-                                    p0=p0,
-                                    max_seconds=max(deadline - time.monotonic(), 1e-9),
-                                    min_probability=floor, from_normal=st.from_normal)
+            sub = levels(i, n_per_level if total == 0 else n_per_level_rest, floor)
             if total > 0 and n_per_level_rest < n_per_level and st.mass * sub.probability > total:
                 # the probes ordered it wrongly: it holds more than all strata before it,
                 # so its kernel density needs the full levels (from n_per_level_rest points
                 # the final level has too few distinct centres: measured 0.47 and 4e-8 of
                 # the reference on `ttc<3 & btn>0.5`, seeds 1014 and 1026)
                 rerun_evals = sub.n_evaluations
-                sub = subset_simulation(model, _in_stratum(st, limit_state),
-                                        _stratum_seed(seed, i), n_per_level=n_per_level,
-                                        p0=p0,
-                                        max_seconds=max(deadline - time.monotonic(), 1e-9),
-                                        min_probability=min_probability,
-                                        from_normal=st.from_normal)
+                sub = levels(i, n_per_level, min_probability)
         except LevelsNotConvergedError as exc:
             # the levels met A but could not converge on it (a thin region): once more with
             # THIN_RETRY times the points per level, else refuse (the stratum may hold
             # most of P(A); counting it 0 would be silently wrong)
             try:
-                sub = subset_simulation(model, _in_stratum(st, limit_state),
-                                        _stratum_seed(seed, i),
-                                        n_per_level=THIN_RETRY * n_per_level, p0=p0,
-                                        max_seconds=max(deadline - time.monotonic(), 1e-9),
-                                        min_probability=floor, from_normal=st.from_normal)
+                sub = levels(i, THIN_RETRY * n_per_level, floor)
             except LevelsNotConvergedError as again:
                 raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
             except EmptyRegionError as below:
@@ -513,13 +516,7 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
         sub = found
         big = total > 0 and st.mass * sub.probability >= adapt_share * total
         try:
-            ex = _explore(model, limit_state, _stratum_seed(seed, i), stratum=st,
-                          n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
-                          n_adapt=n_adapt, adapt_rounds=adapt_rounds if big else 0,
-                          n_centres=n_centres, nu=nu, n_is=n_is, max_seconds=max_seconds,
-                          min_probability=min_probability, deadline=deadline,
-                          weighted_centres=weighted_centres, sub=sub,
-                          level_share=level_share)
+            ex = explore(i, sub, adapt_rounds if big else 0)
         except EmptyRegionError as exc:
             if st.mass * sub.probability < rel_floor * total:  # negligible: bounded
                 runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
@@ -529,19 +526,8 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
             # level's chains barely moved): its levels once more with more points
             n_probe_evals[i] += sub.n_evaluations
             try:
-                sub = subset_simulation(model, _in_stratum(st, limit_state),
-                                        _stratum_seed(seed, i),
-                                        n_per_level=THIN_RETRY * n_per_level, p0=p0,
-                                        max_seconds=max(deadline - time.monotonic(), 1e-9),
-                                        min_probability=min_probability,
-                                        from_normal=st.from_normal)
-                ex = _explore(model, limit_state, _stratum_seed(seed, i), stratum=st,
-                              n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
-                              n_adapt=n_adapt, adapt_rounds=adapt_rounds if big else 0,
-                              n_centres=n_centres, nu=nu, n_is=n_is,
-                              max_seconds=max_seconds, min_probability=min_probability,
-                              deadline=deadline, weighted_centres=weighted_centres, sub=sub,
-                              level_share=level_share)
+                sub = levels(i, THIN_RETRY * n_per_level, min_probability)
+                ex = explore(i, sub, adapt_rounds if big else 0)
             except (EmptyRegionError, LevelsNotConvergedError) as again:
                 raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
         explored[i] = ex

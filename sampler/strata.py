@@ -147,18 +147,14 @@ def halfspace_strata(model: CutInGMM, a: FloatArray, b: float, source: str = "")
     Their masses sum to P(S), not 1: ``P(A) = sum_s pi_s P_s(A)`` still holds for any A
     inside S, and each ``P_s(A)`` is a conditional probability given S, far less rare than
     P(A) when S is tight (``ttc<3``: P(S) = 2e-3)."""
+    from sampler.envelope import _projections  # the components' masses in the half-space
+
     model._check_fitted()
     a = np.asarray(a, dtype=np.float64)
-    out: list[Stratum] = []
+    _, _, log_pk = _projections(model, a, float(b))
     where = f"{source} envelope" if source else "envelope"
-    for k in range(model.n_components_):
-        if not model.weights_[k] > 0:
-            continue
-        sd = math.sqrt(float(a @ model.covariances_[k] @ a))
-        m = float(a @ model.means_[k])
-        out.append(Stratum(model, k, a.copy(), float(b), float(log_ndtr((float(b) - m) / sd)),
-                           f"component {k}, {where}"))
-    return out
+    return [Stratum(model, k, a.copy(), float(b), float(log_pk[k]), f"component {k}, {where}")
+            for k in range(model.n_components_) if model.weights_[k] > 0]
 
 
 def stratum_shares(strata: list[Stratum], z: FloatArray, log_w: FloatArray) -> FloatArray:

@@ -379,8 +379,10 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     # ``region_limit_state``), so that no row outside the kinematic ones is simulated
     layered = bool(kin_cons) and bool(crit_cons)
 
-    def quantities(z: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
-        params = model.params_matrix(model.from_z(z))
+    def quantities(z: FloatArray, params: FloatArray | None = None
+                   ) -> tuple[FloatArray, dict[str, FloatArray]]:
+        if params is None:
+            params = model.params_matrix(model.from_z(z))
         q = region.quantities(params, other) if other else {}
         if crit:
             q.update(criticality_quantities(params, region.lane_width, with_ttr=with_ttr))
@@ -466,7 +468,7 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         if ok.size == 0 or params is None:
             return out
         if not layered:
-            _, q = quantities(z[ok])
+            _, q = quantities(z[ok], params)  # the rows' parameters are known already
             out[ok] = largest(q, list(cons))
             return out
         q = region.quantities(params, other)
