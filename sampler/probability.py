@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError
+from sampler.constraints import Region
 from sampler.intervals import clopper_pearson, upper_bound
 from sampler.memo import MODEL_SEED, memoised
 from sampler.problem import Pilot, Problem, ProgressFn
@@ -97,6 +98,29 @@ class PRegion:
                 f"({self.method}, {self.confidence:.0%}, {self.n_hits}/{self.n_draws})")
 
 
+def _kinematic_part(region: Region) -> Region:
+    """The region without its criticality constraints (what costs no simulation)."""
+    kin = Region(constraints=tuple(c for c in region.constraints if c.tier < 2),
+                 lane_width=region.lane_width, physical_bounds=region.physical_bounds)
+    return kin if region._model is None else kin.bind(region._model)
+
+
+def _draw_inside(problem: Problem, kin: Region | None, n: int, rng: np.random.Generator
+                 ) -> tuple[FloatArray, int]:
+    """``n`` draws of the problem's proposal: (those inside the region, the rows that were
+    simulated: inside ``kin``, the region's part that costs nothing; 0 without ``kin``)."""
+    z = problem.draw_z(n, rng)
+    if kin is None:
+        return z[problem.inside(z)], 0
+    x = problem.params(z)
+    idx = np.flatnonzero(kin.contains(x))
+    inside = np.zeros(n, dtype=bool)
+    if idx.size:
+        inside[idx] = problem.region.contains(x[idx])
+    problem.n_evals += n
+    return z[inside], int(idx.size)
+
+
 class PRegionEstimator:
     """Pilot draws, the broadened search for rare regions, and the P(A) estimators.
 
@@ -128,6 +152,11 @@ class PRegionEstimator:
     min_p : float
         A region whose P(A) upper bound is below this is "practically empty" (error).
     confidence : float
+    exact_sims : int
+        Simulations plain MC may spend on a criticality region (``sample`` with ``auto``,
+        ``estimate_p_region``) before the rare-event methods take over: the pilot goes on
+        while ``mc_min_hits`` hits look reachable within it (``extend_pilot``; 200,000
+        rows, about 4 s; 0: off).
     """
 
     def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
@@ -136,7 +165,7 @@ class PRegionEstimator:
                  inflate: float = 1.5, n_bounds: int = 1 << 15,
                  search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
                  search_draws: int = 1 << 18, min_p: float = 1e-12,
-                 confidence: float = 0.95) -> None:
+                 confidence: float = 0.95, exact_sims: int = 200_000) -> None:
         self.pilot_hits = int(pilot_hits)
         self.pilot_max = int(pilot_max)
         self.pilot_max_costly = int(pilot_max_costly)
@@ -149,6 +178,7 @@ class PRegionEstimator:
         self.search_draws = int(search_draws)
         self.min_p = float(min_p)
         self.confidence = float(confidence)
+        self.exact_sims = int(exact_sims)
 
     def settings(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self).items()}
@@ -179,28 +209,71 @@ class PRegionEstimator:
     # ---------------------------------------------------------------- pilot and search
 
     def pilot(self, problem: Problem, rng: np.random.Generator, need: int,
-              progress: ProgressFn | None = None) -> Pilot:
+              progress: ProgressFn | None = None, extend: bool = False) -> Pilot:
         """Plain MC in growing batches until ``pilot_hits`` hits or ``pilot_max`` draws;
-        then, if fewer than ``need`` hits, the broadened search."""
+        with ``extend``, a criticality region's pilot goes on while plain MC can still
+        reach ``mc_min_hits`` within ``exact_sims`` simulations (``extend_pilot``); then,
+        if fewer than ``need`` hits, the broadened search."""
         hits: list[FloatArray] = []
-        n_hits = n_draws = 0
+        n_hits = n_draws = n_sim = 0
         batch = 1 << 14
         costly = any(c.tier == 2 for c in problem.region.constraints)  # closed-loop runs
         cap = self.pilot_max_costly if costly else self.pilot_max
+        kin = _kinematic_part(problem.region) if costly else None
         while n_hits < self.pilot_hits and n_draws < cap:
             b = min(batch, cap - n_draws)
-            z = problem.draw_z(b, rng)
-            inside = z[problem.inside(z)]
+            inside, sims = _draw_inside(problem, kin, b, rng)
             hits.append(inside)
             n_hits += inside.shape[0]
             n_draws += b
+            n_sim += sims
             batch = min(batch * 2, 1 << 18)
             if progress is not None:
                 progress("pilot", n_draws, cap)
-        pilot = Pilot(n_draws=n_draws, hits=np.concatenate(hits, axis=0))
+        pilot = Pilot(n_draws=n_draws, hits=np.concatenate(hits, axis=0), n_simulated=n_sim)
+        if extend and kin is not None:
+            self.extend_pilot(problem, kin, rng, pilot, progress)
         if pilot.n_hits < need:
             self.search(problem, rng, pilot, need)
         return pilot
+
+    def extend_pilot(self, problem: Problem, kin: Region, rng: np.random.Generator,
+                     pilot: Pilot, progress: ProgressFn | None = None) -> None:
+        """More plain draws for a criticality region while plain MC can still reach
+        ``mc_min_hits`` hits within ``exact_sims`` simulations (``kin``: the region
+        without its criticality constraints).
+
+        Plain MC simulates only the draws inside the bounds and the kinematic constraints
+        (checked first, for free), and its estimate is exact. A region that is rare only
+        through its kinematic part (a thin band such as ``2.9 < ttc < 3``) but not given
+        it is then estimated exactly: subset-is's chains barely move in such a band, and
+        its estimate there was measured 0.35-0.85 of the brute force on average, with
+        intervals that missed it (docs/sampler.md). Before each batch the simulations
+        still needed are projected from the one-sided 95 % upper bound of the hit rate per
+        simulation (optimistic, so that a region within the budget is rarely given up
+        by bad luck); when the projection exceeds the budget the pilot stops and the
+        caller goes on to the rare-event methods. Batches double from the pilot's size. The
+        pilot's draws, hits and ``n_simulated`` grow in place."""
+        if self.exact_sims <= 0:
+            return
+        hits = [pilot.hits]
+        n_hits, n_draws, n_sim = pilot.n_hits, pilot.n_draws, pilot.n_simulated
+        batch = max(n_draws, 1 << 12)
+        while n_hits < self.mc_min_hits:
+            rate = clopper_pearson(n_hits, max(n_sim, 1), 0.90)[1]  # one-sided 95 % upper
+            if n_sim + (self.mc_min_hits - n_hits) / rate > self.exact_sims:
+                break
+            inside, sims = _draw_inside(problem, kin, batch, rng)
+            hits.append(inside)
+            n_hits += inside.shape[0]
+            n_draws += batch
+            n_sim += sims
+            batch = min(batch * 2, 1 << 18)
+            if progress is not None:
+                progress("pilot (plain Monte Carlo)", n_hits, self.mc_min_hits)
+        pilot.hits = np.concatenate(hits, axis=0)
+        pilot.n_draws = n_draws
+        pilot.n_simulated = n_sim
 
     def search(self, problem: Problem, rng: np.random.Generator, pilot: Pilot,
                 need: int) -> None:
@@ -234,29 +307,53 @@ class PRegionEstimator:
                  mc_hits: int, region_z: FloatArray,
                  bounds: tuple[float, float, float]) -> PRegion:
         """Choose ``mc`` or ``is`` (see the module docstring) and estimate P(A)."""
-        p_b, lo_b, hi_b = bounds
         if mc_hits >= self.mc_min_hits:
-            mass = problem.proposal_mass  # P(S) of the envelope the draws came from, or 1
-            lo, hi = clopper_pearson(mc_hits, mc_draws, self.confidence)
-            joint = mass * mc_hits / mc_draws
-            out = PRegion(estimate=min(1.0, joint / p_b), ci_low=mass * lo / hi_b,
-                          ci_high=min(1.0, mass * hi / lo_b), confidence=self.confidence,
-                          method="mc" if problem.envelope is None else "envelope",
-                          n_draws=mc_draws, n_hits=mc_hits, p_bounds=p_b,
-                          p_bounds_ci=(lo_b, hi_b), p_joint=joint,
-                          cov=math.sqrt((1 - mc_hits / mc_draws) / mc_hits))
+            out = self._plain(problem, mc_draws, mc_hits, bounds)
         else:
             out = self._importance(problem, rng, region_z, bounds)
         return self._not_empty(problem, out)
 
+    def _plain(self, problem: Problem, mc_draws: int, mc_hits: int,
+               bounds: tuple[float, float, float]) -> PRegion:
+        """Plain MC (``mc``, or ``envelope`` for draws of the model restricted to one):
+        ``mc_hits`` of ``mc_draws`` inside, exact (Clopper-Pearson) interval."""
+        p_b, lo_b, hi_b = bounds
+        mass = problem.proposal_mass  # P(S) of the envelope the draws came from, or 1
+        lo, hi = clopper_pearson(mc_hits, mc_draws, self.confidence)
+        joint = mass * mc_hits / mc_draws
+        return PRegion(estimate=min(1.0, joint / p_b), ci_low=mass * lo / hi_b,
+                       ci_high=min(1.0, mass * hi / lo_b), confidence=self.confidence,
+                       method="mc" if problem.envelope is None else "envelope",
+                       n_draws=mc_draws, n_hits=mc_hits, p_bounds=p_b,
+                       p_bounds_ci=(lo_b, hi_b), p_joint=joint,
+                       cov=math.sqrt((1 - mc_hits / mc_draws) / mc_hits) if mc_hits else None)
+
+    def contradicts(self, problem: Problem, out: PRegion, pilot: Pilot | None) -> bool:
+        """Whether a rare-event estimate ``out`` lies below what the pilot's exact plain
+        draws prove: its upper end below their lower 99.9 % bound of P(A and B).
+
+        Subset-is can miss most of a thin region (chains that barely move in a narrow
+        band of a kinematic quantity; docs/sampler.md) and then reports a far too small
+        P(A) with a narrow interval. The pilot's hits are exact, so a contradiction means
+        the rare-event estimate is wrong, not unlucky (one-sided 1e-3 per check)."""
+        if pilot is None or pilot.n_hits == 0 or pilot.n_draws == 0:
+            return False
+        lo, _ = clopper_pearson(pilot.n_hits, pilot.n_draws, 0.998)
+        return out.ci_high * out.p_bounds_ci[0] < problem.proposal_mass * lo
+
     def from_subset(self, problem: Problem, result: Any,
-                    bounds: tuple[float, float, float]) -> PRegion:
+                    bounds: tuple[float, float, float], pilot: Pilot | None = None
+                    ) -> PRegion:
         """P(A) from a subset simulation (``sampler.subset.SubsetResult``, method
         ``subset``) or subset-is (``sampler.rare.RareResult``, method ``subset-is``).
 
         Interval: log-normal with ``cov_upper`` (subset: the conservative bound, levels
         fully correlated; subset-is: the importance sampler's CoV),
-        ``p exp(+-z sqrt(log(1 + cov_upper^2)))``, combined with P(B)'s interval."""
+        ``p exp(+-z sqrt(log(1 + cov_upper^2)))``, combined with P(B)'s interval.
+
+        With ``pilot``: when the estimate ``contradicts`` the pilot's exact draws, the
+        pilot's plain estimate (exact interval, however few its hits) is returned
+        instead."""
         p_b, lo_b, hi_b = bounds
         joint = float(result.probability)
         zc = float(stats.norm.ppf(0.5 + self.confidence / 2))
@@ -268,6 +365,8 @@ class PRegionEstimator:
                       n_draws=int(result.n_evaluations), n_hits=int(result.z.shape[0]),
                       p_bounds=p_b, p_bounds_ci=(lo_b, hi_b), p_joint=joint,
                       cov=float(result.cov_upper))
+        if pilot is not None and self.contradicts(problem, out, pilot):
+            out = self._plain(problem, pilot.n_draws, pilot.n_hits, bounds)
         return self._not_empty(problem, out)
 
     def _not_empty(self, problem: Problem, out: PRegion) -> PRegion:

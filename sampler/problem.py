@@ -120,6 +120,7 @@ class Pilot:
     hits: FloatArray  # (k, d) z-space, inside the region, in draw order
     search_hits: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     search_draws: int = 0
+    n_simulated: int = 0  # rows the extended pilot simulated (0: not extended)
 
     @property
     def n_hits(self) -> int:

@@ -288,13 +288,20 @@ def sample(
         # no pilot hit: the broadened search (which ends empty regions); few: subset-is.
         # Not for criticality regions: 10^5-10^6 simulations; subset-is ends empty ones
         need = 0 if _costly(region) else 1
-    pilot = est.pilot(problem, rng, need=need, progress=progress)
+    pilot = est.pilot(problem, rng, need=need, progress=progress,
+                      extend=isinstance(strategy, AutoSampler))
     if isinstance(strategy, AutoSampler) and strategy.choose(
             n, pilot, _costly(region)).name == "mcmc":
         est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
     drawn = strategy.draw(problem, n, rng, pilot, progress)
     if drawn.subset is not None:
-        p_region = est.from_subset(problem, drawn.subset, bounds)
+        p_region = est.from_subset(problem, drawn.subset, bounds,
+                                   pilot if pilot.n_simulated else None)
+        if p_region.method != drawn.method:  # overruled by the pilot's exact draws
+            drawn.diagnostics["overruled"] = (
+                f"{drawn.method}'s P(A) lay below the pilot's exact lower bound (99.9 %): "
+                f"P(A) is the pilot's plain estimate ({pilot.n_hits} hits); the samples "
+                "may cover only part of the region")
     else:
         p_region = est.estimate(problem, rng, mc_draws=drawn.mc_draws, mc_hits=drawn.mc_hits,
                                 region_z=drawn.z, bounds=bounds)
@@ -310,6 +317,7 @@ def sample(
     diag = dict(drawn.diagnostics)
     diag["pilot"] = {"n_draws": pilot.n_draws, "n_hits": pilot.n_hits,
                      "search_draws": pilot.search_draws,
+                     "n_simulated": pilot.n_simulated,
                      "search_hits": int(pilot.search_hits.shape[0])
                      if pilot.search_hits.ndim == 2 else 0}
     return SampleSet(
@@ -350,7 +358,7 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     from sampler.mcmc import MCMCSampler
 
     mcmc = MCMCSampler()
-    pilot = est.pilot(problem, rng, need=0)
+    pilot = est.pilot(problem, rng, need=0, extend=True)
     if pilot.n_hits >= est.mc_min_hits:
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                             region_z=pilot.hits, bounds=bounds)
@@ -360,7 +368,7 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
                 est.search(problem, rng, pilot, 1)  # ends an empty region with its bound
             return est.from_subset(problem, SubsetSampler().run(problem, 1, rng), bounds)
         result = SubsetISSampler().run(problem, rng)
-        return est.from_subset(problem, result, bounds)
+        return est.from_subset(problem, result, bounds, pilot)
     drawn = mcmc.draw(problem, 500, rng, pilot)
     return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                         region_z=drawn.z, bounds=bounds)
