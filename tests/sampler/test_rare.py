@@ -145,7 +145,11 @@ def test_independence_chains_sample_the_restricted_law() -> None:
     stages: list[ImportanceStage] = []
     subset_importance(model, g, 3, keep_stage=stages)
     stage = stages[0]
-    stage.add(20000, np.random.default_rng(5))
+    # 100,000 more proposals: with 20,000 these chains (seed 3) stuck on a heavy weight for
+    # a stretch and the thinned states failed KS (p = 2.6e-6 with numpy 2.4.6 / openturns
+    # 1.27.post1; seeds 4 and 5: 0.58, 0.42); with 100,000 seeds 3-5 give 0.023, 0.23,
+    # 0.045. The chains are exact in the limit, not for short runs on heavy weights
+    stage.add(100000, np.random.default_rng(5))
     states, acc = independence_chain(stage.log_w, np.random.default_rng(6))
     assert ((acc > 0.05) & (acc <= 1.0)).all()
     x0 = stage.z[states[50::10].reshape(-1), 0]
