@@ -66,14 +66,18 @@ class EmptyRegionError(SamplerError):
         Draws that fell inside the region.
     p_upper : float
         One-sided 95 % upper bound of the region's mass found by the search.
+    stalled : float or None
+        Subset simulation only: the threshold its levels repeated when they stalled (the
+        chains did not move, so ``p_upper`` is not a reliable bound), else None.
     """
 
     def __init__(self, message: str, *, n_draws: int = 0, n_hits: int = 0,
-                 p_upper: float = float("nan")) -> None:
+                 p_upper: float = float("nan"), stalled: float | None = None) -> None:
         super().__init__(message, field="constraints", problem="empty region")
         self.n_draws = n_draws
         self.n_hits = n_hits
         self.p_upper = p_upper
+        self.stalled = stalled
 
 
 class LevelsNotConvergedError(SamplerError):

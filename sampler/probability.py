@@ -157,6 +157,11 @@ class PRegionEstimator:
         ``estimate_p_region``) before the rare-event methods take over: the pilot goes on
         while ``mc_min_hits`` hits look reachable within it (``extend_pilot``; 200,000
         rows, about 4 s; 0: off).
+    thin_share, exact_sims_thin : float, int
+        When fewer than ``thin_share`` of the pilot's draws fall inside the region's
+        kinematic part (a thin band: 2.9 < ttc < 3 fills 5.8 % of its ``ttc<3`` envelope,
+        ``ttc<3`` itself 38 %), the budget is ``exact_sims_thin`` (2,000,000 rows, about
+        40 s): subset-is was measured unreliable there (docs/sampler.md).
     """
 
     def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
@@ -165,7 +170,8 @@ class PRegionEstimator:
                  inflate: float = 1.5, n_bounds: int = 1 << 15,
                  search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
                  search_draws: int = 1 << 18, min_p: float = 1e-12,
-                 confidence: float = 0.95, exact_sims: int = 200_000) -> None:
+                 confidence: float = 0.95, exact_sims: int = 200_000,
+                 thin_share: float = 0.1, exact_sims_thin: int = 2_000_000) -> None:
         self.pilot_hits = int(pilot_hits)
         self.pilot_max = int(pilot_max)
         self.pilot_max_costly = int(pilot_max_costly)
@@ -179,6 +185,8 @@ class PRegionEstimator:
         self.min_p = float(min_p)
         self.confidence = float(confidence)
         self.exact_sims = int(exact_sims)
+        self.thin_share = float(thin_share)
+        self.exact_sims_thin = int(exact_sims_thin)
 
     def settings(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self).items()}
@@ -253,15 +261,21 @@ class PRegionEstimator:
         simulation (optimistic, so that a region within the budget is rarely given up
         by bad luck); when the projection exceeds the budget the pilot stops and the
         caller goes on to the rare-event methods. Batches double from the pilot's size. The
-        pilot's draws, hits and ``n_simulated`` grow in place."""
-        if self.exact_sims <= 0:
+        budget is ``exact_sims_thin`` instead when the kinematic part is thin (fewer than
+        ``thin_share`` of the pilot's draws inside it). The pilot's draws, hits and
+        ``n_simulated`` grow in place."""
+        n_hits, n_draws, n_sim = pilot.n_hits, pilot.n_draws, pilot.n_simulated
+        budget = self.exact_sims
+        if n_draws and n_sim < self.thin_share * n_draws:
+            # a thin kinematic part (a ttc band): subset-is's chains are unreliable there
+            budget = max(budget, self.exact_sims_thin)
+        if budget <= 0:
             return
         hits = [pilot.hits]
-        n_hits, n_draws, n_sim = pilot.n_hits, pilot.n_draws, pilot.n_simulated
         batch = max(n_draws, 1 << 12)
         while n_hits < self.mc_min_hits:
             rate = clopper_pearson(n_hits, max(n_sim, 1), 0.90)[1]  # one-sided 95 % upper
-            if n_sim + (self.mc_min_hits - n_hits) / rate > self.exact_sims:
+            if n_sim + (self.mc_min_hits - n_hits) / rate > budget:
                 break
             inside, sims = _draw_inside(problem, kin, batch, rng)
             hits.append(inside)

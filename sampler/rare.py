@@ -489,6 +489,23 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
                 continue
             rerun_evals += int(exc.n_draws)
         except EmptyRegionError as exc:
+            if exc.stalled is not None:
+                # the levels stalled (their chains did not move): "empty" bounds nothing
+                # here (on `2.9 < ttc < 3 & btn > 0.5` such a stratum held nearly all of
+                # P(A)); once more with THIN_RETRY times the points, as above
+                try:
+                    sub = levels(i, THIN_RETRY * n_per_level, floor)
+                except LevelsNotConvergedError as again:
+                    raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
+                except EmptyRegionError as below:
+                    rerun_evals += int(exc.n_draws)  # the first attempt's; below's next
+                    exc = below
+                else:
+                    rerun_evals += int(exc.n_draws)
+                    subs[i] = sub
+                    n_probe_evals[i] += rerun_evals
+                    total += st.mass * sub.probability
+                    continue
             why = str(exc).splitlines()[0]
             if floor > min_probability and not rerun_evals:
                 why = (f"cut at {floor:.3g} = rel_floor x the running total / pi_s: "

@@ -212,6 +212,7 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
                     f"subset simulation: stopped after max_seconds={max_seconds:g} s "
                     f"({state['evals']} evaluations, lowest g so far {state['best']:.3g}); "
                     "raise max_seconds or n_per_level's budget") from None
+            stall = _stalled([float(b) for b in algo.getThresholdPerStep()])
             if state["exhausted"]:
                 if int(state["inside"]) > 0:
                     # rows inside A were met, but the thresholds never reached 0: the
@@ -226,9 +227,10 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
                 raise EmptyRegionError(
                     f"subset simulation did not reach the region in {max_levels} levels "
                     f"({state['evals']} evaluations, lowest g {state['best']:.3g} > 0): it is "
-                    f"empty or holds less than min_probability={min_probability:g}",
-                    n_draws=int(state["evals"]), n_hits=0, p_upper=min_probability
-                ) from None
+                    f"empty or holds less than min_probability={min_probability:g}"
+                    + _stall_note(stall),
+                    n_draws=int(state["evals"]), n_hits=0, p_upper=min_probability,
+                    stalled=stall) from None
             if "too small" not in str(exc):
                 raise SamplerError(f"subset simulation failed: {str(exc).splitlines()[0]}"
                                    ) from None
@@ -237,8 +239,8 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
             raise EmptyRegionError(
                 f"subset simulation went below min_probability={min_probability:g} "
                 f"(P = {p_up:.3g} after {algo.getStepsNumber()} levels) without reaching "
-                "the region: it holds less mass than that",
-                n_draws=int(state["evals"]), n_hits=0, p_upper=p_up) from None
+                "the region: it holds less mass than that" + _stall_note(stall),
+                n_draws=int(state["evals"]), n_hits=0, p_upper=p_up, stalled=stall) from None
         except TypeError as exc:
             # OpenTURNS 1.27 refuses to finish when the last level holds every sample
             # (conditional probability 1: zero variance, gamma NaN); the levels are complete
@@ -253,12 +255,14 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
                              dtype=np.float64)
         probability = cumulative[-1]
     n = blocks * chains
+    stall = _stalled(thresholds)
     if thresholds[-1] > 0:
         raise EmptyRegionError(
             f"subset simulation reached P = {cumulative[-1]:.3g} after {steps} levels "
             f"(min_probability={min_probability:g}) with the limit state still above 0 "
-            f"(threshold {thresholds[-1]:.3g}): the region holds less mass than that",
-            n_draws=int(state["evals"]), n_hits=0, p_upper=cumulative[-1])
+            f"(threshold {thresholds[-1]:.3g}): the region holds less mass than that"
+            + _stall_note(stall),
+            n_draws=int(state["evals"]), n_hits=0, p_upper=cumulative[-1], stalled=stall)
     conditional = [cumulative[0]] + [cumulative[j] / cumulative[j - 1] if cumulative[j - 1] > 0
                                      else 0.0 for j in range(1, steps)]
     gamma = [0.0, *gamma[1:steps]]
@@ -272,6 +276,34 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         thresholds=thresholds, conditional=conditional, gamma=gamma, delta=delta,
         z=to_z(u_final) if u_final.size else np.zeros((0, d)),
         n_per_level=n, seconds=time.monotonic() - t0)
+
+
+#: this many levels in a row with one and the same threshold: the levels have stalled
+STALL_LEVELS = 3
+
+
+def _stalled(thresholds: list[float]) -> float | None:
+    """The threshold that ``STALL_LEVELS`` consecutive levels (after the first) share
+    exactly, or None. A level's threshold is the p0-quantile of its points; it repeats
+    only when the chains' lowest points are copies, i.e. the chains did not move (on
+    `2.9 < ttc < 3 & btn > 0.5` 200-point levels repeated 0.1513 nine times and were
+    then read as "empty below 1e-14" though the stratum holds nearly all of P(A)). Also
+    what an empty region's levels do once their chains sit at g's lowest value above 0.
+    ``EmptyRegionError.stalled`` carries it."""
+    run = 1
+    for j in range(2, len(thresholds)):
+        run = run + 1 if thresholds[j] == thresholds[j - 1] else 1
+        if run >= STALL_LEVELS:
+            return thresholds[j]
+    return None
+
+
+def _stall_note(stall: float | None) -> str:
+    if stall is None:
+        return ""
+    return (f"; but its levels stalled (threshold {stall:.4g} for {STALL_LEVELS} or more "
+            "levels in a row: the chains did not move), so this is no reliable bound (a "
+            "region too thin for the chains, or g's lowest value above 0)")
 
 
 def _near(model: CutInGMM, z: FloatArray) -> NDArray[np.bool_]:

@@ -722,9 +722,75 @@ def test_pilot_is_not_extended_beyond_its_budget(tno: CutInGMM) -> None:
     assert b.diagnostics["pilot"]["n_draws"] == 8192
     assert 0 < b.diagnostics["pilot"]["n_simulated"] < a.diagnostics["pilot"]["n_simulated"]
     assert a.diagnostics["pilot"]["n_simulated"] < 3 * 8192 * 0.4
-    small = sample(tno, THIN_BAND, 5, seed=1, estimator=PRegionEstimator(exact_sims=10_000))
+    small = sample(tno, THIN_BAND, 5, seed=1,
+                   estimator=PRegionEstimator(exact_sims=10_000, exact_sims_thin=10_000))
     assert small.diagnostics["pilot"]["n_simulated"] <= 10_000
     assert small.method == "subset-is"
+    # the band fills ~6 % of its envelope (< thin_share = 0.1): the thin budget applies
+    thin = sample(tno, THIN_BAND, 5, seed=1, estimator=PRegionEstimator(exact_sims=10_000))
+    assert thin.method == "rejection"
+    assert 10_000 < thin.diagnostics["pilot"]["n_simulated"] < 0.1 * thin.diagnostics[
+        "pilot"]["n_draws"]
+
+
+def test_deep_thin_band_auto_is_plain_and_exact(tno: CutInGMM) -> None:
+    """``2.9 < ttc < 3 & btn > 0.5``: P(btn > 0.5 | band) ~ 7e-5, beyond ``exact_sims``
+    but the band is thin, so ``auto`` spends up to ``exact_sims_thin`` (2e6) simulations
+    on plain Monte Carlo (~25 s). Subset-is gave 0.12-7.1 of the brute force over 10
+    seeds (3 of them 0: a stratum cut as "empty" after its levels stalled; now refused
+    as stalled and re-run). Checked against a brute force computed here: 12·10^6
+    envelope draws, the band's rows simulated (~50 hits), within 3 combined standard
+    errors."""
+    from sampler.constraints import derive
+    from sampler.sampleset import estimate_p_region
+
+    cons = ["ttc<3", "ttc>2.9", "btn>0.5"]
+    region = Region.from_constraints(cons, lane_width=tno.lane_width_)
+    problem = Problem(tno, region)
+    assert problem.envelope is not None
+    rng = np.random.default_rng(23)
+    n_ref, hits = 12_000_000, 0
+    for _ in range(12):
+        x = problem.params(problem.draw_z(n_ref // 12, rng))
+        ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
+        band = x[(ttc > 2.9) & (ttc < 3) & region.in_bounds(x)]
+        hits += int(region.contains(band).sum())
+    assert hits > 20
+    p_ref = problem.envelope.mass * hits / n_ref
+    p = estimate_p_region(tno, cons, 100)
+    assert p.method == "envelope" and p.n_hits >= 100
+    se = math.hypot(p.p_joint / math.sqrt(p.n_hits), p_ref / math.sqrt(hits))
+    assert abs(p.p_joint - p_ref) < 3 * se
+
+
+def test_stalled_levels_are_not_read_as_empty() -> None:
+    """Thresholds repeated exactly for ``STALL_LEVELS`` levels mean the chains did not
+    move; by hand on threshold lists, and on a limit state flat at 1 except a half-space
+    (z0 > 12, never met): the p0-quantile is 1 at every level, so the levels stall; the
+    EmptyRegionError says that its bound is not reliable and carries the threshold
+    (``stalled``), which stratified subset-is reads as "retry with more points"."""
+    from sampler import EmptyRegionError
+    from sampler.subset import STALL_LEVELS, _stalled, subset_simulation
+
+    assert STALL_LEVELS == 3
+    assert _stalled([1e6, 0.3, 0.2, 0.15, 0.15, 0.15]) == 0.15
+    assert _stalled([1e6, 0.3, 0.3, 0.2, 0.2, 0.1]) is None  # runs of two
+    assert _stalled([1e6, 1e6, 0.5]) is None  # the first level is plain Monte Carlo
+    assert _stalled([0.4, 0.3, 0.2, 0.1, -0.1]) is None
+
+    model = _two_component()
+
+    def g(z: np.ndarray) -> np.ndarray:
+        return np.where(z[:, 0] > 12.0, -1.0, 1.0)
+
+    with pytest.raises(EmptyRegionError, match="stalled") as info:
+        subset_simulation(model, g, 1, n_per_level=500)
+    assert info.value.stalled == 1.0
+    # a region the levels reach without stalling carries no such note
+    with pytest.raises(EmptyRegionError) as ok:
+        subset_simulation(model, lambda z: np.asarray(50.0 - z[:, 0]), 1, n_per_level=500,
+                          min_probability=1e-6)
+    assert ok.value.stalled is None and "stalled" not in str(ok.value)
 
 
 def test_rare_estimate_below_the_pilots_exact_bound_is_overruled(tno: CutInGMM) -> None:
