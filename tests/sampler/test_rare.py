@@ -859,3 +859,19 @@ def test_unconverged_stratum_is_retried_then_refused(monkeypatch: pytest.MonkeyP
     failures["left"] = 2  # the retry fails too
     with pytest.raises(LevelsNotConvergedError, match=r"component 0.*also with 4000 points"):
         stratified_importance(model, g, 0, strata=strata, n_probe=0)
+
+
+def test_auto_takes_the_pilots_hits_when_they_suffice() -> None:
+    """A thin band's extended pilot holds ~100 exact hits from ~2.4e7 draws: for 20
+    samples they are the samples (rejection, nothing more to draw); by the cost rule alone
+    (20 / p_hat = 4.7e6 rejection draws against ~1e6 for MCMC) it chose MCMC, which took
+    150 s of simulated chains on ``2.9 < ttc < 3 & btn > 0.5``. For 200 samples the cost
+    rule still decides."""
+    from sampler.problem import Pilot
+    from sampler.samplers import AutoSampler
+
+    pilot = Pilot(n_draws=24_000_000, hits=np.zeros((102, 8)))
+    auto = AutoSampler()
+    assert auto.choose(20, pilot, costly=True).name == "rejection"
+    assert auto.choose(102, pilot, costly=True).name == "rejection"
+    assert auto.choose(200, pilot, costly=True).name == "mcmc"
