@@ -391,6 +391,11 @@
         }, source);
       }
     } catch (e) {
+      // the preview runs when the constraint field loses focus (e.g. on "Draw"): a bad
+      // constraint is marked here too, whichever of the two answers arrives first
+      if (!state.catalogue && e.field && e.field.indexOf("constraints") >= 0) {
+        $("constraint-input").classList.add("invalid");
+      }
       reportError("constrained against unconstrained", e);
     } finally {
       busy(-1);
