@@ -121,6 +121,8 @@ class Pilot:
     search_hits: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     search_draws: int = 0
     n_simulated: int = 0  # rows the extended pilot simulated (0: not extended)
+    probe_draws: int = 0  # the extended pilot's probe (not in n_draws when plain)
+    plain: bool = False  # n_draws / hits are a plain run of a size fixed in advance
 
     @property
     def n_hits(self) -> int:

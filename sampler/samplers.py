@@ -166,6 +166,8 @@ class AutoSampler(Sampler):
     def choose(self, n: int, pilot: Pilot, costly: bool = False) -> Sampler:
         """The sampler for ``n`` samples given the pilot; ``costly``: the region has a
         criticality constraint."""
+        if pilot.n_hits >= n and pilot.plain:  # an extended pilot's plain run (below)
+            return self.rejection
         if pilot.n_hits < self.subset_below:
             return self.rare if costly else self.subset
         if pilot.n_hits >= n:

@@ -304,7 +304,7 @@ def sample(
                 "may cover only part of the region")
     else:
         p_region = est.estimate(problem, rng, mc_draws=drawn.mc_draws, mc_hits=drawn.mc_hits,
-                                region_z=drawn.z, bounds=bounds)
+                                region_z=drawn.z, bounds=bounds, plain=pilot.plain)
     x = model.from_z(drawn.z)
     params = pd.DataFrame(model.params_matrix(x), columns=list(PARAM_NAMES))
     for j, f in enumerate(model.features_):
@@ -318,6 +318,7 @@ def sample(
     diag["pilot"] = {"n_draws": pilot.n_draws, "n_hits": pilot.n_hits,
                      "search_draws": pilot.search_draws,
                      "n_simulated": pilot.n_simulated,
+                     "probe_draws": pilot.probe_draws, "plain": pilot.plain,
                      "search_hits": int(pilot.search_hits.shape[0])
                      if pilot.search_hits.ndim == 2 else 0}
     return SampleSet(
@@ -359,9 +360,9 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
 
     mcmc = MCMCSampler()
     pilot = est.pilot(problem, rng, need=0, extend=True)
-    if pilot.n_hits >= est.mc_min_hits:
+    if pilot.n_hits >= est.mc_min_hits or (pilot.plain and pilot.n_hits > 0):
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
-                            region_z=pilot.hits, bounds=bounds)
+                            region_z=pilot.hits, bounds=bounds, plain=pilot.plain)
     if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset(-is)
         if not _costly(region):
             if pilot.n_hits == 0:
