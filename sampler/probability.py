@@ -125,6 +125,15 @@ def _draw_inside(problem: Problem, kin: Region | None, n: int, rng: np.random.Ge
     return z[inside], int(idx.size)
 
 
+def _add_batch(problem: Problem, kin: Region | None, n: int, rng: np.random.Generator,
+               hits: list[FloatArray], counts: tuple[int, int, int]) -> tuple[int, int, int]:
+    """``n`` more draws (``_draw_inside``): their hits appended to ``hits``; returns the
+    running (hits, draws, simulated rows) given the previous ``counts``."""
+    inside, sims = _draw_inside(problem, kin, n, rng)
+    hits.append(inside)
+    return counts[0] + inside.shape[0], counts[1] + n, counts[2] + sims
+
+
 class PRegionEstimator:
     """Pilot draws, the broadened search for rare regions, and the P(A) estimators.
 
@@ -234,11 +243,8 @@ class PRegionEstimator:
         kin = _kinematic_part(problem.region) if costly else None
         while n_hits < self.pilot_hits and n_draws < cap:
             b = min(batch, cap - n_draws)
-            inside, sims = _draw_inside(problem, kin, b, rng)
-            hits.append(inside)
-            n_hits += inside.shape[0]
-            n_draws += b
-            n_sim += sims
+            n_hits, n_draws, n_sim = _add_batch(problem, kin, b, rng, hits,
+                                                (n_hits, n_draws, n_sim))
             batch = min(batch * 2, 1 << 18)
             if progress is not None:
                 progress("pilot", n_draws, cap)
@@ -288,11 +294,8 @@ class PRegionEstimator:
             rate = clopper_pearson(n_hits, max(n_sim, 1), 0.90)[1]
             if n_sim + self.mc_min_hits / rate > budget:
                 break
-            inside, sims = _draw_inside(problem, kin, batch, rng)
-            hits.append(inside)
-            n_hits += inside.shape[0]
-            n_draws += batch
-            n_sim += sims
+            n_hits, n_draws, n_sim = _add_batch(problem, kin, batch, rng, hits,
+                                                (n_hits, n_draws, n_sim))
             batch = min(batch * 2, 1 << 18)
             if progress is not None:
                 progress("pilot (plain Monte Carlo, probe)", n_hits, PROBE_HITS)

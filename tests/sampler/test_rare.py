@@ -643,25 +643,34 @@ def test_sampler_stratifies_inside_the_envelope(tno: CutInGMM) -> None:
 THIN_BAND = ["ttc<3", "ttc>2.9", "btn>0.4"]
 
 
+def _band_brute_force(tno: CutInGMM, cons: list[str], n_ref: int, seed: int
+                      ) -> tuple[float, int]:
+    """(P(A and B), hits) of a ``2.9 < ttc < 3`` band region from ``n_ref`` exact draws of
+    the model restricted to the ``ttc<3`` envelope (in blocks of 10^6), only the band's
+    rows simulated."""
+    from sampler.constraints import derive
+
+    region = Region.from_constraints(cons, lane_width=tno.lane_width_)
+    problem = Problem(tno, region)
+    assert problem.envelope is not None
+    rng = np.random.default_rng(seed)
+    hits = 0
+    for _ in range(n_ref // 1_000_000):
+        x = problem.params(problem.draw_z(1_000_000, rng))
+        ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
+        band = x[(ttc > 2.9) & (ttc < 3) & region.in_bounds(x)]
+        hits += int(region.contains(band).sum())
+    return problem.envelope.mass * hits / n_ref, hits
+
+
 @pytest.fixture(scope="module")
 def thin_band_ref(tno: CutInGMM) -> tuple[float, int, int]:
     """Brute force of ``THIN_BAND``: (P(A and B), hits, envelope draws); 2,000,000 exact
     draws of the model restricted to the ``ttc<3`` envelope, only the band's rows
     simulated."""
-    from sampler.constraints import derive
-
-    region = Region.from_constraints(THIN_BAND, lane_width=tno.lane_width_)
-    problem = Problem(tno, region)
-    assert problem.envelope is not None
-    rng = np.random.default_rng(17)
-    n_ref, hits = 2_000_000, 0
-    for _ in range(4):
-        x = problem.params(problem.draw_z(n_ref // 4, rng))
-        ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
-        band = x[(ttc > 2.9) & (ttc < 3) & region.in_bounds(x)]
-        hits += int(region.contains(band).sum())
+    p_ref, hits = _band_brute_force(tno, THIN_BAND, 2_000_000, 17)
     assert hits > 50
-    return problem.envelope.mass * hits / n_ref, hits, n_ref
+    return p_ref, hits, 2_000_000
 
 
 def test_thin_band_is_not_dropped(tno: CutInGMM, thin_band_ref: tuple[float, int, int]
@@ -744,22 +753,11 @@ def test_deep_thin_band_auto_is_plain_and_exact(tno: CutInGMM) -> None:
     as stalled and re-run). Checked against a brute force computed here: 12·10^6
     envelope draws, the band's rows simulated (~50 hits), within 3 combined standard
     errors."""
-    from sampler.constraints import derive
     from sampler.sampleset import estimate_p_region
 
     cons = ["ttc<3", "ttc>2.9", "btn>0.5"]
-    region = Region.from_constraints(cons, lane_width=tno.lane_width_)
-    problem = Problem(tno, region)
-    assert problem.envelope is not None
-    rng = np.random.default_rng(23)
-    n_ref, hits = 12_000_000, 0
-    for _ in range(12):
-        x = problem.params(problem.draw_z(n_ref // 12, rng))
-        ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
-        band = x[(ttc > 2.9) & (ttc < 3) & region.in_bounds(x)]
-        hits += int(region.contains(band).sum())
+    p_ref, hits = _band_brute_force(tno, cons, 12_000_000, 23)
     assert hits > 20
-    p_ref = problem.envelope.mass * hits / n_ref
     p = estimate_p_region(tno, cons, 100)
     assert p.method == "envelope" and p.n_hits >= 50
     se = math.hypot(p.p_joint / math.sqrt(p.n_hits), p_ref / math.sqrt(hits))
