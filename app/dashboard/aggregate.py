@@ -205,6 +205,9 @@ def nice_edges(lo: float, hi: float, max_bins: int = 40) -> FloatArray:
         for m in NICE_STEPS:
             step = m * 10.0 ** exp
             first, last = math.floor(lo / step), math.ceil(hi / step)
+            # lo / step can underflow to -0.0 (a subnormal lo such as -5e-324): keep lo in
+            first -= first * step > lo
+            last += last * step < hi
             if last == first:
                 last += 1
             if last - first <= max_bins:

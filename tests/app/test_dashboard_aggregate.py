@@ -138,6 +138,15 @@ def test_nice_edges_cover_the_range_with_at_most_max_bins(lo: float, width: floa
     assert np.allclose(np.diff(e), e[1] - e[0], rtol=1e-6, atol=0)
 
 
+def test_nice_edges_cover_a_subnormal_lower_end() -> None:
+    """Found by the property above: with lo = -5e-324 and a step of 100, lo / step
+    underflows to -0.0 and the first edge was 0.0 > lo; now it is one step below 0."""
+    e = nice_edges(-5e-324, 1000.0, 10)
+    assert e[0] <= -5e-324 and e[-1] >= 1000.0
+    # the 100 step would need 11 bins with the extra one below 0: 200, edges -200 ... 1000
+    assert e[0] == -200.0 and e.size == 7
+
+
 def test_nice_edges_refuse_bad_input() -> None:
     with pytest.raises(ValueError):
         nice_edges(1.0, 0.0)
