@@ -312,14 +312,10 @@ class PRegionEstimator:
         #    biased high, 1.17 of the brute force over 9 seeds of the band with btn > 0.5)
         n_plain = math.ceil(need * n_draws / n_sim)
         fresh: list[FloatArray] = []
-        done = got = 0
+        got = done = 0
         while done < n_plain:
-            b = min(1 << 18, n_plain - done)
-            inside, sims = _draw_inside(problem, kin, b, rng)
-            fresh.append(inside)
-            done += b
-            got += inside.shape[0]
-            n_sim += sims
+            got, done, n_sim = _add_batch(problem, kin, min(1 << 18, n_plain - done), rng,
+                                          fresh, (got, done, n_sim))
             if progress is not None:
                 progress("pilot (plain Monte Carlo)", done, n_plain)
         pilot.hits = np.concatenate(fresh, axis=0)

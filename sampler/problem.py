@@ -120,7 +120,7 @@ class Pilot:
     hits: FloatArray  # (k, d) z-space, inside the region, in draw order
     search_hits: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     search_draws: int = 0
-    n_simulated: int = 0  # rows the extended pilot simulated (0: not extended)
+    n_simulated: int = 0  # rows simulated (criticality regions: inside the kinematic part)
     probe_draws: int = 0  # the extended pilot's probe (not in n_draws when plain)
     plain: bool = False  # n_draws / hits are a plain run of a size fixed in advance
 

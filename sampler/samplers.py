@@ -166,15 +166,13 @@ class AutoSampler(Sampler):
     def choose(self, n: int, pilot: Pilot, costly: bool = False) -> Sampler:
         """The sampler for ``n`` samples given the pilot; ``costly``: the region has a
         criticality constraint."""
-        if pilot.n_hits >= n and pilot.plain:  # an extended pilot's plain run (below)
+        if pilot.n_hits >= n and (pilot.plain or pilot.n_hits >= self.subset_below):
+            # the pilot's exact hits are the samples: rejection costs nothing more (a thin
+            # band's extended pilot, a plain run, holds ~100 hits from 2e7 draws; the cost
+            # rule below would have chosen MCMC, 150 s of simulated chains, for 20 samples)
             return self.rejection
         if pilot.n_hits < self.subset_below:
             return self.rare if costly else self.subset
-        if pilot.n_hits >= n:
-            # the pilot's exact hits are the samples: rejection costs nothing more (a thin
-            # band's extended pilot holds 100 hits from 2e7 draws; the cost rule below
-            # would have chosen MCMC, 150 s of simulated chains, for 20 samples)
-            return self.rejection
         rej_cost = n / pilot.p_hat
         mcmc_cost = self.cost_ratio * (n * self.tau_guess
                                        + self.mcmc.n_walkers * self.burn_guess)

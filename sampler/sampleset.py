@@ -296,7 +296,7 @@ def sample(
     drawn = strategy.draw(problem, n, rng, pilot, progress)
     if drawn.subset is not None:
         p_region = est.from_subset(problem, drawn.subset, bounds,
-                                   pilot if pilot.n_simulated else None)
+                                   pilot if _costly(region) else None)
         if p_region.method != drawn.method:  # overruled by the pilot's exact draws
             drawn.diagnostics["overruled"] = (
                 f"{drawn.method}'s P(A) lay below the pilot's exact lower bound (99.9 %): "
