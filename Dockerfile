@@ -11,12 +11,12 @@ WORKDIR /opt/scengen
 
 # Every dependency ships manylinux wheels (numpy, numba, lxml, pyarrow, psycopg[binary]),
 # so no compiler is needed. The project metadata first, then the packages.
-COPY pyproject.toml README.md ./
+COPY pyproject.toml README.md constraints.txt ./
 COPY app ./app
 COPY datasets ./datasets
 COPY riskcore ./riskcore
 COPY sampler ./sampler
-RUN pip install . \
+RUN pip install -c constraints.txt . \
     && useradd --create-home --uid 10001 --user-group scengen \
     && mkdir -p /data \
     && chown scengen:scengen /data

@@ -8,26 +8,36 @@ STAMP  := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 # setuptools' notice that an editable install is one (the only build-backend message left)
 PIP_ENV := PYTHONWARNINGS="ignore:Editable installation"
+# exact versions of everything installed (see constraints.txt; `make lock` rewrites it)
+LOCK   := constraints.txt
 
-.PHONY: install install-run run test lint types pytest services bench clean qc-env
+.PHONY: install install-run run test lint types pytest services bench clean qc-env lock
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # the service's dependencies only
-$(RUN_STAMP): pyproject.toml | $(VENV)/bin/python
-	$(PIP_ENV) $(BIN)/python -m pip install --quiet -e .
+$(RUN_STAMP): pyproject.toml $(LOCK) | $(VENV)/bin/python
+	$(PIP_ENV) $(BIN)/python -m pip install --quiet -c $(LOCK) -e .
 	touch $(RUN_STAMP)
 
 # and the dev tools (pytest, ruff, mypy, playwright, ...)
-$(STAMP): pyproject.toml | $(VENV)/bin/python
-	$(PIP_ENV) $(BIN)/python -m pip install --quiet -e '.[dev]'
+$(STAMP): pyproject.toml $(LOCK) | $(VENV)/bin/python
+	$(PIP_ENV) $(BIN)/python -m pip install --quiet -c $(LOCK) -e '.[dev]'
 	touch $(RUN_STAMP) $(STAMP)
 
 install-run: $(RUN_STAMP)
 
 install: $(STAMP)
+
+# After changing dependencies in pyproject.toml: upgrade everything within its ranges, then
+# record the exact versions (the header comment of constraints.txt is kept).
+lock: | $(VENV)/bin/python
+	$(PIP_ENV) $(BIN)/python -m pip install --quiet --upgrade -e '.[dev]'
+	{ sed -n '/^#/p' $(LOCK); $(BIN)/python -m pip freeze --exclude-editable; } > $(LOCK).new
+	mv $(LOCK).new $(LOCK)
+	touch $(RUN_STAMP) $(STAMP)
 
 # host/port/store: SCENGEN_HOST, SCENGEN_PORT, SCENGEN_DATA_DIR (read by scengen serve)
 run: install-run

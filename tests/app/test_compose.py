@@ -200,10 +200,12 @@ def test_dockerfile_base_user_install_and_cmd() -> None:
     instructions = _dockerfile_instructions()
     assert instructions[0] == ("FROM", "python:3.11-slim")
     runs = " ".join(args for ins, args in instructions if ins == "RUN")
-    assert "pip install ." in runs
+    # installs the project with the exact versions the suite passed on (constraints.txt)
+    assert "pip install -c constraints.txt ." in runs
     users = [args for ins, args in instructions if ins == "USER"]
     assert users and users[-1] not in ("root", "0")
-    assert any(ins == "COPY" and args.startswith("pyproject.toml") for ins, args in instructions)
+    copied = [args.split()[:-1] for ins, args in instructions if ins == "COPY"]
+    assert any("pyproject.toml" in srcs and "constraints.txt" in srcs for srcs in copied)
     [cmd] = [args for ins, args in instructions if ins == "CMD"]
     argv = json.loads(cmd)  # exec form
     assert argv == ["scengen", "serve", "--host", "0.0.0.0", "--port", "8000"]
