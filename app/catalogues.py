@@ -98,9 +98,9 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         chunks = (repo.stored_chunk_indices(s, catalogue_id)
                   if row.status == "running" else set())
     # per scenario: the workers' reports of the chunks being computed (app.db.chunkfile)
-    done = (scenarios_done(row.n, row.chunk_size, chunks,
-                           chunkfile.progress_dir(ctx.data_dir, catalogue_id))
-            if row.status == "running" else stored)
+    folder = chunkfile.progress_dir(ctx.data_dir, catalogue_id)
+    running = row.status == "running"
+    done = scenarios_done(row.n, row.chunk_size, chunks, folder) if running else stored
     # the statistics change only when a chunk is stored: computed once per stored state
     key = (catalogue_id, n_done, stored, row.updated_at.isoformat())
 
@@ -125,6 +125,8 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "scenarios_stored": stored,
         "scenarios_done": done,
         "progress": min(1.0, done / row.n) if row.n else 1.0,
+        # what the running job is doing now (the P(A) estimate can take a minute at 0 %)
+        "stage": chunkfile.read_stage(folder) if running else None,
         "p_region": row.p_region,
         # issue 12: rates per hour / 10^6 km with both intervals, and the weights' sum
         "rates": catalogue_rates(row.p_region, stats.get("exposure_weight")),

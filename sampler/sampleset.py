@@ -342,13 +342,15 @@ def sample(
 def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | None = (),
                       seed: int | None = None, *, lane_width: float | None = None,
                       physical_bounds: bool = True,
-                      estimator: PRegionEstimator | None = None) -> PRegion:
+                      estimator: PRegionEstimator | None = None,
+                      progress: ProgressFn | None = None) -> PRegion:
     """P(A) of a region under the model with its interval, without keeping samples.
 
     Plain MC when the pilot finds enough hits; when it finds fewer than the MCMC walkers,
     subset-is (``sampler.rare``) for criticality regions and subset simulation otherwise
     (as ``auto``); otherwise a short MCMC run supplies the importance sampler's proposal
-    (see ``sampler.probability``).
+    (see ``sampler.probability``). ``progress(stage, done, total)`` hears the pilot's
+    counts and the start of each later stage (the estimate does not depend on it).
     """
     model._check_fitted()
     region = _region(model, constraints, lane_width, physical_bounds)
@@ -359,17 +361,24 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     from sampler.mcmc import MCMCSampler
 
     mcmc = MCMCSampler()
-    pilot = est.pilot(problem, rng, need=0, extend=True)
+    pilot = est.pilot(problem, rng, need=0, progress=progress, extend=True)
+
+    def starting(stage: str) -> None:
+        if progress is not None:
+            progress(stage, 0, 1)
+
     if pilot.n_hits >= est.mc_min_hits or (pilot.plain and pilot.n_hits > 0):
         return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                             region_z=pilot.hits, bounds=bounds, plain=pilot.plain)
     if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset(-is)
         if not _costly(region):
+            starting("subset simulation")
             if pilot.n_hits == 0:
                 est.search(problem, rng, pilot, 1)  # ends an empty region with its bound
             return est.from_subset(problem, SubsetSampler().run(problem, 1, rng), bounds)
+        starting("subset-is (rare-event estimate)")
         result = SubsetISSampler().run(problem, rng)
         return est.from_subset(problem, result, bounds, pilot)
-    drawn = mcmc.draw(problem, 500, rng, pilot)
+    drawn = mcmc.draw(problem, 500, rng, pilot, progress)
     return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
                         region_z=drawn.z, bounds=bounds)

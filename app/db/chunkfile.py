@@ -10,6 +10,11 @@ file (``progress_<index>``: how many of the chunk's scenarios are done) so that 
 and the CLI bar move per scenario, not per chunk; the runner removes it when the chunk is
 stored. A worker that cannot write there (a Dask worker on another machine) reports nothing
 and the progress moves per chunk.
+
+The runner also keeps ``stage.json`` there while the job runs: what it is doing now
+(estimating P(A), with the sampler's own stage and counts; sampling and scoring; refining
+the model interval), so that the status says why the progress stays at 0 during a
+P(A) estimate of half a minute.
 """
 
 from __future__ import annotations
@@ -22,8 +27,11 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["clear_progress", "encode", "progress_dir", "read_at", "read_progress",
-           "read_scenarios", "relative_path", "write_progress"]
+__all__ = ["clear_progress", "clear_stage", "encode", "progress_dir", "read_at",
+           "read_progress", "read_scenarios", "read_stage", "relative_path", "write_progress",
+           "write_stage"]
+
+STAGE_FILE = "stage.json"
 
 
 def relative_path(catalogue_id: str, index: int) -> str:
@@ -78,6 +86,33 @@ def read_progress(folder: Path) -> dict[int, int]:
             with contextlib.suppress(OSError, ValueError):
                 out[int(path.name.removeprefix("progress_"))] = int(path.read_text())
     return out
+
+
+def write_stage(folder: str | Path, name: str, done: int | None = None,
+                total: int | None = None) -> None:
+    """Record the job's current stage (best effort, atomic: a reader sees the old or the
+    new stage, never half of one)."""
+    path = Path(folder) / STAGE_FILE
+    tmp = path.with_name(f".{path.name}.{os.getpid()}")
+    with contextlib.suppress(OSError):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(json.dumps({"name": name, "done": done, "total": total}))
+        os.replace(tmp, path)
+
+
+def read_stage(folder: Path) -> dict[str, Any] | None:
+    """The stage last written (``{"name", "done", "total"}``), or None."""
+    try:
+        data = json.loads((Path(folder) / STAGE_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and isinstance(data.get("name"), str) else None
+
+
+def clear_stage(folder: Path) -> None:
+    """Remove the stage file (the job ended or was interrupted)."""
+    with contextlib.suppress(OSError):
+        (Path(folder) / STAGE_FILE).unlink()
 
 
 def clear_progress(folder: Path, index: int) -> None:

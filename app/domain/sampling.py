@@ -25,7 +25,7 @@ from sampler import (
 from sampler import sample as sampler_sample
 from sampler.constraints import Region
 from sampler.exposure import region_report, uncertainty_report
-from sampler.problem import Problem
+from sampler.problem import Problem, ProgressFn
 from sampler.sampleset import SampleSet
 
 __all__ = ["SampleResult", "estimate_region", "parse_constraints", "region_uncertainty",
@@ -136,10 +136,12 @@ def add_region_report(model: CutInGMM, result: SampleResult) -> None:
 
 
 def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
-                    seed: int) -> dict[str, Any]:
-    """P(A) of the constraint region under the model: ``{"estimate", "ci": [lo, hi], ...}``."""
+                    seed: int, progress: ProgressFn | None = None) -> dict[str, Any]:
+    """P(A) of the constraint region under the model: ``{"estimate", "ci": [lo, hi], ...}``;
+    ``progress`` hears the estimator's stages."""
     try:
-        return region_dict(estimate_p_region(model, list(constraints), seed))
+        return region_dict(estimate_p_region(model, list(constraints), seed,
+                                             progress=progress))
     except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
         raise _sampling_error(exc) from None
 

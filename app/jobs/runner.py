@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,10 @@ from app.jobs.executors import ChunkExecutor
 log = logging.getLogger("scengen.jobs")
 
 Progress = Callable[[int, int], None]  # (scenarios done, scenarios in total)
+#: a stage of the work with its counts: (name, done, total), as ``sampler``'s ProgressFn
+Stage = Callable[[str, int, int], None]
+#: seconds between two writes of the same stage's counts (a new stage is written at once)
+STAGE_EVERY = 0.5
 
 
 class _Either:
@@ -55,13 +60,16 @@ def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
     )
 
 
-def estimate_region(spec: CatalogueSpec) -> dict[str, Any]:
+def estimate_region(spec: CatalogueSpec, stage: Stage | None = None) -> dict[str, Any]:
     """P(A) of the catalogue's region: one estimate from the catalogue's seed, with the
-    "model" interval and the rates when the model has replicates and an exposure."""
+    "model" interval and the rates when the model has replicates and an exposure.
+    ``stage`` hears the estimator's stages (pilot, plain Monte Carlo, subset-is, ...)."""
     model = domain.load_model(spec.model_json)
     constraints = domain.parse_constraints(spec.constraints)
     seed = region_seed(spec.seed)
-    p_region = domain.estimate_region(model, constraints, seed)
+    p_region = domain.estimate_region(model, constraints, seed, progress=stage)
+    if stage is not None and (model.bootstrap_ or model.exposure_):
+        stage("model interval and rates", 0, 1)
     encoded: dict[str, Any] = jsonconv.encode(
         domain.region_uncertainty(model, constraints, p_region, n_samples=spec.n))
     return encoded
@@ -149,11 +157,35 @@ class _Meter:
 PROGRESS_TICK = 0.5
 
 
+class _StageFile:
+    """Writes the job's stage to its folder (``chunkfile.write_stage``) for the status: a
+    new stage at once, the counts of the same stage at most every ``STAGE_EVERY`` s."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.name: str | None = None
+        self.written = 0.0
+
+    def __call__(self, name: str, done: int | None = None, total: int | None = None) -> None:
+        now = time.monotonic()
+        if name == self.name and now - self.written < STAGE_EVERY:
+            return
+        self.name, self.written = name, now
+        chunkfile.write_stage(self.folder, name, done, total)
+
+    def estimating(self, name: str, done: int, total: int) -> None:
+        """A stage of the P(A) estimate."""
+        self(f"estimating P(A): {name}", done, total)
+
+    def clear(self) -> None:
+        chunkfile.clear_stage(self.folder)
+
+
 class CatalogueRunner:
     """Runs catalogue jobs against one database/data dir with one executor."""
 
     def __init__(self, db: Database, data_dir: Path, executor: ChunkExecutor,
-                 region: Callable[[CatalogueSpec], dict[str, Any]] = estimate_region,
+                 region: Callable[[CatalogueSpec, Stage], dict[str, Any]] = estimate_region,
                  refine: Callable[[CatalogueSpec, dict[str, Any]], dict[str, Any] | None]
                  = refine_region) -> None:
         self.db = db
@@ -186,9 +218,11 @@ class CatalogueRunner:
                  catalogue_id, len(done), total, self.executor.name)
         folder = chunkfile.progress_dir(self.data_dir, catalogue_id)
         meter = _Meter(spec, folder, done, progress)
+        stage = _StageFile(folder)
         try:
             if need_region:
-                p_region = self.region(spec)
+                stage.estimating("starting", 0, 1)
+                p_region = self.region(spec, stage.estimating)
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region
@@ -197,6 +231,7 @@ class CatalogueRunner:
             todo = [i for i in range(total) if i not in done]
             for i in todo:  # what an interrupted run reported is redone from 0
                 chunkfile.clear_progress(folder, i)
+            stage("sampling and scoring")
             for result in self.executor.run(spec, todo, halt):
                 with self.db.session() as s:
                     ok = repo.store_chunk(s, self.data_dir, catalogue_id, result.index,
@@ -217,23 +252,27 @@ class CatalogueRunner:
                 missing = total - len(repo.stored_chunk_indices(s, catalogue_id))
             if missing:
                 return self._finish(catalogue_id, "failed", f"{missing} chunks missing")
-            self._refine_region(catalogue_id, spec, note)
+            self._refine_region(catalogue_id, spec, note, stage)
             return self._finish(catalogue_id, "done", None)
         except Exception as exc:
             log.exception("catalogue %s failed", catalogue_id)
             return self._finish(catalogue_id, "failed", f"{type(exc).__name__}: {exc}")
         finally:
             meter.close()
+            stage.clear()
 
     def _refine_region(self, catalogue_id: str, spec: CatalogueSpec,
-                       note: Callable[[str], None] | None) -> None:
+                       note: Callable[[str], None] | None, stage: _StageFile) -> None:
         """Refine the stored model interval (``refine_region``) before the job is done;
-        ``note`` hears why the job is still running."""
+        ``note`` and the stage file say why the job is still running."""
         with self.db.session() as s:
             current = repo.get_catalogue(s, catalogue_id).p_region
-        if current is not None and note is not None and needs_refinement(current):
-            note("all scenarios stored; refining the model interval of P(A): one subset-is "
-                 "run per unresolved bootstrap replicate (about 0.5-1 s each)")
+        if current is not None and needs_refinement(current):
+            why = ("all scenarios stored; refining the model interval of P(A): one subset-is "
+                   "run per unresolved bootstrap replicate (about 0.5-1 s each)")
+            stage(why)
+            if note is not None:
+                note(why)
         refined = None if current is None else self.refine(spec, current)
         if refined is not None:
             with self.db.session() as s:

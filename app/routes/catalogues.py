@@ -65,6 +65,16 @@ class ChunkProgress(ApiModel):
     done: int
 
 
+class CatalogueStage(ApiModel):
+    name: str = Field(description="what the running job is doing: 'estimating P(A): <the "
+                      "estimator's stage>', 'sampling and scoring', 'refining the model "
+                      "interval …'")
+    done: int | None = Field(default=None, description="the stage's count so far (draws, "
+                             "hits, …; null when it has none)")
+    total: int | None = Field(default=None, description="what ``done`` runs to (the "
+                              "pilot's budget, which it may not use up)")
+
+
 class CatalogueStatus(ApiModel):
     """A catalogue's status; ``summary`` has count (and count_inf), min, max, mean and the
     percentiles p05 … p95 of each scored column's finite values (computed in SQL);
@@ -86,6 +96,8 @@ class CatalogueStatus(ApiModel):
     scenarios_done: int = Field(description="scenarios stored plus, while the job runs, "
                                 "those its workers report computed in unfinished chunks")
     progress: float = Field(description="scenarios_done / n, 0 … 1 (moves per scenario)")
+    stage: CatalogueStage | None = Field(default=None, description="while running: the "
+                                         "current stage (null otherwise)")
     p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate; "
                                             "mc_ci and model_ci: its two intervals")
     rates: RegionRates | None = Field(default=None, description="cut-ins of the region per "

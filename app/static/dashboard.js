@@ -510,6 +510,7 @@
         ["effective sample size", esc(fmt(d.ess_total, 4))],
       ];
       if (c.status !== "done") rows.push(["progress", esc(Math.round(100 * c.progress) + "%")]);
+      if (c.stage) rows.push(["stage", esc(stageText(c.stage))]);
       if (c.status === "done") {
         const href = "/catalogues/" + encodeURIComponent(c.id) + "/export?format=";
         rows.push(["export", ["jsonl", "csv", "parquet", "xosc"].map((f) =>
@@ -1017,6 +1018,14 @@
     }
   }
 
+  // what a running catalogue is doing, e.g. "estimating P(A): pilot (plain Monte Carlo)
+  // 262,144 / 1,048,576" (the P(A) estimate can take a minute with the progress at 0 %)
+  function stageText(stage) {
+    const counts = stage.done !== null && stage.total !== null && stage.total > 1 ?
+      " " + stage.done.toLocaleString("en") + " / " + stage.total.toLocaleString("en") : "";
+    return stage.name + counts;
+  }
+
   function waitFor(id, status) {
     return new Promise((resolve, reject) => {
       const tick = async () => {
@@ -1024,7 +1033,7 @@
           const info = await api("/catalogues/" + encodeURIComponent(id));
           status.textContent = "catalogue " + id + ": " + info.status + " " +
             Math.round(100 * info.progress) + "% (" + info.scenarios_stored + " of " + info.n +
-            " scenarios)";
+            " scenarios)" + (info.stage ? " · " + stageText(info.stage) : "");
           if (info.status === "queued" || info.status === "running") {
             setTimeout(tick, 400);
           } else {

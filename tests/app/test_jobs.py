@@ -41,7 +41,7 @@ class Exploding:
         return fake_chunk(spec, index)
 
 
-def region(spec: CatalogueSpec) -> dict[str, Any]:
+def region(spec: CatalogueSpec, stage: Any = None) -> dict[str, Any]:
     return {"estimate": 0.25, "ci": [0.2, 0.3]}
 
 
@@ -224,7 +224,7 @@ def test_an_unresolved_model_interval_is_refined_once_the_scenarios_are_stored(
                                                 "upper_resolved": True}}
 
     runner = CatalogueRunner(db, tmp_path, InlineExecutor(fake_chunk),
-                             region=lambda spec: unresolved, refine=refine)
+                             region=lambda spec, stage: unresolved, refine=refine)
     notes: list[str] = []
     assert runner.run("r", note=notes.append) == "done"
     assert calls == [(23, unresolved)]  # once, after all 23 scenarios were stored
@@ -236,3 +236,42 @@ def test_an_unresolved_model_interval_is_refined_once_the_scenarios_are_stored(
     assert refine_region(spec, {"estimate": 0.1, "ci": [0.0, 0.2]}) is None
     assert refine_region(spec, {"estimate": 0.1, "model_interval": {
         "lower_resolved": True, "upper_resolved": True}}) is None
+
+
+def test_the_stage_file_says_what_the_job_is_doing_and_goes_at_the_end(
+        tmp_path: Path) -> None:
+    from app.db import chunkfile
+
+    db = _db(tmp_path)
+    _catalogue(db, "s")
+    folder = chunkfile.progress_dir(tmp_path, "s")
+    seen: list[dict[str, Any] | None] = []
+
+    def slow_region(spec: CatalogueSpec, stage: Any) -> dict[str, Any]:
+        seen.append(chunkfile.read_stage(folder))
+        stage("pilot", 5, 10)
+        seen.append(chunkfile.read_stage(folder))
+        stage("pilot", 6, 10)  # the same stage again within STAGE_EVERY: not rewritten
+        seen.append(chunkfile.read_stage(folder))
+        stage("subset-is", 0, 1)  # a new stage: written at once
+        seen.append(chunkfile.read_stage(folder))
+        return region(spec)
+
+    def chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
+        seen.append(chunkfile.read_stage(folder))
+        return fake_chunk(spec, index)
+
+    runner = CatalogueRunner(db, tmp_path, InlineExecutor(chunk), region=slow_region)
+    assert runner.run("s") == "done"
+    assert seen[:4] == [
+        {"name": "estimating P(A): starting", "done": 0, "total": 1},
+        {"name": "estimating P(A): pilot", "done": 5, "total": 10},
+        {"name": "estimating P(A): pilot", "done": 5, "total": 10},
+        {"name": "estimating P(A): subset-is", "done": 0, "total": 1}]
+    assert seen[4:] == [{"name": "sampling and scoring", "done": None, "total": None}] * 5
+    assert chunkfile.read_stage(folder) is None  # cleared when the job ends
+    # and when it fails
+    _catalogue(db, "f")
+    failing = CatalogueRunner(db, tmp_path, InlineExecutor(Exploding(at=1)), region=slow_region)
+    assert failing.run("f") == "failed"
+    assert chunkfile.read_stage(chunkfile.progress_dir(tmp_path, "f")) is None

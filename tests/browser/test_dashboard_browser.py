@@ -443,3 +443,29 @@ def test_rates_and_two_models_side_by_side(server: Server, page: Page) -> None:
     assert console.errors == []
     shot(page, "#view-rates", "8-rates.png")
     shot(page, "#view-compare", "9-side-by-side.png")
+
+
+def test_a_running_catalogue_shows_its_stage(server: Server, page: Page) -> None:
+    """While a job estimates P(A) (up to a minute for a thin band, progress 0 %), the
+    catalogue panel says what it is doing, with the counts the status reports."""
+    from app.db import chunkfile
+    from app.db import repository as repo
+
+    db = server.db()
+    try:
+        model_id = httpx.get(f"{server.base}/health").json()["default_model"]
+        cid = store_synthetic_catalogue(db, server.data_dir, model_id, 30, seed=4,
+                                        chunk_size=10)
+        with db.session() as s:
+            repo.get_catalogue(s, cid).status = "running"
+    finally:
+        db.dispose()
+    chunkfile.write_stage(chunkfile.progress_dir(server.data_dir, cid),
+                          "estimating P(A): pilot (plain Monte Carlo)", 262144, 1048576)
+    console = Console(page)
+    page.goto(f"{server.base}/dashboard/catalogues/{cid}")
+    settle(page)
+    info = page.locator("#catalogue-info").inner_text()
+    assert "estimating P(A): pilot (plain Monte Carlo) 262,144 / 1,048,576" in info, info
+    assert console.errors == []
+    shot(page, "#catalogue-info", "8-running-catalogue-stage.png")

@@ -710,7 +710,17 @@ def test_thin_band_auto_is_plain_and_exact(tno: CutInGMM,
         assert abs(p.p_joint - p_ref) < 3 * se
     ss = sample(tno, THIN_BAND, 5, seed=1)
     assert ss.method == "rejection"
-    assert ss.p_region.p_joint == estimate_p_region(tno, THIN_BAND, 1).p_joint
+    heard: list[tuple[str, int, int]] = []
+    p1 = estimate_p_region(tno, THIN_BAND, 1, progress=lambda *a: heard.append(a))
+    assert ss.p_region.p_joint == p1.p_joint
+    # the progress the catalogue status shows: the pilot's stages with their counts, which
+    # do not change the estimate
+    stages = [h[0] for h in heard]
+    assert stages.index("pilot") < stages.index("pilot (plain Monte Carlo, probe)") \
+        < stages.index("pilot (plain Monte Carlo)")
+    plain = [(d, t) for name, d, t in heard if name == "pilot (plain Monte Carlo)"]
+    assert plain[-1][0] == plain[-1][1] == ss.diagnostics["pilot"]["n_draws"]
+    assert [d for d, _ in plain] == sorted(d for d, _ in plain)
     pilot = ss.diagnostics["pilot"]
     assert pilot["plain"] and pilot["probe_draws"] > 0 and pilot["n_simulated"] > 8192
     # the estimate is the plain run's alone, not the probe's draws too

@@ -250,6 +250,11 @@ def test_status_of_a_running_catalogue_counts_the_workers_reports(client: Any) -
     assert status["progress"] == pytest.approx(3 / 12)
     chunkfile.write_progress(folder, 1, 4)
     assert client.get(f"/catalogues/{row.id}").json()["scenarios_done"] == 4
+    # the stage the runner writes beside them is shown while the job runs
+    assert client.get(f"/catalogues/{row.id}").json()["stage"] is None
+    chunkfile.write_stage(folder, "estimating P(A): pilot (plain Monte Carlo)", 40960, 2000000)
+    assert client.get(f"/catalogues/{row.id}").json()["stage"] == {
+        "name": "estimating P(A): pilot (plain Monte Carlo)", "done": 40960, "total": 2000000}
     with ctx.db.session() as s:
         repo.get_catalogue(s, row.id).status = "cancelled"
     chunkfile.clear_progress(folder, 1)
