@@ -150,6 +150,8 @@ def _in_store(exc: LookupError) -> CliError:
 def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
     from tqdm import tqdm
 
+    from app.cli_sampler import _Progress
+
     bar: Any = None
 
     def progress(done: int, total: int) -> None:
@@ -162,13 +164,15 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
         else:
             bar.update(done - bar.n)
 
+    stages = _Progress(quiet=not show_progress)  # the P(A) estimate's stages
     try:
         status = ctx.runner().run(catalogue_id, progress=progress,
                                   note=(lambda text: tqdm.write(text, file=sys.stderr))
-                                  if show_progress else None)
+                                  if show_progress else None, stage=stages)
     except LookupError as exc:
         raise _in_store(exc) from None
     finally:
+        stages.close()
         if bar is not None:
             bar.close()
     print(json.dumps({"id": catalogue_id, "status": status}))

@@ -161,8 +161,9 @@ class _StageFile:
     """Writes the job's stage to its folder (``chunkfile.write_stage``) for the status: a
     new stage at once, the counts of the same stage at most every ``STAGE_EVERY`` s."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, listener: Stage | None = None) -> None:
         self.folder = folder
+        self.listener = listener
         self.name: str | None = None
         self.written = 0.0
 
@@ -174,8 +175,10 @@ class _StageFile:
         chunkfile.write_stage(self.folder, name, done, total)
 
     def estimating(self, name: str, done: int, total: int) -> None:
-        """A stage of the P(A) estimate."""
+        """A stage of the P(A) estimate (also told to the listener, e.g. the CLI's bars)."""
         self(f"estimating P(A): {name}", done, total)
+        if self.listener is not None:
+            self.listener(f"P(A): {name}", done, total)
 
     def clear(self) -> None:
         chunkfile.clear_stage(self.folder)
@@ -196,11 +199,13 @@ class CatalogueRunner:
 
     def run(self, catalogue_id: str, *, cancel: threading.Event | None = None,
             stop: threading.Event | None = None, progress: Progress | None = None,
-            note: Callable[[str], None] | None = None) -> str:
+            note: Callable[[str], None] | None = None, stage: Stage | None = None) -> str:
         """Finish the catalogue; return its final status (done, failed, cancelled,
         deleted, or interrupted when ``stop`` was set: the service is shutting down and
         the job stays ``running``, to be resumed at the next start). Errors of the job
-        end in status ``failed`` with the message kept."""
+        end in status ``failed`` with the message kept. ``progress`` hears the scenarios
+        done, ``stage`` the stages of the P(A) estimate, ``note`` why the job is still
+        running after its scenarios are stored."""
         halt = _Either(cancel, stop)
         with self.db.session() as s:
             row = repo.get_catalogue(s, catalogue_id)
@@ -218,11 +223,11 @@ class CatalogueRunner:
                  catalogue_id, len(done), total, self.executor.name)
         folder = chunkfile.progress_dir(self.data_dir, catalogue_id)
         meter = _Meter(spec, folder, done, progress)
-        stage = _StageFile(folder)
+        stages = _StageFile(folder, stage)
         try:
             if need_region:
-                stage.estimating("starting", 0, 1)
-                p_region = self.region(spec, stage.estimating)
+                stages.estimating("starting", 0, 1)
+                p_region = self.region(spec, stages.estimating)
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region
@@ -231,7 +236,7 @@ class CatalogueRunner:
             todo = [i for i in range(total) if i not in done]
             for i in todo:  # what an interrupted run reported is redone from 0
                 chunkfile.clear_progress(folder, i)
-            stage("sampling and scoring")
+            stages("sampling and scoring")
             for result in self.executor.run(spec, todo, halt):
                 with self.db.session() as s:
                     ok = repo.store_chunk(s, self.data_dir, catalogue_id, result.index,
@@ -252,14 +257,14 @@ class CatalogueRunner:
                 missing = total - len(repo.stored_chunk_indices(s, catalogue_id))
             if missing:
                 return self._finish(catalogue_id, "failed", f"{missing} chunks missing")
-            self._refine_region(catalogue_id, spec, note, stage)
+            self._refine_region(catalogue_id, spec, note, stages)
             return self._finish(catalogue_id, "done", None)
         except Exception as exc:
             log.exception("catalogue %s failed", catalogue_id)
             return self._finish(catalogue_id, "failed", f"{type(exc).__name__}: {exc}")
         finally:
             meter.close()
-            stage.clear()
+            stages.clear()
 
     def _refine_region(self, catalogue_id: str, spec: CatalogueSpec,
                        note: Callable[[str], None] | None, stage: _StageFile) -> None:

@@ -18,6 +18,7 @@ def test_create_status_list_export(store: Path, tmp_path: Path,
     result = json.loads(out.strip().splitlines()[-1])
     assert result["status"] == "done"
     assert "4/4" in err and "scenario" in err  # the progress bar (per scenario) on stderr
+    assert "P(A): pilot" in err  # and, before it, the P(A) estimate's stages
     cid = result["id"]
     assert main(["catalogue", "status", cid]) == 0
     status = json.loads(capsys.readouterr().out)
