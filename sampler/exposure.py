@@ -219,7 +219,7 @@ def uncertainty_report(model: Any, p_region: Any, region: Any,
         # reach it either
         try:
             model_iv = model_interval(model, region,
-                                      rare=p.method in ("subset", "subset-is"),
+                                      rare=p.method in ("subset", "subset-is", "split"),
                                       n_plain=n_plain, confidence=confidence,
                                       per_replicate=per_replicate)
         except SamplerError as exc:

@@ -66,7 +66,7 @@ class PRegion:
     ci_low: float
     ci_high: float
     confidence: float
-    method: str  # "mc", "envelope", "is", "subset" or "subset-is"
+    method: str  # "mc", "envelope", "is", "subset", "subset-is" or "split" (a sum of parts)
     n_draws: int  # draws behind the estimate (model draws for mc, proposal draws for is)
     n_hits: int  # of those, inside the region
     p_bounds: float  # P(B), the model's mass inside the physical bounds
@@ -176,6 +176,10 @@ class PRegionEstimator:
         ``ttc<3`` itself 38 %), the budget is ``exact_sims_thin`` (2,000,000 rows, about
         40 s): subset-is was measured unreliable there (docs/sampler.md).
     """
+
+    #: P(A) when it is known already (a catalogue's chunks reuse their catalogue's): the
+    #: estimator then returns it instead of estimating (``app.domain.sampling.KnownRegion``)
+    known: PRegion | None = None
 
     def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
                  pilot_max_costly: int = 1 << 13,
@@ -419,6 +423,33 @@ class PRegionEstimator:
         if pilot is not None and self.contradicts(problem, out, pilot):
             out = self._plain(problem, pilot.n_draws, pilot.n_hits, bounds)
         return self._not_empty(problem, out)
+
+    def combine(self, parts: list[PRegion], bounds: tuple[float, float, float]) -> PRegion:
+        """P(A) of a union of disjoint parts from their estimates (method ``split``):
+        P(A and B) is the sum of theirs, its variance the sum of theirs (independent
+        runs; a part's standard error is its CoV times its estimate, or, without a CoV,
+        from its interval), and the interval is log-normal as in ``from_subset``."""
+        p_b, lo_b, hi_b = bounds
+        zc = float(stats.norm.ppf(0.5 + self.confidence / 2))
+        joint = sum(p.p_joint for p in parts)
+        var = 0.0
+        for p in parts:
+            if p.cov is not None:
+                rel = p.cov
+            elif p.estimate > 0:
+                rel = (p.ci_high - p.ci_low) / (2 * zc * p.estimate)
+            else:  # an empty part: its upper end as the standard error
+                var += (p.ci_high * p.p_bounds / zc) ** 2
+                continue
+            var += (rel * p.p_joint) ** 2
+        cov = math.sqrt(var) / joint if joint > 0 else math.inf
+        s = math.sqrt(math.log1p(cov ** 2)) if joint > 0 else 0.0
+        hi = (joint * math.exp(zc * s) if joint > 0 else math.sqrt(var) * zc) / lo_b
+        return PRegion(estimate=min(1.0, joint / p_b), ci_low=joint * math.exp(-zc * s) / hi_b,
+                       ci_high=min(1.0, hi), confidence=self.confidence, method="split",
+                       n_draws=sum(p.n_draws for p in parts),
+                       n_hits=sum(p.n_hits for p in parts), p_bounds=p_b,
+                       p_bounds_ci=(lo_b, hi_b), p_joint=joint, cov=cov)
 
     def _not_empty(self, problem: Problem, out: PRegion) -> PRegion:
         """``out``, unless its upper bound is below ``min_p`` (EmptyRegionError)."""

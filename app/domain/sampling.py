@@ -76,6 +76,8 @@ class KnownRegion(PRegionEstimator):
     catalogue estimates them once and every chunk reuses them instead of spending
     ``n_bounds`` draws on P(B) and an estimate of P(A) it would throw away."""
 
+    known: PRegion
+
     def __init__(self, known: PRegion) -> None:
         super().__init__()
         self.known = known
