@@ -171,7 +171,7 @@ def _clean(value: Any) -> Any:
     return value
 
 
-class _Progress:
+class StageBars:
     """tqdm bars on stderr, one per stage. A stage's ``total`` is its budget (the pilot's
     is its largest number of draws), which it may not use up: when the next stage starts,
     or at the end, a stage's bar ends at the count it really reached (100 %), not at 2 %."""
@@ -243,7 +243,7 @@ def _sample(args: argparse.Namespace) -> int:
         raise ValueError("give the model once: as MODEL or as --model")
     model = _load_model(args.model if args.model is not None else args.model_option,
                         CutInGMM)
-    progress = _Progress(args.quiet)
+    progress = StageBars(args.quiet)
     try:
         ss = sample(model, args.constraints or [], args.n, args.seed, args.sampler,
                     lane_width=args.lane_width, use_envelope=not args.no_envelope,

@@ -150,7 +150,7 @@ def _in_store(exc: LookupError) -> CliError:
 def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
     from tqdm import tqdm
 
-    from app.cli_sampler import _Progress
+    from app.cli_sampler import StageBars
 
     bar: Any = None
 
@@ -164,7 +164,7 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
         else:
             bar.update(done - bar.n)
 
-    stages = _Progress(quiet=not show_progress)  # the P(A) estimate's stages
+    stages = StageBars(quiet=not show_progress)  # the P(A) estimate's stages
     try:
         status = ctx.runner().run(catalogue_id, progress=progress,
                                   note=(lambda text: tqdm.write(text, file=sys.stderr))

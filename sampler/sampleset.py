@@ -33,6 +33,7 @@ from sampler._exceptions import EmptyRegionError, SamplerError
 from sampler._threads import single_threaded
 from sampler.builder import build_scenario
 from sampler.constraints import DERIVED, Region
+from sampler.envelope import find_envelope
 from sampler.model import CutInGMM
 from sampler.probability import PRegion, PRegionEstimator
 from sampler.problem import Problem, ProgressFn, Sampler
@@ -241,13 +242,13 @@ def _split_parts(region: Region) -> list[Region] | None:
     model = region._model
     if model is None:
         return None
+    if find_envelope(model, region) is not None:
+        return None
     parts = [Region.from_constraints([*region.constraints, extra],
                                      lane_width=region.lane_width,
                                      physical_bounds=region.physical_bounds).bind(model)
              for extra in (f"ttc<{SPLIT_TTC:g}", f"ttc>={SPLIT_TTC:g}")]
-    if Problem(model, region).envelope is not None or Problem(model, parts[0]).envelope is None:
-        return None
-    return parts
+    return parts if find_envelope(model, parts[0]) is not None else None
 
 
 def _split_estimate(model: CutInGMM, parts: list[Region], seed: int, est: PRegionEstimator,

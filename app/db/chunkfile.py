@@ -70,12 +70,7 @@ def progress_dir(data_dir: Path, catalogue_id: str) -> Path:
 def write_progress(folder: str | Path, index: int, done: int) -> None:
     """Record that ``done`` scenarios of chunk ``index`` are computed (best effort: a
     folder that cannot be written is skipped)."""
-    path = Path(folder) / f"progress_{index:06d}"
-    tmp = path.with_name(f".{path.name}.{os.getpid()}")
-    with contextlib.suppress(OSError):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(str(int(done)))
-        os.replace(tmp, path)
+    _write_atomic(Path(folder) / f"progress_{index:06d}", str(int(done)))
 
 
 def read_progress(folder: Path) -> dict[int, int]:
@@ -92,11 +87,17 @@ def write_stage(folder: str | Path, name: str, done: int | None = None,
                 total: int | None = None) -> None:
     """Record the job's current stage (best effort, atomic: a reader sees the old or the
     new stage, never half of one)."""
-    path = Path(folder) / STAGE_FILE
+    _write_atomic(Path(folder) / STAGE_FILE,
+                  json.dumps({"name": name, "done": done, "total": total}))
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename, so a reader sees
+    the old or the new content; best effort (a folder that cannot be written is skipped)."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}")
     with contextlib.suppress(OSError):
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(json.dumps({"name": name, "done": done, "total": total}))
+        tmp.write_text(text)
         os.replace(tmp, path)
 
 

@@ -899,10 +899,9 @@ def test_combine_sums_disjoint_parts_by_hand() -> None:
     def part(p: float, lo: float, hi: float, cov: float | None) -> PRegion:
         return PRegion(estimate=p / 0.5, ci_low=lo / 0.5, ci_high=hi / 0.5, confidence=0.95,
                        method="x", n_draws=10, n_hits=3, p_bounds=0.5,
-                       p_bounds_ci=(0.4, 0.6), p_joint=p)
+                       p_bounds_ci=(0.4, 0.6), p_joint=p, cov=cov)
 
-    a = part(3e-5, 2.5e-5, 3.6e-5, None)
-    a = PRegion(**{**a.to_dict(), "p_bounds_ci": (0.4, 0.6), "cov": 0.1})
+    a = part(3e-5, 2.5e-5, 3.6e-5, 0.1)  # its CoV is used, not its interval
     b = part(1e-5, 0.0, 2e-5, None)
     out = PRegionEstimator().combine([a, b], (0.5, 0.45, 0.55))
     z = 1.959963984540054
