@@ -22,7 +22,7 @@ __all__ = ["KERNEL_FILES", "cache_dir", "configure"]
 
 #: every file of the project with a numba kernel (a test checks the list is complete)
 KERNEL_FILES = ("riskcore/_kernels.py", "riskcore/_criticality_kernels.py",
-                "sampler/kinematics.py", "sampler/criticality.py")
+                "sampler/kinematics.py", "sampler/criticality.py", "sampler/btn_bound.py")
 
 _ROOT = Path(__file__).resolve().parents[1]
 

@@ -24,6 +24,8 @@ Derived quantities (road frame, SI units; ``t = 0`` is the start of the lateral 
     psi_max       rad  peak heading 2 |p_y1| p_t / pi
     v_cut_min     m/s  the cutter's lowest speed at any time (before or after the pulse)
     max_lat_speed m/s  the largest lateral speed |v sin psi| during the lane change
+    btn_bound     -    an upper bound of btn proved from the motion alone, without the
+                       simulation (``sampler.btn_bound``; never below btn)
 
 Criticality quantities (``sampler.criticality``; the values ``evaluate_criticality`` gives
 the built scenario; evaluated last, on the rows that pass every other constraint)::
@@ -35,6 +37,11 @@ the built scenario; evaluated last, on the rows that pass every other constraint
     r157_collision    -     1 if the UN R157 careful driver hits the cutter, else 0
     r157_impact_speed m/s   its relative impact speed (0 without contact)
     none_collision    -     1 if the ego at constant speed hits the cutter, else 0
+
+A lower limit on ``btn`` or ``a_req`` (``btn > 0.4``, ``a_req >= 3``) implies the same limit
+on ``btn_bound``, which costs no simulation: ``Region`` checks it first (right after the
+cheap constraints, before the crossing kinematics), so only the vectors whose bound reaches
+the limit are simulated. The rows inside are the same; only the cost changes.
 
 Model quantities (``sampler.extrapolation``; need the model, which ``sample`` and
 ``estimate_p_region`` bind to the region: ``Region.bind``)::
@@ -59,7 +66,9 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
+from riskcore.criticality_record import CriticalitySettings
 from sampler._exceptions import ConstraintError
+from sampler.btn_bound import btn_bound
 from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from sampler.kinematics import crossing_kinematics, plateau_speeds
 
@@ -71,6 +80,7 @@ __all__ = [
     "Constraint",
     "Region",
     "derive",
+    "implied_bounds",
     "parse_constraint",
 ]
 
@@ -110,6 +120,8 @@ DERIVED: dict[str, _Quantity] = {
     "end_margin": _Quantity("m", "lane_width / 2 - |lat_offset| (> 0: ends in the ego lane)",
                             True),
     "max_lat_speed": _Quantity("m/s", "largest lateral speed during the lane change", True),
+    "btn_bound": _Quantity("-", "an upper bound of btn proved from the motion alone, without "
+                           "the simulation (never below btn)", True),
     **{name: _Quantity(unit, doc, True, True)
        for name, (unit, doc) in CRITICALITY_QUANTITIES.items()},
     "density_pct": _Quantity("-", "share of the model's physical cut-ins less probable than "
@@ -285,10 +297,14 @@ def _params_matrix(params: ArrayLike | Mapping[str, ArrayLike]) -> FloatArray:
 class _Quantities:
     """Lazy, cached evaluation of parameters and derived quantities for rows of a matrix."""
 
-    def __init__(self, params: FloatArray, lane_width: float, model: Any = None) -> None:
+    def __init__(self, params: FloatArray, lane_width: float, model: Any = None,
+                 bound_stop_at: float = 0.0) -> None:
         self.p = params
         self.lane_width = lane_width
         self.model = model
+        # btn_bound: only whether it reaches this matters (a looser bound below it is
+        # cheaper; sampler.btn_bound)
+        self.bound_stop_at = bound_stop_at
         self._cache: dict[str, FloatArray] = {}
 
     def __getitem__(self, name: str) -> FloatArray:
@@ -308,6 +324,8 @@ class _Quantities:
             elif name == "v_cut_min":
                 before, after = plateau_speeds(col["p_a1"], col["p_a2"], col["p_a3"], col["p_v0"])
                 c[name] = np.minimum(before, after)
+            elif name == "btn_bound":
+                c[name] = btn_bound(self.p, self.lane_width, stop_at=self.bound_stop_at)
             elif name in CRITICALITY_QUANTITIES:
                 # the TTR scan costs more than the drivers: only when ttr_true is asked for
                 q = criticality_quantities(self.p, self.lane_width,
@@ -369,6 +387,23 @@ def derive(params: ArrayLike | Mapping[str, ArrayLike], names: Iterable[str] | N
     wanted = ([k for k, v in DERIVED.items() if model is not None or not v.model]
               if names is None else list(names))
     return {name: np.array(q[name], dtype=np.float64) for name in wanted}
+
+
+def implied_bounds(constraints: Iterable[Constraint]) -> tuple[Constraint, ...]:
+    """The ``btn_bound`` limits that lower limits on ``btn`` or ``a_req`` imply.
+
+    ``btn_bound >= btn`` for every vector (``sampler.btn_bound``), so ``btn > c`` and
+    ``btn >= c`` imply ``btn_bound >= c``, and ``a_req > c`` implies
+    ``btn_bound >= c / decel_max``: adding them changes no row inside a region; it spares
+    the simulation of the rows they rule out. Only positive limits imply one.
+    """
+    decel_max = CriticalitySettings().decel_max
+    out = []
+    for c in constraints:
+        if c.op in (">", ">=") and c.value > 0 and c.name in ("btn", "a_req"):
+            value = c.value if c.name == "btn" else c.value / decel_max
+            out.append(Constraint(name="btn_bound", op=">=", value=value))
+    return tuple(out)
 
 
 class Region(BaseModel):
@@ -443,13 +478,19 @@ class Region(BaseModel):
         for c in constraints:
             if c.tier == 0:
                 mask &= c.mask(q[c.name])
-        # the costly tiers only on the rows that are still in: kinematics, then criticality
-        for tier in (1, 2):
-            costly = [c for c in constraints if c.tier == tier]
+        # the costly groups only on the rows that are still in: the btn bound (stated or
+        # implied; cheap where it is far below its limit), the kinematics, the criticality
+        bound = [c for c in (*constraints, *implied_bounds(constraints))
+                 if c.name == "btn_bound"]
+        groups = (bound, [c for c in constraints if c.tier == 1 and c.name != "btn_bound"],
+                  [c for c in constraints if c.tier == 2])
+        for costly in groups:
             idx = np.flatnonzero(mask)
             if not costly or not idx.size:
                 continue
-            q2 = _Quantities(arr[idx], self.lane_width, self._model)
+            stop_at = max((c.value for c in costly if c.name == "btn_bound"
+                           and c.op in (">", ">=")), default=0.0)
+            q2 = _Quantities(arr[idx], self.lane_width, self._model, max(stop_at, 0.0))
             sub = np.ones(idx.size, dtype=bool)
             for c in costly:
                 sub &= c.mask(q2[c.name])

@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from sampler._exceptions import EmptyRegionError
-from sampler.constraints import Region
+from sampler.constraints import Region, implied_bounds
 from sampler.intervals import clopper_pearson, upper_bound
 from sampler.memo import MODEL_SEED, memoised
 from sampler.problem import Pilot, Problem, ProgressFn
@@ -103,8 +103,10 @@ PROBE_HITS = 20
 
 
 def _kinematic_part(region: Region) -> Region:
-    """The region without its criticality constraints (what costs no simulation)."""
-    kin = Region(constraints=tuple(c for c in region.constraints if c.tier < 2),
+    """The region without its criticality constraints, with the ``btn_bound`` limits they
+    imply (what costs no simulation: ``sampler.constraints.implied_bounds``)."""
+    kept = tuple(c for c in region.constraints if c.tier < 2)
+    kin = Region(constraints=kept + implied_bounds(region.constraints),
                  lane_width=region.lane_width, physical_bounds=region.physical_bounds)
     return kin if region._model is None else kin.bind(region._model)
 
@@ -175,6 +177,11 @@ class PRegionEstimator:
         kinematic part (a thin band: 2.9 < ttc < 3 fills 5.8 % of its ``ttc<3`` envelope,
         ``ttc<3`` itself 38 %), the budget is ``exact_sims_thin`` (2,000,000 rows, about
         40 s): subset-is was measured unreliable there (docs/sampler.md).
+    exact_draws : int
+        Model draws the extended pilot may make (its probe and plain run together; 2^25,
+        at most about 100 s at ~3 us per draw). With a ``btn``/``a_req`` lower limit nearly every
+        draw is ruled out by ``btn_bound`` without a simulation, so it is the draws, not
+        the simulations, that bound such a run.
     """
 
     #: P(A) when it is known already (a catalogue's chunks reuse their catalogue's): the
@@ -188,7 +195,8 @@ class PRegionEstimator:
                  search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
                  search_draws: int = 1 << 18, min_p: float = 1e-12,
                  confidence: float = 0.95, exact_sims: int = 200_000,
-                 thin_share: float = 0.1, exact_sims_thin: int = 2_000_000) -> None:
+                 thin_share: float = 0.1, exact_sims_thin: int = 2_000_000,
+                 exact_draws: int = 1 << 25) -> None:
         self.pilot_hits = int(pilot_hits)
         self.pilot_max = int(pilot_max)
         self.pilot_max_costly = int(pilot_max_costly)
@@ -204,6 +212,7 @@ class PRegionEstimator:
         self.exact_sims = int(exact_sims)
         self.thin_share = float(thin_share)
         self.exact_sims_thin = int(exact_sims_thin)
+        self.exact_draws = int(exact_draws)
 
     def settings(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self).items()}
@@ -266,7 +275,9 @@ class PRegionEstimator:
         without its criticality constraints).
 
         Plain MC simulates only the draws inside the bounds and the kinematic constraints
-        (checked first, for free), and its estimate is exact. A region that is rare only
+        (checked first, for free; for a lower limit on ``btn`` or ``a_req`` also the
+        ``btn_bound`` it implies, which rules out nearly every draw that does not reach it:
+        ``sampler.btn_bound``), and its estimate is exact. A region that is rare only
         through its kinematic part (a thin band such as ``2.9 < ttc < 3``) but not given
         it is then estimated exactly: subset-is's chains barely move in such a band, and
         its estimate there was measured 0.35-0.85 of the brute force on average, with
@@ -282,7 +293,8 @@ class PRegionEstimator:
         own hits is not. Otherwise the pilot keeps the probe's draws and the caller goes
         on to the rare-event methods. The budget is ``exact_sims_thin`` instead when the
         kinematic part is thin (fewer than ``thin_share`` of the pilot's draws inside
-        it)."""
+        it). The draws, cheap but not free (a few microseconds each with the bound), are
+        capped at ``exact_draws`` (the probe and the plain run together)."""
         n_hits, n_draws, n_sim = pilot.n_hits, pilot.n_draws, pilot.n_simulated
         budget = self.exact_sims
         if n_draws and n_sim < self.thin_share * n_draws:
@@ -296,15 +308,20 @@ class PRegionEstimator:
         #    reach, judged on the one-sided 95 % upper bound of the rate)
         while n_hits < PROBE_HITS:
             rate = clopper_pearson(n_hits, max(n_sim, 1), 0.90)[1]
-            if n_sim + self.mc_min_hits / rate > budget:
+            per_draw = clopper_pearson(n_hits, max(n_draws, 1), 0.90)[1]
+            if (n_sim + self.mc_min_hits / rate > budget
+                    or n_draws + self.mc_min_hits / per_draw > self.exact_draws):
                 break
             n_hits, n_draws, n_sim = _add_batch(problem, kin, batch, rng, hits,
                                                 (n_hits, n_draws, n_sim))
             batch = min(batch * 2, 1 << 18)
             if progress is not None:
                 progress("pilot (plain Monte Carlo, probe)", n_hits, PROBE_HITS)
-        need = self.mc_min_hits * n_sim / n_hits if n_hits >= PROBE_HITS else math.inf
-        if n_sim + need > budget:  # out of reach: the rare-event methods take over
+        probed = n_hits >= PROBE_HITS
+        need = self.mc_min_hits * n_sim / n_hits if probed else math.inf
+        n_plain = math.ceil(self.mc_min_hits * n_draws / n_hits) if probed else 0
+        if not probed or n_sim + need > budget or n_draws + n_plain > self.exact_draws:
+            # out of reach: the rare-event methods take over
             pilot.hits = np.concatenate(hits, axis=0)
             pilot.n_draws = n_draws
             pilot.n_simulated = n_sim
@@ -314,7 +331,6 @@ class PRegionEstimator:
         #    unbiased with an exact interval (the probe stopped on its hits and was
         #    continued or given up on its rate: an estimate over its draws was measured
         #    biased high, 1.17 of the brute force over 9 seeds of the band with btn > 0.5)
-        n_plain = math.ceil(need * n_draws / n_sim)
         fresh: list[FloatArray] = []
         got = done = 0
         while done < n_plain:

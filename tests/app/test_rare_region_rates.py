@@ -16,7 +16,7 @@ from app.cli import main
 def test_sample_in_a_btn_region_reports_both_intervals(
         store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "s.jsonl"
-    assert main(["sample", "-n", "10", "-c", "btn>0.7", "--seed", "1", "-q",
+    assert main(["sample", "-n", "10", "-c", "btn>0.7", "--seed", "2", "-q",
                  "-o", str(out)]) == 0
     err = capsys.readouterr().err
     assert "subset-is" in err, err

@@ -23,6 +23,7 @@ from sampler.importance import (
     independence_chain,
 )
 from sampler.model import CutInGMM
+from sampler.probability import PRegionEstimator
 from sampler.problem import Problem
 from sampler.rare import (
     RareResult,
@@ -266,9 +267,10 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
 def test_sample_with_subset_is_deterministic_and_inside(tno: CutInGMM) -> None:
     a = sample(tno, ["ttc<1.5"], 300, seed=4, method="subset-is")
     b = sample(tno, ["ttc<1.5"], 300, seed=4, method="subset-is")
-    # auto on a criticality region rare also given its kinematic part (the pilot's plain
-    # Monte Carlo could not reach 100 hits within its budget): subset-is
-    c = sample(tno, ["ttc<3", "btn>=1"], 50, seed=1)
+    # auto on a criticality region rare also given its kinematic part, when the pilot's
+    # plain Monte Carlo could not reach 100 hits within its budget of draws: subset-is
+    c = sample(tno, ["ttc<3", "btn>=1"], 50, seed=1,
+               estimator=PRegionEstimator(exact_draws=1 << 16))
     assert c.method == "subset-is" and c.p_region.method == "subset-is"
     assert (c.derived["ttc"] < 3).all()
     # ttr_true is a multiple of the step: the strict threshold itself has mass and lies
@@ -722,37 +724,35 @@ def test_thin_band_auto_is_plain_and_exact(tno: CutInGMM,
     assert plain[-1][0] == plain[-1][1] == ss.diagnostics["pilot"]["n_draws"]
     assert [d for d, _ in plain] == sorted(d for d, _ in plain)
     pilot = ss.diagnostics["pilot"]
-    assert pilot["plain"] and pilot["probe_draws"] > 0 and pilot["n_simulated"] > 8192
+    # the plain run simulated only the draws whose btn_bound reaches 0.4
+    assert pilot["plain"] and pilot["probe_draws"] > 0
+    assert 0 < pilot["n_simulated"] < 0.01 * (pilot["n_draws"] + pilot["probe_draws"])
     # the estimate is the plain run's alone, not the probe's draws too
     assert ss.p_region.n_draws == pilot["n_draws"] and ss.p_region.n_hits == pilot["n_hits"]
 
 
 def test_pilot_is_not_extended_beyond_its_budget(tno: CutInGMM) -> None:
-    """``ttc<3 & btn>=1`` holds ~1e-5 of ``ttc<3``: the pilot's ~3,000 simulations find
-    no hit; the rate's one-sided 95 % upper bound, 3.0 / 3,000, projects 1e5 simulations
-    for 100 hits, so one more batch (another ~3,000) is drawn; then 3.0 / 6,000 projects
-    2e5 + 6,000 > ``exact_sims`` = 2e5 and the pilot stops: subset-is estimates it.
-    With ``exact_sims=0`` nothing is added to the pilot's 8,192 draws. With a budget of
-    10^4 the thin band goes to subset-is as well."""
-    from sampler.probability import PRegionEstimator
+    """The extended pilot's two budgets. Draws: ``ttc<3 & btn>=1`` holds ~7e-6 of its
+    envelope; after the pilot's 8,192 draws without a hit, the one-sided 90 % upper bound
+    of the rate per draw, 2.3 / 8,192, projects ~3.6e5 draws for 100 hits, beyond an
+    ``exact_draws`` of 2^16: no draw is added and subset-is estimates it. Simulations:
+    the thin band (P(btn > 0.4 | band) ~ 1e-3) needs ~100 simulations for 100 hits once
+    ``btn_bound`` rules out the rest, beyond a budget of 10, within the default."""
+
 
     cons = ["ttc<3", "btn>=1"]
-    a = sample(tno, cons, 5, seed=3)
-    b = sample(tno, cons, 5, seed=3, estimator=PRegionEstimator(exact_sims=0))
-    assert a.method == b.method == "subset-is"
-    assert a.diagnostics["pilot"]["n_draws"] == 2 * 8192
-    assert b.diagnostics["pilot"]["n_draws"] == 8192
-    assert 0 < b.diagnostics["pilot"]["n_simulated"] < a.diagnostics["pilot"]["n_simulated"]
-    assert a.diagnostics["pilot"]["n_simulated"] < 3 * 8192 * 0.4
+    a = sample(tno, cons, 5, seed=3, estimator=PRegionEstimator(exact_draws=1 << 16))
+    assert a.method == "subset-is"
+    assert a.diagnostics["pilot"]["n_draws"] == 8192
+    assert not a.diagnostics["pilot"]["plain"]
     small = sample(tno, THIN_BAND, 5, seed=1,
-                   estimator=PRegionEstimator(exact_sims=10_000, exact_sims_thin=10_000))
-    assert small.diagnostics["pilot"]["n_simulated"] <= 10_000
+                   estimator=PRegionEstimator(exact_sims=10, exact_sims_thin=10))
     assert small.method == "subset-is"
-    # the band fills ~6 % of its envelope (< thin_share = 0.1): the thin budget applies
-    thin = sample(tno, THIN_BAND, 5, seed=1, estimator=PRegionEstimator(exact_sims=10_000))
+    thin = sample(tno, THIN_BAND, 5, seed=1)
     assert thin.method == "rejection"
     tp = thin.diagnostics["pilot"]
-    assert 10_000 < tp["n_simulated"] < 0.1 * (tp["n_draws"] + tp["probe_draws"])
+    # the bound leaves about one draw in 10^3 of the band's envelope to simulate
+    assert 0 < tp["n_simulated"] < 0.01 * (tp["n_draws"] + tp["probe_draws"])
 
 
 def test_deep_thin_band_auto_is_plain_and_exact(tno: CutInGMM) -> None:
@@ -812,7 +812,6 @@ def test_rare_estimate_below_the_pilots_exact_bound_is_overruled(tno: CutInGMM) 
     one at 9e-6 (upper end 1.09e-5) is kept."""
     from types import SimpleNamespace
 
-    from sampler.probability import PRegionEstimator
     from sampler.problem import Pilot
 
     est = PRegionEstimator()
@@ -926,22 +925,38 @@ def test_standalone_criticality_region_is_split_at_the_envelope(tno: CutInGMM) -
     force of 2·10^6 plain model draws made here (about 1,900 hits), for four seeds: at least
     three within 2 combined standard errors, none beyond 4 (eight seeds gave 0.90-1.08 of
     the 10^7-draw reference of bench_rare). ``sample`` reports the same P(A), and a
-    catalogue chunk's known P(A) is not re-estimated."""
+    catalogue chunk's known P(A) is not re-estimated. With the default budget the plain
+    run reaches it (``btn_bound``): within 3 combined standard errors, for two seeds."""
     from app.domain.sampling import KnownRegion
-    from sampler.probability import PRegionEstimator
     from sampler.sampleset import estimate_p_region
 
     def est() -> PRegionEstimator:
         return PRegionEstimator(exact_sims=0, exact_sims_thin=0)
 
-    region = Region.from_constraints(["btn>0.15"], lane_width=tno.lane_width_).bind(tno)
+    from sampler.criticality import criticality_quantities
+
+    # the brute force simulates every draw inside the bounds (Region.contains would skip
+    # those whose btn_bound stays below 0.15: not independent of the bound under test)
+    bounds = Region.from_constraints([], lane_width=tno.lane_width_)
     rng = np.random.default_rng(99)
     hits, n_ref = 0, 2_000_000
     for _ in range(8):
         x = tno.params_matrix(tno.from_z(tno.sample_z(n_ref // 8, rng)))
-        hits += int(region.contains(x).sum())
+        x = x[bounds.in_bounds(x)]
+        hits += int((criticality_quantities(x, tno.lane_width_, with_ttr=False)["btn"]
+                     > 0.15).sum())
     p_ref = hits / n_ref
     assert hits > 1000
+    # the default: plain Monte Carlo, which simulates only the draws whose btn_bound
+    # reaches 0.15 (``sampler.btn_bound``), exact and unbiased
+    for seed in (1, 2):
+        d = sample(tno, ["btn>0.15"], 5, seed=seed)
+        p = d.p_region
+        assert p.method == "mc" and d.diagnostics["pilot"]["plain"]
+        pilot = d.diagnostics["pilot"]
+        assert pilot["n_simulated"] < 0.01 * (pilot["n_draws"] + pilot["probe_draws"])
+        se = math.hypot(p.p_joint / math.sqrt(p.n_hits), p_ref / math.sqrt(hits))
+        assert abs(p.p_joint - p_ref) < 3 * se
     z = []
     for seed in (1, 2, 3, 4):
         p = estimate_p_region(tno, ["btn>0.15"], seed, estimator=est())
