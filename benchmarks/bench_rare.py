@@ -20,7 +20,10 @@ error, so it bounds what a finite reference can show); the mean reported CoV; th
 number of criticality evaluations (every row simulated: the subset levels, the adaptation
 and the importance draws; for ``auto`` also the pilot and P(A)); the acceleration = the
 naive draws needed for the same CoV, ``(1 - p) / (p CoV^2)``, divided by the evaluations
-used (``accel``: from ``CoV``; ``accel ref``: from ``CoV ref``); ``accel sim``, the fair
+used (``accel``: from ``CoV``; ``accel ref``: from ``CoV ref``); ``accel wall``, the same
+in seconds: naive Monte Carlo's seconds for ``CoV ref`` (its cost per draw measured in the
+run: drawing, the bounds, and the simulation of the share it simulates) over the method's
+seconds per repetition; ``accel sim``, the fair
 figure for the simulations: ``accel ref`` times the share of naive draws that naive Monte
 Carlo has to simulate (those inside the physical bounds and the region's kinematic
 constraints, such as ``ttc<3``: it checks them first, for free; from the naive pass; the
@@ -101,6 +104,28 @@ def _count_evaluations() -> None:
 
     sc.criticality_quantities = counted  # type: ignore[assignment]
     ss.criticality_quantities = counted  # type: ignore[attr-defined]
+
+
+def _naive_costs(model: Any, n: int = 1 << 16) -> dict[str, float]:
+    """Seconds per draw of naive Monte Carlo's parts, measured in this run: drawing and
+    the physical bounds; the simulation per simulated row without and with the TTR scan
+    (a ``btn`` region needs no TTR scan, a ``ttr_true`` region does)."""
+    from sampler.constraints import Region
+    from sampler.criticality import criticality_quantities
+
+    rng = np.random.default_rng(2024)
+    bounds = Region.from_constraints([], lane_width=model.lane_width_)
+    criticality_quantities(model.params_matrix(model.sample(64, rng)), model.lane_width_)
+    t = time.perf_counter()
+    x = model.params_matrix(model.sample(n, rng))
+    x = x[bounds.in_bounds(x)]
+    out = {"draw": (time.perf_counter() - t) / n}
+    for key, ttr in (("btn", False), ("ttr", True)):
+        rows = x[: n // 4 if ttr else n]
+        t = time.perf_counter()
+        criticality_quantities(rows, model.lane_width_, with_ttr=ttr)
+        out[key] = (time.perf_counter() - t) / rows.shape[0]
+    return out
 
 
 def _references(model: Any, n_naive: int, n_env: int, seed: int) -> dict[str, Any]:
@@ -242,6 +267,10 @@ def main() -> int:
           f"{int(args.envelope):,} envelope draws, P(S) = {refs['envelope']['mass']:.4g} "
           f"({refs['envelope']['seconds']:.0f} s); load {load()}", flush=True)
     _count_evaluations()
+    costs = _naive_costs(model)
+    print(f"naive Monte Carlo's cost, measured now: {costs['draw'] * 1e6:.2f} us per draw "
+          f"(drawing and the physical bounds), {costs['btn'] * 1e6:.1f} us per simulated "
+          f"row without the TTR scan, {costs['ttr'] * 1e6:.1f} us with it", flush=True)
     table = []
     for i in (int(s) for s in args.regions.split(",") if s):
         constraints, _order, kind = REGIONS[i]
@@ -255,9 +284,11 @@ def main() -> int:
         f_sim = _sim_share(refs, constraints)
         print(f"  naive Monte Carlo simulates {f_sim:.4g} of its draws (inside the physical "
               "bounds and the kinematic constraints)", flush=True)
+        per_draw = costs["draw"] + f_sim * costs[
+            "ttr" if any(c.startswith("ttr_true") for c in constraints) else "btn"]
         print(f"  {'method':15s} {'mean P':>10s} {'CoV':>6s} {'CoV ref':>7s} {'CoV rep':>7s} "
               f"{'evals':>8s} {'accel':>8s} {'accel ref':>9s} {'accel sim':>9s} {'in 2CoV':>7s} "
-              f"{'mean in CI':>10s} {'in CI':>6s} {'s/rep':>6s}")
+              f"{'mean in CI':>10s} {'in CI':>6s} {'s/rep':>6s} {'accel wall':>10s}")
         for method in args.methods.split(","):
             est, cov, ev = [], [], []
             t = time.perf_counter()
@@ -284,10 +315,13 @@ def main() -> int:
             in2 = float(np.mean(np.abs(e_arr - p_ref) <= 2 * c_arr * e_arr))
             mean_in = "yes" if lo <= mean <= hi else "no"
             in_ci = float(np.mean((e_arr >= lo) & (e_arr <= hi)))
+            # wall clock: naive Monte Carlo's seconds for the same CoV (measured per draw
+            # above) over this method's seconds per repetition
+            accel_wall = (1 - p_ref) / (p_ref * max(cov_ref, 1e-12) ** 2) * per_draw / dt
             print(f"  {method:15s} {mean:10.3g} {cov_spread:6.3f} {cov_ref:7.3f} "
                   f"{np.nanmean(c_arr):7.3f} {evals:8.0f} {accel:8.0f} {accel_ref:9.0f} "
                   f"{accel_ref * f_sim:9.1f} {in2:7.2f} {mean_in:>10s} {in_ci:6.2f} "
-                  f"{dt:6.2f}", flush=True)
+                  f"{dt:6.2f} {accel_wall:10.1f}", flush=True)
             table.append((name, p_ref, lo, hi, method, mean, cov_spread, cov_ref,
                           float(np.nanmean(c_arr)), evals, accel, accel_ref, accel_ref * f_sim,
                           in2, mean_in, len(est)))
