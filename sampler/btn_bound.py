@@ -33,6 +33,12 @@ Why it is an upper bound. Four relaxations, each of which can only raise the res
    interval it is at most its value at (D at the start, t at the end). After the cutter's
    last change of speed or heading, D grows linearly and the supremum is in closed form.
 
+With a limit (``stop_at``), two looser bounds settle most rows first, in O(1): from the
+speeds alone (the cutter's within its two plateaus; braking at most the reaction time
+after the crossing, since t_p comes before it), then with t_p, the crossing and the first
+moment in the band bracketed in closed form (``|y|`` lies between ``k Psi(t)`` for two
+constants k, ``Psi(t) = t - (p_t / pi) sin(pi t / p_t)``).
+
 Before ``t_b`` the ego drives at its scripted constant speed: if the relaxed cutter could
 be touched then, the bound is +inf (the simulation's ``a_req`` is +inf when contact comes
 before ``t_b``). A vector that is not a buildable cut-in (no crossing, a negative speed)
@@ -71,14 +77,13 @@ H_FINE = 0.02
 
 
 @numba.njit(cache=True, nogil=True)
-def _quick_bound(p_t: float, dv: float, gap: float, before: float, after: float,
-                 psi_max: float, extent: float,
-                 brake_delay: float) -> float:  # pragma: no cover - compiled
-    """A looser bound in O(1), without the lateral motion: t_p comes before the
-    crossing (the wandering zone is less than half a lane), so braking starts at most
-    ``brake_delay`` after it; the band is met at most ``2 p_t`` before it (the lateral
-    motion lasts 2 p_t); the cutter's speed stays within [min, max] of its two plateaus
-    (times cos psi_max along x), the ego's is the cutter's at the crossing plus ``dv``."""
+def _quick_bound(dv: float, gap: float, before: float, after: float, psi_max: float,
+                 extent: float, window: float,
+                 delay: float) -> float:  # pragma: no cover - compiled
+    """A looser bound in O(1) from speeds alone: the cutter's speed stays within [min,
+    max] of its two plateaus (times cos psi_max along x), the ego's is the cutter's at the
+    crossing plus ``dv``; ``window``: how long before the crossing the cutter may be in the
+    band or the ego may brake; ``delay``: how long after the crossing braking may start."""
     v_hi = max(before, after)
     v_lo = min(before, after) * math.cos(psi_max)
     ve_hi = v_hi + dv
@@ -87,14 +92,66 @@ def _quick_bound(p_t: float, dv: float, gap: float, before: float, after: float,
         return np.inf
     d = gap - extent
     # before the crossing: the cutter, faster than the ego, was further back
-    d_pre = d - max(v_hi - ve_lo, 0.0) * 2.0 * p_t
+    d_pre = d - max(v_hi - ve_lo, 0.0) * window
     # after it: the clearance closed at most at (ve_hi - v_lo) until braking starts
-    d_b = min(d_pre, d - max(ve_hi - v_lo, 0.0) * brake_delay)
+    d_b = min(d_pre, d - max(ve_hi - v_lo, 0.0) * delay)
     if d_b <= 0.0:
         return np.inf
     if ve_hi <= v_lo:
         return 0.0
     return (ve_hi - v_lo) ** 2 / (2.0 * d_b)
+
+
+@numba.njit(cache=True, nogil=True)
+def _psi_inv(target: float, p_t: float, upper: bool) -> float:  # pragma: no cover
+    """The time t in [0, 2 p_t] at which Psi(t) = t - (p_t / pi) sin(pi t / p_t) (rising
+    from 0 to 2 p_t) reaches ``target``, bracketed by bisection to 2 p_t / 2^10: the
+    bracket's upper end when ``upper``, else its lower end; 2 p_t (upper) or NaN (lower)
+    when it is not reached."""
+    if target <= 0.0:
+        return 0.0
+    if target >= 2.0 * p_t:
+        return 2.0 * p_t if upper else np.nan
+    lo, hi = 0.0, 2.0 * p_t
+    for _ in range(10):
+        mid = 0.5 * (lo + hi)
+        if mid - p_t / np.pi * math.sin(np.pi * mid / p_t) < target:
+            lo = mid
+        else:
+            hi = mid
+    return hi if upper else lo
+
+
+@numba.njit(cache=True, nogil=True)
+def _bracket_bound(p_t: float, dv: float, gap: float, before: float, after: float,
+                   amp: float, psi_max: float, extent: float, lane_width: float,
+                   y_band: float, wandering: float,
+                   reaction: float) -> float:  # pragma: no cover - compiled
+    """:func:`_quick_bound` with the lateral moments bracketed in closed form: |y(t)| =
+    int v |sin psi| lies between k_lo Psi(t) and k_hi Psi(t) (v within its plateaus,
+    psi - psi^3 / 6 <= sin psi <= psi, |psi| = amp (1 - cos(pi t / p_t))), which brackets
+    t_p, the crossing and the first moment in the band."""
+    k_lo = min(before, after) * (1.0 - psi_max * psi_max / 6.0) * amp
+    k_hi = max(before, after) * amp
+    if not (k_lo > 0.0 and k_hi > 0.0):
+        return np.inf
+    y_cross = 0.5 * lane_width
+    c_lo = _psi_inv(y_cross / k_hi, p_t, False)
+    if np.isnan(c_lo):
+        return np.inf  # it never crosses: not buildable, the evaluation decides
+    c_hi = _psi_inv(y_cross / k_lo, p_t, True)
+    tp_lo = _psi_inv(wandering / k_hi, p_t, False)
+    tp_hi = min(_psi_inv(wandering / k_lo, p_t, True), c_hi)
+    if y_band <= 0.0:
+        e_lo = 0.0
+    else:
+        e_lo = _psi_inv(y_band / k_hi, p_t, False)
+        if np.isnan(e_lo):
+            return 0.0  # the box never reaches the ego's band
+    first = min(e_lo, tp_lo - T_MARGIN + reaction)
+    window = max(c_hi - first, 0.0)
+    delay = max(tp_hi + T_MARGIN + reaction - c_lo, 0.0)
+    return _quick_bound(dv, gap, before, after, psi_max, extent, window, delay)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -188,13 +245,22 @@ def _bound_kernel(arr: FloatArray, lane_width: float, wandering: float, reaction
             out[r] = np.inf  # not a buildable cut-in: the evaluation decides
             continue
         extent = chw * math.sin(psi_max) + X_MARGIN
+        y_band = lane_width - ehw - chw - chl * math.sin(psi_max) - Y_MARGIN
         if stop_at > 0.0:
-            quick = _quick_bound(p_t, dv, gap, before, after, psi_max, extent,
+            # cheaper, looser bounds first: below what is asked, they settle the row.
+            # Speeds alone (t_p and the crossing lie in [0, 2 p_t], t_p before the
+            # crossing: braking at most the reaction time after it) ...
+            quick = _quick_bound(dv, gap, before, after, psi_max, extent, 2.0 * p_t,
                                  reaction + T_MARGIN)
             if quick < stop_at:
-                out[r] = quick  # below what is asked: no need for the tighter bound
+                out[r] = quick
                 continue
-        y_band = lane_width - ehw - chw - chl * math.sin(psi_max) - Y_MARGIN
+            # ... then with the lateral moments bracketed in closed form
+            quick = _bracket_bound(p_t, dv, gap, before, after, abs(amp), psi_max, extent,
+                                   lane_width, y_band, wandering, reaction)
+            if quick < stop_at:
+                out[r] = quick
+                continue
         y_cross = 0.5 * lane_width
         # lateral motion (the crossing kernel's rule): t_p, crossing, first band contact
         h_lat = p_t * du
@@ -265,7 +331,9 @@ def a_req_bound(params: FloatArray, lane_width: float, *, stop_at: float = 0.0,
         Lane width in m.
     stop_at : float
         Only whether the bound reaches this matters to the caller (m/s²): a row whose
-        coarse bound stays below it keeps the coarse bound (still a bound, cheaper).
+        cheaper, looser bound (from the speeds alone, then with the lateral moments
+        bracketed in closed form) stays below it keeps that bound, still >= ``a_req``.
+        0: the tight bound everywhere.
         0: always the fine bound.
     settings : CriticalitySettings, optional
         The criticality's settings (default when None): wandering zone, reaction time.
