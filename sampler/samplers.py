@@ -171,6 +171,14 @@ class AutoSampler(Sampler):
             # band's extended pilot, a plain run, holds ~100 hits from 2e7 draws; the cost
             # rule below would have chosen MCMC, 150 s of simulated chains, for 20 samples)
             return self.rejection
+        if costly and pilot.plain and pilot.n_hits > 0:
+            # the pilot's plain run holds P(A) already; more exact draws by rejection
+            # are cheap when btn_bound rules out nearly every draw without a simulation
+            # (MCMC chains in such a region were measured to run for many minutes), and
+            # subset-is makes the samples when rejection would need too many draws
+            if n / pilot.p_hat <= self.rejection.max_draws:
+                return self.rejection
+            return self.rare
         if pilot.n_hits < self.subset_below:
             return self.rare if costly else self.subset
         rej_cost = n / pilot.p_hat

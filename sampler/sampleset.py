@@ -362,8 +362,14 @@ def sample(
         est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
     drawn = strategy.draw(problem, n, rng, pilot, progress)
     parts = (_split_parts(region) if isinstance(strategy, AutoSampler)
-             and drawn.subset is not None and est.known is None else None)
-    if parts is not None:
+             and drawn.subset is not None and est.known is None and not pilot.plain
+             else None)
+    if pilot.plain and pilot.n_hits > 0 and isinstance(strategy, AutoSampler):
+        # P(A) from the extended pilot's plain run alone (exact, unbiased; the draws
+        # rejection adds were continued until enough hits, which would bias it)
+        p_region = est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
+                                region_z=pilot.hits, bounds=bounds, plain=True)
+    elif parts is not None:
         # P(A) as estimate_p_region gives it, from the two parts; the samples are still
         # those of the whole region's subset-is run
         p_region, info = _split_estimate(model, parts, seed_i, est, bounds, progress)

@@ -119,3 +119,28 @@ def test_regions_keep_their_rows_and_simulate_fewer(
     rows.clear()
     Region.from_constraints(["ttc<3", "btn<0.3"], lane_width=LW).contains(x)
     assert sum(rows) == x.shape[0]  # an upper limit implies nothing: every row simulated
+
+
+def test_auto_after_a_plain_pilot_keeps_its_estimate_and_avoids_mcmc(tno: CutInGMM) -> None:
+    """A criticality region whose extended pilot was a plain run: more samples than its
+    hits come from rejection (cheap behind ``btn_bound``) while n / p_hat draws stay
+    within ``max_draws``, else from subset-is; never from MCMC (whose chains ran for
+    more than 15 minutes in ``btn > 0.4``). P(A) stays the plain run's own estimate."""
+    from sampler.problem import Pilot
+    from sampler.samplers import AutoSampler
+    from sampler.sampleset import sample
+
+    auto = AutoSampler()
+    pilot = Pilot(n_draws=10_000_000, hits=np.zeros((80, 8)), plain=True)
+    assert auto.choose(100, pilot, costly=True).name == "rejection"
+    assert auto.choose(1000, pilot, costly=True).name == "subset-is"  # 1.25e8 draws
+    assert auto.choose(80, pilot, costly=True).name == "rejection"  # the hits suffice
+    ss = sample(tno, ["btn>0.15"], 300, seed=3)
+    pilot_d = ss.diagnostics["pilot"]
+    assert pilot_d["plain"] and pilot_d["n_hits"] < 300
+    assert ss.method == "rejection" and len(ss) == 300
+    assert (ss.derived["btn_bound"] >= 0.15).all()
+    # the plain run's estimate, not one over the draws rejection added after it
+    assert ss.p_region.n_draws == pilot_d["n_draws"]
+    assert ss.p_region.n_hits == pilot_d["n_hits"]
+    assert ss.p_region.method == "mc"
