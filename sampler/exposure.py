@@ -215,11 +215,15 @@ def uncertainty_report(model: Any, p_region: Any, region: Any,
     model_iv = None
     if getattr(model, "bootstrap_", None):
         # rare when the region needed subset simulation (plain or with importance
-        # sampling) under the fitted model: plain draws of the replicates' average do not
-        # reach it either
+        # sampling) under the fitted model, or when its plain run's hit rate is too low for
+        # the replicates' pilot (a criticality region's: 8,192 draws; ``btn > 0.4`` is
+        # plain behind btn_bound, at ~1e-5 per draw): plain draws of the replicates'
+        # average do not reach it either
+        costly = any(c.tier == 2 for c in region.constraints)
+        thin = costly and p.n_draws > 0 and p.n_hits / p.n_draws < RARE_RATE
         try:
             model_iv = model_interval(model, region,
-                                      rare=p.method in ("subset", "subset-is", "split"),
+                                      rare=p.method in ("subset", "subset-is", "split") or thin,
                                       n_plain=n_plain, confidence=confidence,
                                       per_replicate=per_replicate)
         except SamplerError as exc:
@@ -252,6 +256,11 @@ def _quantiles(values: Any) -> dict[str, float]:
     if not v.size:
         return {}
     return {f"p{q:g}": float(x) for q, x in zip(qs, np.percentile(v, qs), strict=True)}
+
+
+#: below this hit rate per draw of its plain run, a criticality region's model interval
+#: takes the rare path: the replicates' pilot (8,192 draws) would find fewer than ~20 hits
+RARE_RATE = 20 / 8192
 
 
 def model_interval(model: Any, region: Any, *, rare: bool, n_plain: int = 8192,

@@ -361,3 +361,33 @@ def test_failed_model_interval_is_reported_not_raised(monkeypatch: pytest.Monkey
     assert rep["rates"]["per_hour"]["estimate"] == pytest.approx(
         300 / 25.0 * ss.p_region.estimate)
     assert rep["rates"]["per_hour"].get("model_ci") is None
+
+
+def test_model_interval_takes_the_rare_path_for_a_thin_plain_run(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A criticality region estimated by a plain run (``btn > 0.4`` behind btn_bound: 76
+    hits in 4e6 draws) is rare for the replicates' pilot of 8,192 draws as well: its model
+    interval takes the rare path (the plain path found no hit and the API answered
+    ``model_ci: null``); a frequent one, or a kinematic region, keeps the plain path."""
+    import dataclasses
+
+    import sampler.exposure as exposure
+    from sampler.constraints import Region
+    from sampler.probability import PRegion
+
+    asked: list[bool] = []
+
+    def record(model: object, region: object, *, rare: bool, **kwargs: object) -> object:
+        asked.append(rare)
+        return {"ci": [1e-6, 2e-6], "replicates": []}
+
+    monkeypatch.setattr(exposure, "model_interval", record)
+    model = type("M", (), {"bootstrap_": {"n_boot": 3}, "exposure_": None})()
+    thin = PRegion(estimate=2.7e-5, ci_low=2.1e-5, ci_high=3.4e-5, confidence=0.95,
+                   method="mc", n_draws=4_032_985, n_hits=76, p_bounds=0.7,
+                   p_bounds_ci=(0.69, 0.71), p_joint=1.9e-5, cov=0.11)
+    frequent = dataclasses.replace(thin, n_draws=10_000, n_hits=100)
+    btn = Region.from_constraints(["btn>0.4"])
+    for p, region in ((thin, btn), (frequent, btn), (thin, Region.from_constraints(["ttc<1"]))):
+        exposure.uncertainty_report(model, p, region)
+    assert asked == [True, False, False]
