@@ -319,8 +319,7 @@ def _speed(tau: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float,
 
 
 def a_req_bound(params: FloatArray, lane_width: float, *, stop_at: float = 0.0,
-                settings: CriticalitySettings | None = None,
-                n_grid: int = DEFAULT_N_GRID) -> FloatArray:
+                settings: CriticalitySettings | None = None) -> FloatArray:
     """An upper bound of ``a_req`` in m/s² for many vectors (module docstring).
 
     Parameters
@@ -334,9 +333,10 @@ def a_req_bound(params: FloatArray, lane_width: float, *, stop_at: float = 0.0,
         cheaper, looser bound (from the speeds alone, then with the lateral moments
         bracketed in closed form) stays below it keeps that bound, still >= ``a_req``.
         0: the tight bound everywhere.
-        0: always the fine bound.
     settings : CriticalitySettings, optional
         The criticality's settings (default when None): wandering zone, reaction time.
+        The lateral motion is integrated on the kinematics kernel's default grid, which
+        ``T_MARGIN`` was chosen for.
 
     Returns
     -------
@@ -351,7 +351,7 @@ def a_req_bound(params: FloatArray, lane_width: float, *, stop_at: float = 0.0,
     (_, ew), (cl, cw) = DEFAULT_VEHICLE_SIZE, DEFAULT_VEHICLE_SIZE
     out = np.empty(arr.shape[0])
     _bound_kernel(arr, float(lane_width), float(s.wandering_zone), float(s.reaction_time),
-                  0.5 * ew, 0.5 * cl, 0.5 * cw, float(stop_at), _one_minus_cos(int(n_grid)),
+                  0.5 * ew, 0.5 * cl, 0.5 * cw, float(stop_at), _one_minus_cos(DEFAULT_N_GRID),
                   out)
     return out
 
