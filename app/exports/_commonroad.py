@@ -192,6 +192,13 @@ def scenario_xml(scenario: ConcreteScenario, *, index: int, lane_width: float,
     finally:
         Path(name).unlink(missing_ok=True)
     root.set("date", date.strftime("%Y-%m-%d"))  # commonroad-io writes today's date
+    # commonroad-io writes the tags in the order of a set of enums, which follows the
+    # process's string hash seed: sort them so that every process writes the same bytes
+    for tags in root.iter("scenarioTags"):
+        tails = [e.tail for e in tags]  # the indentation stays where it was
+        tags[:] = sorted(tags, key=lambda e: str(e.tag))
+        for e, tail in zip(tags, tails, strict=True):
+            e.tail = tail
     data: bytes = etree.tostring(root, pretty_print=True, xml_declaration=True,
                                  encoding="UTF-8")
     return data

@@ -121,3 +121,37 @@ def test_a_non_uniform_grid_is_named(tmp_path: Path) -> None:
                                                     "time grid")):
         _export(tmp_path, [bad])
     assert list(tmp_path.iterdir()) == []
+
+
+_SAME_BYTES = """
+import sys
+from pathlib import Path
+import zipfile
+from tests.app.test_exports_commonroad import crossing, _export
+with zipfile.ZipFile(_export(Path(sys.argv[1]), [crossing()])) as zf:
+    print(zf.read("scenario_0000000.xml").hex())
+"""
+
+
+def test_the_same_bytes_under_any_hash_seed(tmp_path: Path) -> None:
+    """The scenario tags were written in a set's order, which follows the string hash seed:
+    two processes wrote different bytes for the same scenario (found by the refactoring's
+    behaviour snapshot). Exported under three hash seeds, the XML must be identical."""
+    import os
+    import subprocess
+    import sys
+
+    blobs = []
+    for seed in ("1", "2", "3"):
+        out = tmp_path / seed
+        out.mkdir()
+        env = dict(os.environ, PYTHONHASHSEED=seed)
+        r = subprocess.run([sys.executable, "-c", _SAME_BYTES, str(out)], env=env,
+                           capture_output=True, text=True, check=True,
+                           cwd=Path(__file__).resolve().parents[2])
+        blobs.append(r.stdout)
+    assert blobs[0] == blobs[1] == blobs[2]
+    with zipfile.ZipFile(tmp_path / "1" / "catalogue.zip") as zf:
+        xml = zf.read("scenario_0000000.xml").decode()
+    tags = re.findall(r"<scenarioTags>(.*?)</scenarioTags>", xml, re.S)[0]
+    assert re.findall(r"<(\w+)/>", tags) == ["cut_in", "highway", "multi_lane"]
