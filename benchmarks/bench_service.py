@@ -371,7 +371,7 @@ def scenarios_before_after(data_dir: Path, quick: bool) -> dict[str, Any]:
     model figures (P(B), the model interval) estimated per request (the memo cleared
     before each) against memoised on the model."""
     from app import domain
-    from riskcore import criticality_wagner as criticality
+    from riskcore.criticality import wagner as criticality
     from sampler import memo
     from sampler.record import score_vector
 

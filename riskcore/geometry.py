@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from riskcore import _kernels
+from riskcore import kernels as _kernels
 from riskcore.errors import RiskcoreError
 
 __all__ = ["boxes_overlap", "time_headway", "ttc_constant_velocity"]

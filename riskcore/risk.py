@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from riskcore import _kernels
+from riskcore import kernels as _kernels
 from riskcore.errors import RiskcoreError
 
 __all__ = ["object_risk", "risk_dependent", "risk_independent", "ttr_weight"]

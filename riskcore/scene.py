@@ -27,7 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from riskcore import _kernels
+from riskcore import kernels as _kernels
 from riskcore.errors import SceneError
 from riskcore.evasion import MANOEUVRES, Manoeuvre, evasion_label
 from riskcore.risk import risk_dependent, risk_independent

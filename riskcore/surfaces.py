@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from riskcore import _kernels
+from riskcore import kernels as _kernels
 from riskcore.errors import SurfaceError
 
 __all__ = ["FORMAT", "InputSurfaces", "Surface"]

@@ -54,13 +54,13 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from riskcore import _jit_cache
-from riskcore.criticality_record import CriticalitySettings
+from riskcore import jit
+from riskcore.criticality.record import CriticalitySettings
 from sampler._exceptions import SamplerError
 from sampler.builder import DEFAULT_VEHICLE_SIZE
 from sampler.kinematics import DEFAULT_N_GRID, _one_minus_cos
 
-_jit_cache.configure()
+jit.register(__file__)
 
 __all__ = ["a_req_bound", "btn_bound"]
 

@@ -66,7 +66,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
-from riskcore.criticality_record import CriticalitySettings
+from riskcore.criticality.record import CriticalitySettings
 from sampler._exceptions import ConstraintError
 from sampler.btn_bound import btn_bound
 from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities

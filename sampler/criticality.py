@@ -21,7 +21,7 @@ How: one compiled loop over the vectors. For each it integrates the cutter's mot
 (``datasets.cutin_model``: closed-form heading and speed, positions by Simpson's rule on
 0.05 s halves) at the builder's sample times and runs the drivers on the same 0.01 s
 simulation grid the scenario-level code uses (linear between samples) with the pruned
-kernels of :mod:`riskcore._criticality_kernels` (``drive_pruned``,
+kernels of :mod:`riskcore.criticality.kernels` (``drive_pruned``,
 ``r157_reaction_start_pruned``, ``required_decel_pruned``: a bound per 0.1 s sample
 interval rules most intervals out; docs/criticality.md), then riskcore's TTR scan when
 asked. ``baseline=True`` runs the grid kernels over every 0.01 s step instead (the
@@ -38,15 +38,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datasets.cutin_model import DEFAULT_LANE_WIDTH
-from riskcore import _criticality_kernels as _ck
-from riskcore import _jit_cache, _kernels
+from riskcore import jit
+from riskcore import kernels as _kernels
 from riskcore.criticality import CriticalitySettings
+from riskcore.criticality import kernels as _ck
 from riskcore.evasion import MANOEUVRES
 from riskcore.settings import RiskSettings
 from sampler._exceptions import SamplerError
 from sampler.builder import MAX_DURATION
 
-_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
+jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
 __all__ = ["CRITICALITY_QUANTITIES", "criticality_quantities"]
 
@@ -221,9 +222,9 @@ def _ttr_at_tp(t_p: float, c_none: float, v_e: float, cs: FloatArray, cd: FloatA
             traj[0, i, 1] = cd[n_s - 1]
             pq = cp[n_s - 1]
         else:
-            traj[0, i, 0] = _ck._interp(cs, 0.0, _DT, tq)
-            traj[0, i, 1] = _ck._interp(cd, 0.0, _DT, tq)
-            pq = _ck._interp(cp, 0.0, _DT, tq)
+            traj[0, i, 0] = _ck.interp(cs, 0.0, _DT, tq)
+            traj[0, i, 1] = _ck.interp(cd, 0.0, _DT, tq)
+            pq = _ck.interp(cp, 0.0, _DT, tq)
         traj[0, i, 2] = math.cos(pq)
         traj[0, i, 3] = math.sin(pq)
     n_man = man_a1.shape[0]
@@ -355,7 +356,7 @@ def _drivers_grid(t_p: float, v_e: float, t_stop: float, cs_s: FloatArray,
     for i in range(k0):
         if abs(cd[i]) - radius > ehw:  # clear whatever its heading: no trigonometry
             continue
-        if not _ck._lateral_clear(cd[i], math.cos(cp[i]), math.sin(cp[i]), chl, chw, ehw):
+        if not _ck.lateral_clear(cd[i], math.cos(cp[i]), math.sin(cp[i]), chl, chw, ehw):
             k0 = i
             break
     t0 = k0 * h

@@ -24,10 +24,10 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from riskcore import _jit_cache
+from riskcore import jit
 from sampler._exceptions import SamplerError
 
-_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
+jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
 __all__ = ["CrossingKinematics", "crossing_kinematics", "plateau_speeds"]
 

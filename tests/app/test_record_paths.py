@@ -135,7 +135,7 @@ def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
 def loaded_kernels(_: object) -> int:
     """In a pool worker: how many compiled signatures the batched Wagner kernel holds (0
     until a scenario was scored in this process; for the test only)."""
-    from riskcore import _criticality_kernels
+    from riskcore.criticality import kernels as _criticality_kernels
 
     return len(_criticality_kernels.scene_risks.signatures)
 

@@ -318,7 +318,7 @@ def test_ttr_true_is_a_clean_multiple_of_the_step() -> None:
        jerk=st.sampled_from([12.65, 3.0, math.inf]), a_max=st.floats(1.0, 10.0))
 def test_brake_time_to_is_when_the_braking_ego_reaches_the_speed(
         v_b: float, v: float, jerk: float, a_max: float) -> None:
-    from riskcore import _criticality_kernels as ck
+    from riskcore.criticality import kernels as ck
 
     tau = ck.brake_time_to(v_b, jerk, a_max, v)
     target = min(max(v, 0.0), v_b)
@@ -337,7 +337,7 @@ def test_decel_bound_is_the_largest_needed_deceleration_over_the_interval(
         c0: float, slope: float, v_b: float, tau_a: float, width: float) -> None:
     # _decel_bound prunes required_decel's intervals: it must never be below the
     # deceleration needed at any time of the interval, and it is the exact maximum
-    from riskcore import _criticality_kernels as ck
+    from riskcore.criticality import kernels as ck
 
     tau_b = tau_a + width
     bound = ck._decel_bound(c0, slope, v_b, tau_a, tau_b)

@@ -220,7 +220,7 @@ def test_time_headway_hand_cases() -> None:
 def test_the_batch_rollout_matches_the_closed_form(psi0: float, v0: float, a: list[float],
                                                    w: float) -> None:
     """The engine's batch rollout (angle-addition recurrence) vs ctra_states per step."""
-    from riskcore import _kernels
+    from riskcore import kernels as _kernels
 
     a_arr = np.array(a)
     w_arr = np.full(a_arr.shape, w)

@@ -1,55 +1,110 @@
-"""One numba cache directory per version of the kernel sources (riskcore/_jit_cache.py)."""
+"""One numba cache directory per version of the kernel sources (riskcore/jit.py)."""
 
 from __future__ import annotations
 
+import ast
+import importlib
+import re
 import shutil
 from pathlib import Path
 
 import numba
 import pytest
 
-from riskcore import _jit_cache
+from riskcore import jit
 
 ROOT = Path(__file__).resolve().parents[2]
+_FIRST_KERNEL = re.compile(r"^@(numba\.)?njit\(", re.M)
 
 
-def test_every_kernel_file_is_listed_and_configures_the_cache_first() -> None:
-    found = sorted(str(p.relative_to(ROOT)) for pkg in ("riskcore", "sampler", "datasets", "app")
-                   for p in (ROOT / pkg).rglob("*.py") if "njit(" in p.read_text())
-    assert found == sorted(_jit_cache.KERNEL_FILES)
-    for rel in found:
-        text = (ROOT / rel).read_text()
-        assert text.index("_jit_cache.configure()") < text.index("njit("), rel
+def _kernel_modules() -> list[str]:
+    """Every module of the project with a numba kernel, as a dotted name."""
+    found = []
+    for pkg in ("riskcore", "sampler", "datasets", "app"):
+        for p in sorted((ROOT / pkg).rglob("*.py")):
+            if _FIRST_KERNEL.search(p.read_text()):
+                found.append(".".join(p.relative_to(ROOT).with_suffix("").parts))
+    return found
 
 
-def test_the_directory_follows_every_kernel_file(tmp_path: Path,
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    for rel in _jit_cache.KERNEL_FILES:
+def test_every_kernel_module_registers_before_its_first_kernel() -> None:
+    modules = _kernel_modules()
+    assert len(modules) >= 5
+    for name in modules:
+        text = (ROOT / (name.replace(".", "/") + ".py")).read_text()
+        assert "jit.register(__file__)" in text, name
+        first = _FIRST_KERNEL.search(text)
+        assert first is not None
+        assert text.index("jit.register(__file__)") < first.start(), name
+
+
+def _imported_modules(name: str) -> set[str]:
+    tree = ast.parse((ROOT / (name.replace(".", "/") + ".py")).read_text())
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            out.add(node.module)
+            out.update(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+    return out
+
+
+def test_a_module_is_registered_after_the_kernel_modules_it_calls() -> None:
+    """The cache directory of a module's kernels is hashed over what was registered before
+    it: its callees must be among them, or an edit of a callee would leave stale code."""
+    modules = _kernel_modules()
+    for name in modules:
+        importlib.import_module(name)
+    order = [".".join(p.relative_to(ROOT).with_suffix("").parts) for p in jit.registered()]
+    assert sorted(order) == sorted(modules)
+    for name in modules:
+        for callee in _imported_modules(name) & set(modules):
+            assert order.index(callee) < order.index(name), (name, callee)
+
+
+def test_the_directory_follows_every_registered_file(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    modules = _kernel_modules()
+    files = []
+    for name in modules:
+        rel = Path(name.replace(".", "/") + ".py")
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / rel, tmp_path / rel)
-    monkeypatch.setattr(_jit_cache, "_ROOT", tmp_path)
+        files.append(tmp_path / rel)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    first = _jit_cache.cache_dir()
+    first = jit.cache_dir(tuple(files))
     assert first.parent == tmp_path / "cache" / "scengen" / "numba"
-    assert _jit_cache.cache_dir() == first  # stable
-    for rel in _jit_cache.KERNEL_FILES:  # an edit of any one (e.g. only a callee) moves it
-        path = tmp_path / rel
+    assert jit.cache_dir(tuple(files)) == first  # stable
+    for path in files:  # an edit of any one (e.g. only a callee) moves it
         original = path.read_bytes()
         path.write_bytes(original + b"\n# edited\n")
-        assert _jit_cache.cache_dir() != first, rel
+        assert jit.cache_dir(tuple(files)) != first, path
         path.write_bytes(original)
-    assert _jit_cache.cache_dir() == first
+    assert jit.cache_dir(tuple(files)) == first
 
 
-def test_configure_uses_it_unless_the_user_chose(tmp_path: Path,
-                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_compiled_kernels_live_in_the_directory_of_their_registration() -> None:
+    from riskcore import kernels
+    from riskcore.criticality import kernels as criticality_kernels
+
+    files = jit.registered()
+    for module, kernel in ((kernels, kernels.predict),
+                           (criticality_kernels, criticality_kernels.scene_risks)):
+        upto = files[: files.index(Path(module.__file__).resolve()) + 1]
+        cache_path = Path(kernel._cache._cache_path)  # numba's own record of it
+        assert cache_path.parent == jit.cache_dir(upto), module.__name__
+
+
+def test_register_uses_it_unless_the_user_chose(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(numba.config, "CACHE_DIR", "")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    _jit_cache.configure()
-    assert str(_jit_cache.cache_dir()) == numba.config.CACHE_DIR
+    jit.register(jit.__file__.replace("jit.py", "kernels.py"))
+    assert str(jit.cache_dir()) == numba.config.CACHE_DIR
     assert Path(numba.config.CACHE_DIR).is_dir()
     monkeypatch.setattr(numba.config, "CACHE_DIR", "/the/users/choice")
     monkeypatch.setenv("NUMBA_CACHE_DIR", "/the/users/choice")
-    _jit_cache.configure()
+    jit.register(jit.__file__.replace("jit.py", "kernels.py"))
     assert numba.config.CACHE_DIR == "/the/users/choice"

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from riskcore.criticality import CriticalitySettings
-from riskcore.criticality_drivers import _frames
-from riskcore.criticality_wagner import _Wagner
+from riskcore.criticality.drivers import _frames
+from riskcore.criticality.wagner import _Wagner
 from riskcore.scene import default_surfaces
 from riskcore.settings import RiskSettings
 from sampler.builder import build_scenario

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import sampler.constraints as constraints_mod
 from datasets.cutin_model import PARAM_NAMES
-from riskcore.criticality_record import CriticalitySettings
+from riskcore.criticality.record import CriticalitySettings
 from sampler.btn_bound import a_req_bound, btn_bound
 from sampler.constraints import Region, implied_bounds, parse_constraint
 from sampler.criticality import criticality_quantities

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from riskcore import _criticality_kernels as _ck
-from riskcore.criticality_drivers import (
+from riskcore.criticality import kernels as _ck
+from riskcore.criticality.drivers import (
     _braked,
     _cutter_index,
     _Drivers,
@@ -22,7 +22,7 @@ from riskcore.criticality_drivers import (
     crossing_time,
     perception_time,
 )
-from riskcore.criticality_record import CriticalitySettings
+from riskcore.criticality.record import CriticalitySettings
 from riskcore.evasion import MANOEUVRES
 from riskcore.scenario import ConcreteScenario
 from riskcore.scenario_risk import object_inputs
@@ -39,7 +39,7 @@ class _Wagner:
     """Scenes of the scenario at arbitrary times, with the scripted or a reacted ego.
 
     A one-object scenario (every cut-in) goes through one compiled call per scene
-    (:func:`riskcore._criticality_kernels.scene_risk`, the engine's own kernels); more
+    (:func:`riskcore.criticality.kernels.scene_risk`, the engine's own kernels); more
     objects through riskcore's scene engine. Both give riskcore's r_dep and r_ind.
     """
 

@@ -10,9 +10,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from riskcore import _criticality_kernels as _ck
-from riskcore import _kernels
-from riskcore.criticality_record import CriticalityError, CriticalitySettings
+from riskcore import kernels as _kernels
+from riskcore.criticality import kernels as _ck
+from riskcore.criticality.record import CriticalityError, CriticalitySettings
 from riskcore.evasion import MANOEUVRES, evasion_label
 from riskcore.scenario import ConcreteScenario, Track
 from riskcore.settings import RiskSettings

@@ -34,9 +34,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from riskcore import _jit_cache, _kernels
+from riskcore import jit
+from riskcore import kernels as _kernels
 
-_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
+jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
 FloatArray = NDArray[np.float64]
 
@@ -126,7 +127,7 @@ def brake_time_to(v_b: float, jerk: float, a_max: float,
 
 
 @njit(cache=True)
-def _interp(arr: FloatArray, t0: float, h: float, t: float) -> float:  # pragma: no cover
+def interp(arr: FloatArray, t0: float, h: float, t: float) -> float:  # pragma: no cover
     """Linear interpolation of a grid array at time t (clamped to the grid)."""
     n = arr.shape[0]
     u = (t - t0) / h
@@ -146,7 +147,7 @@ def _ego_scripted(es: FloatArray, ev: FloatArray, t0: float, h: float,
     t_last = t0 + (es.shape[0] - 1) * h
     if t > t_last:
         return es[es.shape[0] - 1] + ev[ev.shape[0] - 1] * (t - t_last), ev[ev.shape[0] - 1]
-    return _interp(es, t0, h, t), _interp(ev, t0, h, t)
+    return interp(es, t0, h, t), interp(ev, t0, h, t)
 
 
 @njit(cache=True)
@@ -165,12 +166,12 @@ def ego_at(t: float, t0: float, h: float, es: FloatArray, ev: FloatArray, t_b: f
 def _cutter_at(t: float, t0: float, h: float, cs: FloatArray, cd: FloatArray,
                cpsi: FloatArray, cv: FloatArray
                ) -> tuple[float, float, float, float]:  # pragma: no cover - jit
-    return (_interp(cs, t0, h, t), _interp(cd, t0, h, t), _interp(cpsi, t0, h, t),
-            _interp(cv, t0, h, t))
+    return (interp(cs, t0, h, t), interp(cd, t0, h, t), interp(cpsi, t0, h, t),
+            interp(cv, t0, h, t))
 
 
 @njit(cache=True)
-def _lateral_clear(cd: float, c: float, s: float, chl: float, chw: float,
+def lateral_clear(cd: float, c: float, s: float, chl: float, chw: float,
                    ehw: float) -> bool:  # pragma: no cover - jit
     """Cheap test: the cutter's box lies entirely outside the ego's band |y| <= ehw."""
     return abs(cd) - (chl * abs(s) + chw * abs(c)) > ehw
@@ -184,7 +185,7 @@ def _clearance(x: float, y: float, p: float, s: float, ehl: float, ehw: float, c
     front (< 0: the boxes overlap), cos p, sin p)."""
     c = math.cos(p)
     sn = math.sin(p)
-    if _lateral_clear(y, c, sn, chl, chw, ehw):
+    if lateral_clear(y, c, sn, chl, chw, ehw):
         return False, np.nan, c, sn
     meets, lo, hi = band_range(x, y, c, sn, chl, chw, ehw)
     if not (meets and hi > s - ehl):
@@ -398,9 +399,9 @@ def _conflict_state(t: float, t0: float, h: float, cs: FloatArray, es: FloatArra
                     half_lengths: float) -> tuple[bool, float, float]:  # pragma: no cover
     """At time t (arrays sampled every h from t0): is the cutter's centre ahead of the
     ego's, the longitudinal gap g = cs - es - (L_c + L_e)/2, and the closing speed."""
-    x = _interp(cs, t0, h, t)
-    s = _interp(es, t0, h, t)
-    clos = _interp(ev, t0, h, t) - _interp(cv, t0, h, t) * math.cos(_interp(cpsi, t0, h, t))
+    x = interp(cs, t0, h, t)
+    s = interp(es, t0, h, t)
+    clos = interp(ev, t0, h, t) - interp(cv, t0, h, t) * math.cos(interp(cpsi, t0, h, t))
     return x > s, x - s - half_lengths, clos
 
 
@@ -521,7 +522,7 @@ def rss_trigger(t0: float, h: float, cs: FloatArray, cd: FloatArray, cpsi: Float
         for _ in range(_BISECT):
             m = 0.5 * (a + b)
             x, y, p, vc = _cutter_at(m, t0, h, cs, cd, cpsi, cv)
-            if _rss_danger(x, y, p, vc, _interp(es, t0, h, m), _interp(ev, t0, h, m), ehl,
+            if _rss_danger(x, y, p, vc, interp(es, t0, h, m), interp(ev, t0, h, m), ehl,
                            ehw, chl, chw, rho, a_acc, b_min, b_max, mu, a_lat):
                 b = m
             else:

@@ -12,9 +12,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from riskcore import _jit_cache
+from riskcore import jit
 
-_jit_cache.configure()  # before the first @njit: one cache per version of the kernels
+jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
 FloatArray = NDArray[np.float64]
 

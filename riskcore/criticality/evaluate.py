@@ -5,7 +5,7 @@ semantics for test engineers; CONTRACT: the flat field names of ``CRITICALITY_FI
 
 The cutter is the object with id ``"cutter"`` (else the first object); it follows its own
 recorded or generated motion and does not react. The ego reacts longitudinally only,
-along its own path (the kernels in :mod:`riskcore._criticality_kernels` work in the ego's
+along its own path (the kernels in :mod:`riskcore.criticality.kernels` work in the ego's
 frame; for a generated cut-in that is the road frame).
 
 Perception moment ``t_p`` (UN R157 Annex 4 Appendix 3, cut-in: the lateral movement of
@@ -43,8 +43,8 @@ import math
 
 import numpy as np
 
-from riskcore import _criticality_kernels as _ck
-from riskcore.criticality_drivers import (
+from riskcore.criticality import kernels as _ck
+from riskcore.criticality.drivers import (
     _braked,
     _check_not_cut_off,
     _cutter_index,
@@ -52,40 +52,20 @@ from riskcore.criticality_drivers import (
     _lane_width,
     _run_drivers,
     _ttr_true,
-    conflict_resolution,
     crossing_time,
     perception_time,
 )
-from riskcore.criticality_record import (
-    CLASSES,
-    CRITICALITY_FIELDS,
+from riskcore.criticality.record import (
     Criticality,
     CriticalityError,
     CriticalitySettings,
-    FieldSpec,
-    G,
-    settings_from_dict,
 )
-from riskcore.criticality_wagner import _wagner_fields, criticality_profiles
+from riskcore.criticality.wagner import _wagner_fields
 from riskcore.scenario import ConcreteScenario
 from riskcore.settings import RiskSettings
 from riskcore.surfaces import InputSurfaces
 
-__all__ = [
-    "CLASSES",
-    "CRITICALITY_FIELDS",
-    "Criticality",
-    "CriticalityError",
-    "CriticalitySettings",
-    "FieldSpec",
-    "G",
-    "conflict_resolution",
-    "criticality_profiles",
-    "crossing_time",
-    "evaluate_criticality",
-    "perception_time",
-    "settings_from_dict",
-]
+__all__ = ["evaluate_criticality"]
 
 def evaluate_criticality(scenario: ConcreteScenario, *, lane_width: float | None = None,
                          settings: CriticalitySettings | None = None,
