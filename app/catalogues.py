@@ -22,8 +22,8 @@ from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
 from app.rates import catalogue_rates
-from riskcore.scenario import ConcreteScenario
-from sampler.record import SCORE_FIELDS, ScenarioRecord
+from riskcore import ConcreteScenario
+from sampler.scenario import SCORE_FIELDS, ScenarioRecord
 
 SAMPLER_METHODS = ("auto", "rejection", "mcmc", "subset", "subset-is")
 

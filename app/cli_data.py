@@ -16,8 +16,7 @@ from app.cli import add_out, add_quiet
 
 
 def _convert_tno(args: argparse.Namespace) -> int:
-    from datasets.embedded import DEFAULT_EVENTS_PATH
-    from datasets.tno_package import write_tno_package
+    from datasets import DEFAULT_EVENTS_PATH, write_tno_package
 
     out = Path(args.output)
     if out.resolve() == DEFAULT_EVENTS_PATH.resolve() and not args.replace_embedded:
@@ -33,8 +32,7 @@ def _convert_tno(args: argparse.Namespace) -> int:
 
 
 def _extract(args: argparse.Namespace) -> int:
-    from datasets.extract import extract_cutins
-    from datasets.table import write_table
+    from datasets import extract_cutins, write_table
 
     res = extract_cutins(args.path, args.format, progress=not args.quiet)
     for event_id, reason in res.skipped:
@@ -43,7 +41,7 @@ def _extract(args: argparse.Namespace) -> int:
     print(f"{len(res.table)} cut-ins extracted, {len(res.skipped)} skipped; "
           f"wrote {args.output}")
     if res.exposure is not None:  # highD: 'scengen fit TABLE' reads it from beside the table
-        from sampler.exposure import highd_exposure
+        from sampler.rates import highd_exposure
 
         exp = highd_exposure(res.exposure, len(res.table))
         side = exposure_path(args.output)
@@ -59,7 +57,7 @@ def exposure_path(table: str | Path) -> Path:
 
 
 def _synth(args: argparse.Namespace) -> int:
-    from datasets.synth import write_synthetic
+    from datasets import write_synthetic
 
     paths = write_synthetic(args.output, args.seed, minutes=args.minutes,
                             vehicles=args.vehicles, lanes_per_direction=args.lanes,
@@ -73,7 +71,7 @@ def _synth(args: argparse.Namespace) -> int:
 def _fit_surfaces(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from datasets.surfaces_fit import (
+    from datasets import (
         fit_surfaces,
         trajectories_from_egocentric,
         trajectories_from_highd,
@@ -81,17 +79,18 @@ def _fit_surfaces(args: argparse.Namespace) -> int:
     )
 
     if args.input is None:
-        from datasets.embedded import SOURCE, load_default_events
+        from datasets import EMBEDDED_SOURCE as SOURCE
+        from datasets import load_default_events
 
         traj = trajectories_from_egocentric(load_default_events())
         source = f"embedded {SOURCE}"
     elif args.format == "egocentric":
-        from datasets.egocentric import read_egocentric
+        from datasets import read_egocentric
 
         traj = trajectories_from_egocentric(read_egocentric(args.input))
         source = str(args.input)
     else:
-        from datasets.highd import find_recordings, read_highd
+        from datasets import find_recordings, read_highd
 
         parts = []
         for prefix in find_recordings(args.input):
@@ -111,10 +110,11 @@ def _scenarios(args: argparse.Namespace) -> int:
     import json
     import re
 
-    from datasets.egocentric import egocentric_to_scenarios, read_egocentric
+    from datasets import egocentric_to_scenarios, read_egocentric
 
     if args.events is None:
-        from datasets.embedded import SOURCE, load_default_events
+        from datasets import EMBEDDED_SOURCE as SOURCE
+        from datasets import load_default_events
 
         frame, label = load_default_events(), f"embedded events ({SOURCE})"
     else:
@@ -138,10 +138,11 @@ def _scenarios(args: argparse.Namespace) -> int:
 def _describe(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from datasets.table import describe_table, read_table
+    from datasets import describe_table, read_table
 
     if args.table is None:
-        from datasets.embedded import SOURCE, default_parameter_table
+        from datasets import EMBEDDED_SOURCE as SOURCE
+        from datasets import default_parameter_table
 
         table = default_parameter_table()
         label = f"embedded table ({SOURCE})"

@@ -1,6 +1,6 @@
 """``scengen fit`` and ``scengen sample``: the scenario model and constrained sampling.
 
-``scengen fit [DATASET] -o MODEL.json`` fits the cut-in GMM (sampler.model.CutInGMM) to a
+``scengen fit [DATASET] -o MODEL.json`` fits the cut-in GMM (sampler.model.gmm.CutInGMM) to a
 parameter table (CSV or Parquet as written by ``scengen data extract``; default: the
 embedded real TNO table) and prints the BIC curve, the chosen K and the fit report.
 
@@ -13,7 +13,7 @@ per sample::
      "log_density": ..., "scenario": {...} (with --scenarios),
      "risk": ..., "min_ttr": ..., ..., "error": ... (the score fields, with --score)}
 
-i.e. the service's scored record (``sampler.record.ScenarioRecord``, the same as an item of
+i.e. the service's scored record (``sampler.scenario.record.ScenarioRecord``, the same as an item of
 ``POST /scenarios``) plus the sampler's derived quantities and log density; +inf/NaN are
 written as "Infinity"/"NaN" (the service's JSON convention), and one summary line on
 stderr with P(A), its interval and the sampler's diagnostics; ``--summary-json FILE``
@@ -99,7 +99,7 @@ def _read_table(path: str | None) -> tuple[Any, str]:
     import pandas as pd
 
     if path is None:
-        from datasets.embedded import default_parameter_table
+        from datasets import default_parameter_table
 
         return default_parameter_table(), "embedded TNO cut-ins (MIT)"
     p = Path(path)
@@ -127,7 +127,7 @@ def _fit(args: argparse.Namespace) -> int:
     if args.bootstrap < 0 or args.bootstrap == 1:
         raise ValueError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
     from app.cli_data import exposure_path
-    from sampler.exposure import Exposure, cutin_rate, tno_exposure
+    from sampler.rates import Exposure, cutin_rate, tno_exposure
 
     exposure = None
     if args.exposure_hours is not None or args.exposure_km is not None:
@@ -142,7 +142,7 @@ def _fit(args: argparse.Namespace) -> int:
     if exposure is not None:
         model.exposure_ = exposure.to_dict()
     if args.bootstrap:
-        from sampler.bootstrap import bootstrap_fit
+        from sampler.model import bootstrap_fit
 
         bootstrap_fit(model, table, args.bootstrap, seed=args.seed, n_jobs=args.bootstrap_jobs)
     model.save(args.output)
@@ -234,8 +234,8 @@ def _load_model(ref: str | None, gmm: Any) -> Any:
 
 
 def _sample(args: argparse.Namespace) -> int:
+    from sampler import sample
     from sampler.model import CutInGMM
-    from sampler.sampleset import sample
 
     if args.workers < 1:
         raise ValueError(f"--workers: must be >= 1, got {args.workers}")
@@ -250,12 +250,14 @@ def _sample(args: argparse.Namespace) -> int:
                     progress=progress)
     finally:
         progress.close()
-    from sampler.scoring import score_samples
+    from app.jobs.lifeline import lifeline_pool
+    from sampler.scenario import score_samples
 
-    records = score_samples(ss, n_workers=args.workers, score=args.score,
-                            include_scenarios=args.scenarios, mp_context=_POOL,
-                            progress=(lambda d, t: progress("score", d, t)) if args.score
-                            else None)
+    with lifeline_pool(args.workers, _POOL) as pool:
+        records = score_samples(ss, executor=pool, score=args.score,
+                                include_scenarios=args.scenarios,
+                                progress=(lambda d, t: progress("score", d, t)) if args.score
+                                else None)
     progress.close()
     d = ss.to_dict()
     lines = []
@@ -277,7 +279,7 @@ def _sample(args: argparse.Namespace) -> int:
                                            encoding="utf-8")
     print(f"scengen sample: seed {ss.seed}: {ss.summary()}", file=sys.stderr)
     if getattr(model, "bootstrap_", None) or getattr(model, "exposure_", None):
-        from sampler.exposure import region_report, report_text
+        from sampler.rates import region_report, report_text
 
         report = region_report(model, ss)
         print(report_text(report), file=sys.stderr)

@@ -174,7 +174,7 @@ class ServiceContext:
         """In the background: start the executor's workers and load their kernels
         (``ChunkExecutor.warm``), and estimate what a first request with the default model
         and region would (P(B) and the model interval are memoised on the model object,
-        ``sampler.memo``). Failures are logged only. Returns the thread of the latter."""
+        ``sampler.model.memo``). Failures are logged only. Returns the thread of the latter."""
         self.executor.warm()
 
         def run() -> None:

@@ -31,9 +31,9 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from datasets.errors import DatasetError
-from riskcore.errors import RiskcoreError
-from sampler._exceptions import NotFittedError, SamplerError
+from datasets import DatasetError
+from riskcore import RiskcoreError
+from sampler import NotFittedError, SamplerError
 
 log = logging.getLogger("scengen.app")
 

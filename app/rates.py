@@ -2,7 +2,7 @@
 and of the rates per hour / per 10^6 km, and a catalogue's rates with the check that its
 exposure weights sum to the rate.
 
-The figures come from ``sampler.exposure.uncertainty_report`` (stored with a catalogue's
+The figures come from ``sampler.rates.exposure.uncertainty_report`` (stored with a catalogue's
 P(A), or computed for a request); this module only types and reshapes them.
 """
 

@@ -12,7 +12,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from sampler.record import ScenarioRecord
+from sampler.scenario import ScenarioRecord
 
 __all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord"]
 

@@ -1,4 +1,4 @@
-"""Coverage of the "model" interval of P(A) (``sampler.bootstrap.pooled_interval``).
+"""Coverage of the "model" interval of P(A) (``sampler.rates.bootstrap_interval.pooled_interval``).
 
 Data sets of 250 rows are drawn from a known two-component mixture of (gap, dv); each is
 fitted (K = 2), refitted B times (``bootstrap_fit``) and the model interval of
@@ -34,9 +34,10 @@ from scipy import stats
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the checkout this script is in (and its tests/)
 
-from sampler.bootstrap import INTERVALS, bootstrap_ci, bootstrap_fit, pooled_interval  # noqa: E402
-from sampler.constraints import Region  # noqa: E402
-from sampler.model import CutInGMM  # noqa: E402
+from sampler.model import bootstrap_fit  # noqa: E402
+from sampler.model.gmm import CutInGMM  # noqa: E402
+from sampler.rates import INTERVALS, bootstrap_ci, pooled_interval  # noqa: E402
+from sampler.region.constraints import Region  # noqa: E402
 from tests.sampler.factories import base_params, closed_form, draw_table, true_p  # noqa: E402
 
 CUTS = ((9.0, False), (3.0, True))

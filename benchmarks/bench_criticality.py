@@ -39,7 +39,7 @@ from datasets.embedded import default_parameter_table  # noqa: E402
 from riskcore import evaluate_scenario  # noqa: E402
 from riskcore.criticality import evaluate_criticality  # noqa: E402
 from sampler import CutInGMM, build_scenario, sample  # noqa: E402
-from sampler.criticality import criticality_quantities  # noqa: E402
+from sampler.region.criticality import criticality_quantities  # noqa: E402
 
 
 def load() -> str:

@@ -1,6 +1,6 @@
 """Benchmark of the catalogue exports: time to export N scenarios in each format.
 
-Builds N cut-ins (default 1,000) with ``sampler.builder.build_scenario`` from parameter
+Builds N cut-ins (default 1,000) with ``sampler.scenario.builder.build_scenario`` from parameter
 vectors drawn uniformly from a box of valid cut-ins (seeded), then exports the same items
 in every format and mode, one after another, each into a fresh temporary directory:
 ``jsonl``, ``csv``, ``parquet``, ``xosc`` (``test`` and ``replay``; both include the
@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 from app.exports import build_manifest, export_catalogue  # noqa: E402
 from riskcore.scenario import ConcreteScenario  # noqa: E402
-from sampler._exceptions import BuilderError  # noqa: E402
-from sampler.builder import build_scenario  # noqa: E402
+from sampler.errors import BuilderError  # noqa: E402
+from sampler.scenario.builder import build_scenario  # noqa: E402
 
 #: (low, high) of each parameter; p_y1's sign is drawn separately
 BOX = {"p_y1": (0.04, 0.09), "p_t": (1.5, 2.5), "p_a1": (-1.0, 1.0), "p_a2": (-1.0, 1.0),

@@ -8,7 +8,7 @@ Brute-force references, computed in the same run (one pass each, shared by the r
   criticality quantities; P(A and B) = hits / draws with its exact (Clopper-Pearson) 95 %
   interval;
 * ``envelope`` (regions with ``ttc<3``): ``--envelope`` exact draws of the model restricted
-  to the half-space envelope S of ``ttc<3`` (``sampler.envelope``, P(S) exact); the draws
+  to the half-space envelope S of ``ttc<3`` (``sampler.methods.envelope``, P(S) exact); the draws
   inside ``ttc<3`` get their criticality quantities; P(A and B) = P(S) hits / draws, the
   interval P(S) times the exact one. Still naive Monte Carlo (stratified by an exactly
   known set), so it is unbiased with an exact interval, far cheaper for these regions.
@@ -32,7 +32,7 @@ within 2 reported CoV of the reference; whether the mean lies inside the referen
 interval, and the share of single estimates that do.
 
 Methods: ``subset`` (plain subset simulation, 2,000 points per level), ``subset-is``
-(``sampler.rare`` defaults: ``stratify="auto"``, which stratifies the TNO model),
+(``sampler.methods.rare`` defaults: ``stratify="auto"``, which stratifies the TNO model),
 ``subset-is-plain`` (one subset-is on
 the whole model, ``stratify="never"``), ``subset-is-strat`` (one per stratum of the model,
 component x cut-in side, ``stratify="always"``), ``auto``
@@ -93,8 +93,8 @@ _COUNT = {"rows": 0}
 def _count_evaluations() -> None:
     """Count every row whose criticality quantities are simulated (the costly limit
     state, whichever path evaluates it)."""
-    import sampler.constraints as sc
-    import sampler.subset as ss
+    import sampler.methods.subset as ss
+    import sampler.region.constraints as sc
 
     original = sc.criticality_quantities
 
@@ -110,8 +110,8 @@ def _naive_costs(model: Any, n: int = 1 << 16) -> dict[str, float]:
     """Seconds per draw of naive Monte Carlo's parts, measured in this run: drawing and
     the physical bounds; the simulation per simulated row without and with the TTR scan
     (a ``btn`` region needs no TTR scan, a ``ttr_true`` region does)."""
-    from sampler.constraints import Region
-    from sampler.criticality import criticality_quantities
+    from sampler.region.constraints import Region
+    from sampler.region.criticality import criticality_quantities
 
     rng = np.random.default_rng(2024)
     bounds = Region.from_constraints([], lane_width=model.lane_width_)
@@ -130,9 +130,9 @@ def _naive_costs(model: Any, n: int = 1 << 16) -> dict[str, float]:
 
 def _references(model: Any, n_naive: int, n_env: int, seed: int) -> dict[str, Any]:
     """The two brute-force passes: per pass the draws, P(S) and the rows' quantities."""
-    from sampler.constraints import Region, derive
-    from sampler.criticality import criticality_quantities
-    from sampler.problem import Problem
+    from sampler.methods.problem import Problem
+    from sampler.region.constraints import Region, derive
+    from sampler.region.criticality import criticality_quantities
 
     lw = model.lane_width_
     out: dict[str, Any] = {}
@@ -170,8 +170,8 @@ def _references(model: Any, n_naive: int, n_env: int, seed: int) -> dict[str, An
 
 def _reference(refs: dict[str, Any], constraints: list[str], kind: str,
                lane_width: float) -> tuple[float, float, float, int, int]:
-    from sampler.constraints import parse_constraint
     from sampler.intervals import clopper_pearson
+    from sampler.region.constraints import parse_constraint
 
     r = refs[kind]
     inside = np.ones(r["params"].shape[0], dtype=bool)
@@ -189,8 +189,8 @@ def _sim_share(refs: dict[str, Any], constraints: list[str]) -> float:
     region: those inside the physical bounds and inside its kinematic constraints (which
     cost no simulation, so a naive run checks them first), from the naive pass. 1 for a
     kinematic region (nothing is simulated: the cost unit is a limit-state row there)."""
-    from sampler.constraints import parse_constraint
-    from sampler.criticality import CRITICALITY_QUANTITIES
+    from sampler.region.constraints import parse_constraint
+    from sampler.region.criticality import CRITICALITY_QUANTITIES
 
     cons = [parse_constraint(text) for text in constraints]
     if not any(c.name in CRITICALITY_QUANTITIES for c in cons):
@@ -206,11 +206,11 @@ def _sim_share(refs: dict[str, Any], constraints: list[str]) -> float:
 def _run(model: Any, constraints: list[str], method: str, seed: int
          ) -> tuple[float, float, int]:
     """One repetition: (P(A and B), reported CoV, criticality evaluations)."""
-    from sampler.constraints import Region
-    from sampler.problem import Problem
-    from sampler.rare import SubsetISSampler
-    from sampler.sampleset import sample
-    from sampler.subset import SubsetSampler
+    from sampler.methods.problem import Problem
+    from sampler.methods.rare import SubsetISSampler
+    from sampler.methods.subset import SubsetSampler
+    from sampler.region.constraints import Region
+    from sampler.sampling import sample
 
     _COUNT["rows"] = 0
     rng = np.random.default_rng(seed)

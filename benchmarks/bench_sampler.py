@@ -35,6 +35,7 @@ def main() -> int:
     parser.add_argument("--no-score", action="store_true")
     args = parser.parse_args()
 
+    from app.jobs.lifeline import lifeline_pool
     from datasets.embedded import default_parameter_table
     from sampler import CutInGMM, sample, score_samples
 
@@ -68,7 +69,8 @@ def main() -> int:
         t = time.perf_counter()
         ss = sample(model, ["ttc<3"], args.n, seed=args.seed, method="auto")
         t_s = time.perf_counter() - t
-        scored = score_samples(ss, n_workers=args.workers, mp_context=_POOL, chunk_size=50)
+        with lifeline_pool(args.workers, _POOL) as pool:
+            scored = score_samples(ss, executor=pool, chunk_size=50)
         dt = time.perf_counter() - t
         n_err = sum(s.error is not None for s in scored)
         risks = [s.risk or 0.0 for s in scored if s.error is None]

@@ -21,7 +21,7 @@ Measures, against ``uvicorn app.main:app`` started here in a subprocess:
 Before/after (issue 13), measured in the same run, in this process, one core:
 
 * scoring 100 sampled vectors: the old path (build, full Wagner run over every step and
-  its summary) against ``sampler.record.score_vector`` (build + criticality record);
+  its summary) against ``sampler.scenario.record.score_vector`` (build + criticality record);
 * sampling one catalogue chunk: the old chunk (its own P(B) and a P(A) it threw away)
   against the catalogue-level estimate reused (``KnownRegion``);
 * the status statistics of the ``--rows`` catalogue: the old code (every value loaded and
@@ -313,8 +313,8 @@ def before_after(data_dir: Path, cid: str, chunk_size: int, quick: bool) -> dict
     from app.jobs.chunk import CatalogueSpec, compute_chunk
     from app.jobs.runner import estimate_region
     from riskcore import evaluate_scenario
-    from sampler.builder import build_scenario
-    from sampler.record import score_vector
+    from sampler.scenario.builder import build_scenario
+    from sampler.scenario.record import score_vector
 
     out: dict[str, Any] = {}
     model_json = sorted((data_dir / "models").glob("default-*.json"))[0].read_text()
@@ -372,8 +372,8 @@ def scenarios_before_after(data_dir: Path, quick: bool) -> dict[str, Any]:
     before each) against memoised on the model."""
     from app import domain
     from riskcore.criticality import wagner as criticality
-    from sampler import memo
-    from sampler.record import score_vector
+    from sampler.model import memo
+    from sampler.scenario.record import score_vector
 
     def one_scene_per_step(self: Any, ks: Any, level: float, cache: dict[int, float],
                            first_block: int = 8) -> int | None:

@@ -36,10 +36,10 @@ def main() -> int:
 
     from datasets.embedded import default_parameter_table
     from sampler import CutInGMM, estimate_p_region
-    from sampler.constraints import Region
-    from sampler.criticality import criticality_quantities
-    from sampler.problem import Problem
-    from sampler.rare import rare_probability
+    from sampler.methods.problem import Problem
+    from sampler.methods.rare import rare_probability
+    from sampler.region.constraints import Region
+    from sampler.region.criticality import criticality_quantities
 
     model = CutInGMM(random_state=0).fit(default_parameter_table(), source="embedded")
     band = Region.from_constraints(["ttc<3", "ttc>2.9"], lane_width=model.lane_width_)

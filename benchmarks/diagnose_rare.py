@@ -71,9 +71,9 @@ def main() -> int:
     from datasets.cutin_model import PARAM_NAMES
     from datasets.embedded import default_parameter_table
     from sampler import CutInGMM
-    from sampler.constraints import Region, parse_constraint
-    from sampler.rare import StratumRun, stratified_importance
-    from sampler.subset import region_limit_state
+    from sampler.methods.rare import StratumRun, stratified_importance
+    from sampler.methods.subset import region_limit_state
+    from sampler.region.constraints import Region, parse_constraint
 
     model = CutInGMM(random_state=0).fit(default_parameter_table(), source="embedded")
     key, refs = pickle.loads(Path(args.refs_cache).read_bytes())

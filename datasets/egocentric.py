@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from datasets.errors import FormatError
-from riskcore.scenario import ConcreteScenario, Track
+from riskcore import ConcreteScenario, Track
 
 __all__ = [
     "EGO_COLUMNS",

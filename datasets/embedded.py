@@ -7,6 +7,8 @@ out), the MIT licence of the source and ``PROVENANCE.md``.
 
 from __future__ import annotations
 
+import hashlib
+import importlib
 from functools import lru_cache
 from pathlib import Path
 
@@ -17,8 +19,10 @@ from datasets.egocentric import read_egocentric
 __all__ = [
     "DEFAULT_EVENTS_PATH",
     "EMBEDDED_DIR",
+    "SOURCE",
     "default_parameter_table",
     "load_default_events",
+    "source_hash",
 ]
 
 #: folder of the embedded data set
@@ -58,3 +62,19 @@ def default_parameter_table() -> pd.DataFrame:
     Returns a fresh copy on each call, so callers may modify it.
     """
     return _table().copy()
+
+
+#: modules whose code turns the embedded events into the parameter table (in hashing order)
+_EXTRACTION_MODULES = ("datasets.cutin_model", "datasets.egocentric", "datasets.extract",
+                       "datasets.embedded")
+
+
+def source_hash() -> str:
+    """sha256 of the embedded events file and of the extraction code: a key under which a
+    caller may cache the parameter table (extraction takes tens of seconds); it changes
+    when the data or the code that extracts it does."""
+    digest = hashlib.sha256()
+    digest.update(DEFAULT_EVENTS_PATH.read_bytes())
+    for name in _EXTRACTION_MODULES:
+        digest.update(Path(str(importlib.import_module(name).__file__)).read_bytes())
+    return digest.hexdigest()

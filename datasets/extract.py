@@ -23,7 +23,6 @@ out and listed, with the reason, in :attr:`ExtractionResult.skipped`.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -32,10 +31,16 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from datasets import egocentric as ec
-from datasets.cutin_model import ttc_from_gap_dv
 from datasets.errors import DatasetError, ExtractionError, FormatError
-from datasets.fit import fit_lateral, fit_pulse, max_lateral_speed
-from datasets.table import TABLE_COLUMNS, empty_table, validate_table
+from datasets.extract_rows import (
+    PULSE_MARGIN,
+    ExtractionResult,
+    finish_row,
+    motion_row,
+    to_table,
+)
+from datasets.highd_extract import extract_recording
+from datasets.table import empty_table
 
 if TYPE_CHECKING:
     from datasets.highd import HighDRecording
@@ -52,103 +57,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: highD: seconds of speed data before t0 and after t0 + 2 p_t used by the pulse fit
-PULSE_MARGIN = 2.0
-
-
-@dataclass
-class ExtractionResult:
-    """The parameter table plus the events that were left out, with reasons."""
-
-    table: pd.DataFrame
-    skipped: list[tuple[str, str]] = field(default_factory=list)
-    #: highD: the recordings' exposure per vehicle (``HighDRecording.driven``, summed):
-    #: ``vehicle_hours``, ``vehicle_km``, ``recordings``, ``duration_hours``; else None
-    exposure: dict[str, Any] | None = None
-
-
-def _to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
-    if not rows:
-        return empty_table()
-    return validate_table(pd.DataFrame(rows, columns=list(TABLE_COLUMNS)))
-
-
-def _crossing_time(t: FloatArray, y: FloatArray, y_marking: float, sign: float) -> float:
-    """First time y crosses y_marking moving in direction ``sign`` (+1 = left).
-
-    Linear interpolation between the bracketing samples. NaN when y never gets from the
-    start side to the other side.
-    """
-    s = sign * (y - y_marking)
-    before = s < 0
-    if not before.any():
-        return float("nan")
-    first_before = int(np.argmax(before))
-    after = np.flatnonzero(s[first_before:] >= 0)
-    if after.size == 0:
-        return float("nan")
-    i = first_before + int(after[0])
-    frac = -s[i - 1] / (s[i] - s[i - 1])
-    return float(t[i - 1] + frac * (t[i] - t[i - 1]))
-
-
-def _motion_row(
-    t: FloatArray, y: FloatArray, v_cut: FloatArray, *, lane_width: float | None,
-    y_marking: float | None = None, pulse_margin: float | None = PULSE_MARGIN,
-) -> dict[str, Any]:
-    """Fit both models and find the crossing moment. Returns the cutter's part of a row.
-
-    ``y`` is the cutter's lateral position in a lane-fixed frame. With ``y_marking`` the
-    crossing moment is when y crosses it. Otherwise, with ``lane_width``, y is taken as
-    relative to the ego's lane centre and the marking lies at sign(y_start) lane_width / 2;
-    without it, the crossing is when |y - y_start| reaches half the fitted displacement.
-    """
-    lat = fit_lateral(t, y, v_cut)
-    width = abs(lat.displacement) if lane_width is None else float(lane_width)
-    if y_marking is None and lane_width is not None:
-        y_marking = float(np.sign(lat.y_start)) * 0.5 * width
-    sign = 1.0 if lat.p_y1 > 0 else -1.0
-    if y_marking is None:
-        y_marking = lat.y_start + sign * 0.5 * width
-    if sign * (y_marking - lat.y_start) <= 0:
-        raise ExtractionError(
-            f"the cutter moves away from the lane marking at {y_marking:.2f} m "
-            f"(starts at {lat.y_start:.2f} m): a cut-out, not a cut-in"
-        )
-    t_cross = _crossing_time(t, y, y_marking, sign)
-    if not np.isfinite(t_cross):
-        raise ExtractionError(
-            f"the cutter never crosses the lane marking (lateral displacement "
-            f"{lat.displacement:.2f} m, lane width {width:.2f} m)"
-        )
-    if pulse_margin is None:
-        w = np.ones(t.shape, dtype=bool)
-    else:
-        lo, hi = lat.t0 - pulse_margin, lat.t0 + 2.0 * lat.p_t + pulse_margin
-        w = (t >= lo) & (t <= hi)
-    pulse = fit_pulse(t[w], v_cut[w], lat.t0)
-    return {
-        "p_y1": lat.p_y1, "p_t": lat.p_t, "p_a1": pulse.p_a1, "p_a2": pulse.p_a2,
-        "p_a3": pulse.p_a3, "p_v0": pulse.p_v0,
-        "side": "right" if lat.p_y1 > 0 else "left",
-        "lane_width": width,
-        "max_lat_speed": max_lateral_speed(t, y),
-        "resid_lat": lat.rms, "resid_lon": pulse.rms,
-        "t_start": lat.t0, "t_cross": t_cross, "t_end": lat.t0 + 2.0 * lat.p_t,
-    }
-
-
-def _finish_row(row: dict[str, Any], gap: float, v_ego: float, v_cut: float) -> dict[str, Any]:
-    dv = v_ego - v_cut
-    row.update({
-        "dv": dv, "gap": gap, "ttc": float(ttc_from_gap_dv(gap, dv)),
-        "thw": gap / v_ego if v_ego > 0 else float("inf"), "v_ego": v_ego,
-    })
-    if not np.isfinite(row["thw"]):
-        raise ExtractionError("ego speed is 0 at the crossing moment: THW undefined")
-    return row
-
-
 # ---------------------------------------------------------------------------- ego-centric
 
 def _extract_event(ev: pd.DataFrame) -> dict[str, Any]:
@@ -160,7 +68,7 @@ def _extract_event(ev: pd.DataFrame) -> dict[str, Any]:
     widths = ev[ec.LANE_WIDTH].to_numpy()
     finite = widths[np.isfinite(widths)]
     lane_width = float(finite[0]) if finite.size else None
-    row = _motion_row(t, y, v_cut, lane_width=lane_width, pulse_margin=None)
+    row = motion_row(t, y, v_cut, lane_width=lane_width, pulse_margin=None)
     tc = row["t_cross"]
     if abs(y[-1]) >= abs(y[0]):
         raise ExtractionError(
@@ -176,7 +84,7 @@ def _extract_event(ev: pd.DataFrame) -> dict[str, Any]:
                   + float(np.interp(tc, t, ev[ec.TARGET_LENGTH].to_numpy())))
     v_ego = float(np.interp(tc, t, ev[ec.EGO_V].to_numpy()))
     v_c = float(np.interp(tc, t, v_cut))
-    return _finish_row(row, dx - half, v_ego, v_c)
+    return finish_row(row, dx - half, v_ego, v_c)
 
 
 def extract_egocentric_report(
@@ -210,7 +118,7 @@ def extract_egocentric_report(
         row.update({"source": source, "event_id": str(event_id), "ego_id": "",
                     "cutter_id": ""})
         rows.append(row)
-    return ExtractionResult(_to_table(rows), skipped)
+    return ExtractionResult(to_table(rows), skipped)
 
 
 def extract_egocentric(frame: pd.DataFrame, source: str = "egocentric") -> pd.DataFrame:
@@ -222,8 +130,6 @@ def extract_egocentric(frame: pd.DataFrame, source: str = "egocentric") -> pd.Da
 
 def extract_highd_report(recording: HighDRecording, progress: bool = False) -> ExtractionResult:
     """Extract every cut-in of a highD recording (see :mod:`datasets.highd_extract`)."""
-    from datasets.highd_extract import extract_recording
-
     return extract_recording(recording, progress=progress)
 
 

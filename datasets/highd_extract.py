@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from datasets.errors import DatasetError, ExtractionError
-from datasets.extract import ExtractionResult, _finish_row, _motion_row, _to_table
+from datasets.extract_rows import ExtractionResult, finish_row, motion_row, to_table
 from datasets.highd import HighDRecording, road_frame
 
 __all__ = ["WINDOW", "extract_recording", "find_cutins"]
@@ -104,7 +104,7 @@ def extract_recording(recording: HighDRecording, progress: bool = False) -> Extr
             y_mark = recording.marking_road(int(ev.lane_from), int(ev.lane_to))
             t = cut["t"].to_numpy()
             v_cut = np.hypot(cut["vx"].to_numpy(), cut["vy"].to_numpy())
-            row = _motion_row(t, cut["y"].to_numpy(), v_cut,
+            row = motion_row(t, cut["y"].to_numpy(), v_cut,
                               lane_width=recording.lane_width(int(ev.lane_from)),
                               y_marking=y_mark)
             tc = row["t_cross"]
@@ -115,11 +115,11 @@ def extract_recording(recording: HighDRecording, progress: bool = False) -> Extr
             ego_v = np.hypot(ego["vx"].to_numpy(), ego["vy"].to_numpy())
             v_e = float(np.interp(tc, ego["t"].to_numpy(), ego_v))
             half = 0.5 * (float(cut["length"].iloc[0]) + float(ego["length"].iloc[0]))
-            row = _finish_row(row, x_c - x_e - half, v_e, float(np.interp(tc, t, v_cut)))
+            row = finish_row(row, x_c - x_e - half, v_e, float(np.interp(tc, t, v_cut)))
         except DatasetError as exc:  # one bad event never stops the recording
             skipped.append((event_id, str(exc)))
             continue
         row.update({"source": source, "event_id": event_id, "ego_id": str(ev.ego),
                     "cutter_id": str(ev.cutter)})
         rows.append(row)
-    return ExtractionResult(_to_table(rows), skipped)
+    return ExtractionResult(to_table(rows), skipped)

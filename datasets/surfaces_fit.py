@@ -49,7 +49,8 @@ from numpy.typing import NDArray
 
 from datasets import egocentric as ec
 from datasets.errors import DatasetError, FormatError
-from riskcore.surfaces import FORMAT, InputSurfaces
+from riskcore import SURFACES_FORMAT as FORMAT
+from riskcore import InputSurfaces
 
 __all__ = [
     "SurfaceGrid",

@@ -12,7 +12,7 @@ Public surface:
 """
 
 from riskcore.ctra import ctra_states
-from riskcore.errors import RiskcoreError, SceneError, SettingsError, SurfaceError
+from riskcore.errors import FieldError, RiskcoreError, SceneError, SettingsError, SurfaceError
 from riskcore.evasion import (
     MANOEUVRES,
     Accelerate,
@@ -26,17 +26,27 @@ from riskcore.geometry import boxes_overlap, time_headway, ttc_constant_velocity
 from riskcore.risk import object_risk, risk_dependent, risk_independent, ttr_weight
 from riskcore.sampling import input_grid, standard_grid
 from riskcore.scenario import ConcreteScenario, ScenarioError, Track
-from riskcore.scenario_risk import ScenarioRisk, ego_future_at, evaluate_scenario, object_inputs
+from riskcore.scenario_risk import (
+    RESULT_FORMAT,
+    ScenarioRisk,
+    ego_future_at,
+    evaluate_scenario,
+    object_inputs,
+)
 from riskcore.scene import EgoFuture, ObjectRisk, ObjectState, SceneResult, evaluate_scene
 from riskcore.settings import RiskSettings
+from riskcore.surfaces import FORMAT as SURFACES_FORMAT
 from riskcore.surfaces import InputSurfaces, Surface
 
 __all__ = [
     "MANOEUVRES",
+    "RESULT_FORMAT",
+    "SURFACES_FORMAT",
     "Accelerate",
     "Brake",
     "ConcreteScenario",
     "EgoFuture",
+    "FieldError",
     "InputSurfaces",
     "Manoeuvre",
     "ObjectRisk",

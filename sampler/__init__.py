@@ -12,7 +12,7 @@ Public surface (docs/sampler.md)::
     score_samples                              many vectors -> records (optional pool)
 """
 
-from sampler._exceptions import (
+from sampler.errors import (
     BuilderError,
     ConstraintError,
     EmptyRegionError,
@@ -21,8 +21,10 @@ from sampler._exceptions import (
     NotFittedError,
     SamplerError,
 )
-from sampler.builder import build_scenario
-from sampler.constraints import (
+from sampler.methods.probability import PRegion, PRegionEstimator
+from sampler.methods.samplers import AutoSampler, MCMCSampler, RejectionSampler, Sampler
+from sampler.model.gmm import CutInGMM
+from sampler.region.constraints import (
     DERIVED,
     PHYSICAL_BOUNDS,
     QUANTITY_NAMES,
@@ -31,12 +33,10 @@ from sampler.constraints import (
     derive,
     parse_constraint,
 )
-from sampler.model import CutInGMM
-from sampler.probability import PRegion, PRegionEstimator
-from sampler.record import ScenarioRecord, score_vector
-from sampler.samplers import AutoSampler, MCMCSampler, RejectionSampler, Sampler
-from sampler.sampleset import SampleSet, estimate_p_region, sample
-from sampler.scoring import score_samples
+from sampler.sampling import SampleSet, estimate_p_region, sample
+from sampler.scenario.builder import build_scenario
+from sampler.scenario.record import ScenarioRecord, score_vector
+from sampler.scenario.scoring import score_samples
 
 __all__ = [
     "DERIVED",

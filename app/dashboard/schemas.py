@@ -14,7 +14,7 @@ from typing import Any
 from pydantic import ConfigDict, Field
 
 from app.schemas import ApiModel
-from sampler.record import ScenarioRecord
+from sampler.scenario import ScenarioRecord
 
 __all__ = [
     "CatalogueCriticalityView",

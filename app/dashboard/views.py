@@ -496,8 +496,8 @@ def _profiles(sc: Any) -> tuple[dict[str, Any] | None, str | None]:
     """Wagner's r(t) for the scripted and the R157 driver's ego and the R157 ego's track
     (``riskcore.criticality.criticality_profiles``, computed for this one scenario), as
     plot data; or None and why not."""
+    from riskcore import RiskcoreError
     from riskcore.criticality import criticality_profiles
-    from riskcore.errors import RiskcoreError
 
     try:
         prof = criticality_profiles(sc)

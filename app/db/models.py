@@ -130,7 +130,7 @@ class ScenarioRow(Base):
     ttc: Mapped[float | None] = mapped_column(Float, nullable=True)
     risk: Mapped[float | None] = mapped_column(Float, nullable=True)  # = risk_peak
     exposure_weight: Mapped[float | None] = mapped_column(Float, nullable=True)
-    #: the record's score fields (``sampler.record.SCORE_FIELDS``; inf as "Infinity")
+    #: the record's score fields (``sampler.scenario.record.SCORE_FIELDS``; inf as "Infinity")
     summary: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     #: why the vector has no scores ("build: ..." / "score: ..."), None when scored
     error: Mapped[str | None] = mapped_column(Text, nullable=True)

@@ -10,7 +10,7 @@ request field:
 - ``app.domain.sampling``  constraints, samples, P(A)
 - ``app.domain.risk``      score a posted scenario; a scenario's risk profile on demand
 
-One parameter vector becomes a scored record in ``sampler.record.score_vector`` (the
+One parameter vector becomes a scored record in ``sampler.scenario.record.score_vector`` (the
 route, the catalogue chunk and the CLI call it directly).
 """
 
@@ -42,7 +42,7 @@ from app.domain.sampling import (
     region_uncertainty,
     sample,
 )
-from datasets.cutin_model import PARAM_NAMES
+from datasets import PARAM_NAMES
 
 __all__ = [
     "DATASET_KINDS",

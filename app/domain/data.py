@@ -11,26 +11,16 @@ from typing import Any, Literal
 
 import pandas as pd
 
-import datasets.cutin_model
-import datasets.egocentric
-import datasets.embedded
-import datasets.extract
 from app import jsonconv
 from app.errors import InvalidInput
-from datasets.embedded import DEFAULT_EVENTS_PATH, default_parameter_table
-from datasets.errors import DatasetError
-from datasets.extract import extract_cutins
-from sampler.exposure import highd_exposure
+from datasets import DatasetError, default_parameter_table, extract_cutins
+from datasets import embedded_source_hash as embedded_source_hash_of_datasets
+from sampler.rates import highd_exposure
 
 __all__ = ["DATASET_KINDS", "dataset_from_files", "embedded_parameter_table",
            "embedded_source_hash", "options_hash", "table_hash"]
 
 DATASET_KINDS = ("highd", "egocentric")
-
-#: modules whose code turns the embedded events into the parameter table
-_EXTRACTION_MODULES = (datasets.cutin_model, datasets.egocentric, datasets.extract,
-                       datasets.embedded)
-
 
 def embedded_parameter_table() -> pd.DataFrame:
     """The cut-in parameter table of the embedded TNO data (one row per cut-in)."""
@@ -40,11 +30,7 @@ def embedded_parameter_table() -> pd.DataFrame:
 def embedded_source_hash() -> str:
     """sha256 of the embedded events file and of the extraction code: the key of the
     cached embedded parameter table (extraction takes tens of seconds)."""
-    digest = hashlib.sha256()
-    digest.update(Path(DEFAULT_EVENTS_PATH).read_bytes())
-    for module in _EXTRACTION_MODULES:
-        digest.update(Path(str(module.__file__)).read_bytes())
-    return digest.hexdigest()
+    return embedded_source_hash_of_datasets()
 
 
 def options_hash(options: Mapping[str, Any]) -> str:

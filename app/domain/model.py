@@ -14,11 +14,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from app import jsonconv
 from app.errors import InvalidInput
-from datasets.cutin_model import PARAM_NAMES
-from datasets.embedded import SOURCE as EMBEDDED_SOURCE
+from datasets import EMBEDDED_SOURCE, PARAM_NAMES
 from sampler import CutInGMM, SamplerError
-from sampler.bootstrap import bootstrap_fit
-from sampler.exposure import Exposure, tno_exposure
+from sampler.model import bootstrap_fit
+from sampler.rates import Exposure, tno_exposure
 
 __all__ = ["FittedModel", "describe_model", "fit_model", "load_model", "marginal_density",
            "model_components", "model_draws", "model_features", "model_lane_width"]
@@ -38,7 +37,7 @@ def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
               source: str | None = None,
               exposure: Mapping[str, Any] | None = None) -> FittedModel:
     """Fit the cut-in GMM on a parameter table with the sampler's options. ``exposure``:
-    the dataset's (``sampler.exposure.Exposure`` as a dict), carried into the model; the
+    the dataset's (``sampler.rates.exposure.Exposure`` as a dict), carried into the model; the
     embedded TNO table gets its 63 hours."""
     kwargs = dict(options)
     n_boot = kwargs.pop("n_bootstrap", 100)  # issue 12: the model interval's refits

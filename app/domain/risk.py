@@ -17,6 +17,7 @@ from app import jsonconv
 from app.errors import InvalidInput
 from riskcore import (
     MANOEUVRES,
+    RESULT_FORMAT,
     ConcreteScenario,
     InputSurfaces,
     RiskcoreError,
@@ -26,7 +27,6 @@ from riskcore import (
     evasion_label,
 )
 from riskcore.criticality import evaluate_criticality
-from riskcore.scenario_risk import RESULT_FORMAT
 
 __all__ = ["SERIES", "criticality_of", "parse_scenario", "risk_report", "scenario_risk_series",
            "score_posted"]

@@ -19,14 +19,14 @@ from sampler import (
     PRegion,
     PRegionEstimator,
     SamplerError,
+    SampleSet,
     estimate_p_region,
     parse_constraint,
 )
 from sampler import sample as sampler_sample
-from sampler.constraints import Region
-from sampler.exposure import region_report, uncertainty_report
-from sampler.problem import Problem, ProgressFn
-from sampler.sampleset import SampleSet
+from sampler.methods import Problem, ProgressFn
+from sampler.rates import region_report, uncertainty_report
+from sampler.region import Region
 
 __all__ = ["SampleResult", "estimate_region", "parse_constraints", "region_uncertainty",
            "sample"]
@@ -130,7 +130,7 @@ def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int
 
 def add_region_report(model: CutInGMM, result: SampleResult) -> None:
     """Issue 12: the "model" interval of P(A) beside the Monte Carlo one, and rates per hour
-    / 10^6 km with both (``sampler.exposure.region_report``), added to ``result.p_region``
+    / 10^6 km with both (``sampler.rates.exposure.region_report``), added to ``result.p_region``
     when the model has bootstrap refits or an exposure."""
     if result.sample_set is None or not (model.bootstrap_ or model.exposure_):
         return
@@ -169,8 +169,8 @@ def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
                        per_replicate: bool = False) -> dict[str, Any]:
     """``p_region`` (a ``region_dict``) with the "model" interval beside the Monte Carlo one
     and the rates per hour / per 10^6 km with both, when the model has bootstrap replicates
-    and an exposure (``sampler.exposure.uncertainty_report``); unchanged otherwise.
-    ``per_replicate``: see ``sampler.exposure.model_interval``."""
+    and an exposure (``sampler.rates.exposure.uncertainty_report``); unchanged otherwise.
+    ``per_replicate``: see ``sampler.rates.exposure.model_interval``."""
     if not (model.bootstrap_ or model.exposure_):
         return p_region
     region = Region.from_constraints(list(constraints), lane_width=model.lane_width_).bind(model)

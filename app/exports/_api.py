@@ -16,9 +16,9 @@ from app.exports._common import (
     jsonable,
 )
 from app.versions import LIBRARIES, versions
-from datasets.cutin_model import PARAM_NAMES, ttc_from_gap_dv
-from riskcore.scenario import ConcreteScenario
-from sampler.record import SCORE_FIELDS
+from datasets import PARAM_NAMES, ttc_from_gap_dv
+from riskcore import ConcreteScenario
+from sampler.scenario import SCORE_FIELDS
 
 #: The formats ``export_catalogue`` writes.
 EXPORT_FORMATS: tuple[str, ...] = ("jsonl", "csv", "parquet", "xosc", "commonroad")
@@ -30,7 +30,7 @@ ID_COLUMNS: tuple[str, ...] = ("scenario_id", "seed")
 DERIVED_COLUMNS: tuple[str, ...] = ("ttc", "duration", "dt", "n_steps", "n_objects")
 
 #: Score columns in their fixed order (always present, None when the summary lacks them):
-#: the scored record's fields after ``ttc`` (``sampler.record.ScenarioRecord``):
+#: the scored record's fields after ``ttc`` (``sampler.scenario.record.ScenarioRecord``):
 #: ``exposure_weight`` (the scenario's share of P(A)), the criticality record
 #: (``SCORE_FIELDS`` = ``riskcore.criticality.CRITICALITY_FIELDS``, in its order; +inf is
 #: kept, e.g. ``ttr_true`` without a collision course) and ``error`` (why a vector has no

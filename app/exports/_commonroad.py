@@ -50,7 +50,7 @@ from app.exports._xosc import (
     assemble_zip,
     write_scratch,
 )
-from riskcore.scenario import ConcreteScenario, Track
+from riskcore import ConcreteScenario, Track
 
 Item = tuple[int, ConcreteScenario, Mapping[str, Any], Row]
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from app.exports._common import ExportError, Row, decode_nonfinite, dumps, jsonable
-from riskcore.scenario import ConcreteScenario, ScenarioError
+from riskcore import ConcreteScenario, ScenarioError
 
 MANIFEST_KIND = "manifest"
 SCENARIO_KIND = "scenario"

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from datasets.cutin_model import PARAM_DOCS, PARAM_NAMES, PARAM_UNITS
-from riskcore.scenario import ConcreteScenario, Track
+from datasets import PARAM_DOCS, PARAM_NAMES, PARAM_UNITS
+from riskcore import ConcreteScenario, Track
 
 MODES: tuple[str, ...] = ("test", "replay")
 DEFAULT_MODE = "test"

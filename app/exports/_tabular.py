@@ -25,9 +25,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from app.exports._common import ExportError, Row, dumps
-from datasets.cutin_model import PARAM_NAMES
+from datasets import PARAM_NAMES
+from riskcore import ConcreteScenario
 from riskcore.criticality import CRITICALITY_FIELDS
-from riskcore.scenario import ConcreteScenario
 
 Item = tuple[int, ConcreteScenario, Mapping[str, Any], Row]
 

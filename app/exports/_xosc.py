@@ -50,8 +50,8 @@ from scenariogeneration import xodr
 from app.exports import _osc as osc
 from app.exports._common import ExportError, Row, dumps
 from app.exports._tabular import CsvRowWriter
-from datasets.cutin_model import DEFAULT_LANE_WIDTH, PARAM_NAMES
-from riskcore.scenario import ConcreteScenario
+from datasets import DEFAULT_LANE_WIDTH, PARAM_NAMES
+from riskcore import ConcreteScenario
 
 Item = tuple[int, ConcreteScenario, Mapping[str, Any], Row]
 

@@ -5,7 +5,7 @@ Seeds: chunk i samples with ``chunk_seed(seed, i)``, drawn from
 scenario has no seed of its own (its ``seed`` is the catalogue's, its provenance names its
 index). So chunk i's content depends only on the catalogue's spec and i: the order in which
 chunks run, the executor, and restarts cannot change it. Every vector goes through
-``sampler.record.score_vector`` (the route and the CLI use it too); a vector the builder
+``sampler.scenario.record.score_vector`` (the route and the CLI use it too); a vector the builder
 refuses is a row with ``error`` set, not a failed chunk.
 """
 
@@ -23,9 +23,9 @@ import numpy as np
 
 from app import domain, jsonconv
 from app.db import chunkfile
-from riskcore.scenario import ConcreteScenario
+from riskcore import ConcreteScenario
 from sampler import Constraint, CutInGMM
-from sampler.record import ScenarioRecord, score_rows, score_vector
+from sampler.scenario import ScenarioRecord, score_rows, score_vector
 
 #: seconds between two progress reports of a chunk being computed
 PROGRESS_EVERY = 0.25
@@ -49,7 +49,7 @@ def warm_worker() -> int:
     (numba's on-disk cache) by scoring one vector and running the sampler's crossing
     kinematics once, so that the first chunk or request does not pay for it (1-3 s on a
     fresh worker). Returns the worker's pid."""
-    from sampler.kinematics import crossing_kinematics
+    from sampler.region import crossing_kinematics
 
     score_vector(_WARM_VECTOR)
     crossing_kinematics(np.array([[_WARM_VECTOR[k] for k in ("p_y1", "p_t", "p_a1", "p_a2",

@@ -19,7 +19,7 @@ from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExe
 from typing import Any, Protocol, TypeVar
 
 from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk, warm_worker
-from sampler.lifeline import die_with_parent, pool_keeper_thread
+from app.jobs.lifeline import die_with_parent, pool_keeper_thread
 
 log = logging.getLogger("scengen.jobs")
 
@@ -184,7 +184,7 @@ class FuturesExecutor:
 
 class LocalPoolExecutor(FuturesExecutor):
     """A process pool on this machine (``spawn`` start method: safe under threads). Its
-    workers die with this process however it ends (``sampler.lifeline``): they are
+    workers die with this process however it ends (``app.jobs.lifeline``): they are
     started all at once from a keeper thread that lives as long as the pool."""
 
     name = "local"

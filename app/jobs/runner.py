@@ -85,8 +85,8 @@ def needs_refinement(p_region: dict[str, Any]) -> bool:
 def refine_region(spec: CatalogueSpec, p_region: dict[str, Any]) -> dict[str, Any] | None:
     """The catalogue's P(A) dict with its model interval refined when that interval left an
     end unresolved (rare regions: every unresolved bootstrap replicate gets its own
-    subset-is run, ``sampler.bootstrap.pooled_interval(per_replicate=True)``); None when
-    there is nothing to refine. Run once the scenarios are stored: it takes 0.4-1 s per
+    subset-is run, ``sampler.rates.pooled_interval(per_replicate=True)``); None when there
+    is nothing to refine. Run once the scenarios are stored: it takes 0.4-1 s per
     unresolved replicate (tens of seconds for ``btn>0.7`` on the TNO model)."""
     if not needs_refinement(p_region):
         return None

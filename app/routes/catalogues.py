@@ -18,7 +18,7 @@ from app.deps import ContextDep, JobsDep, SessionDep
 from app.limits import INDEX_MAX
 from app.rates import RegionRates
 from app.schemas import ApiModel, SamplingRequest
-from sampler.record import ScenarioRecord
+from sampler.scenario import ScenarioRecord
 
 router = APIRouter(prefix="/catalogues", tags=["catalogues"])
 

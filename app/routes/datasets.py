@@ -24,8 +24,8 @@ from app.errors import InvalidInput, PayloadTooLarge
 from app.limits import INDEX_MAX
 from app.rates import ExposureInfo
 from app.schemas import ApiModel
-from datasets.plausibility import implausible
-from sampler.exposure import tno_exposure
+from datasets import implausible
+from sampler.rates import tno_exposure
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 

@@ -28,7 +28,7 @@ class FitRequest(BaseModel):
     dataset: str = Field(default="tno-cutin", description="id of the dataset to fit on")
     options: dict[str, Any] = Field(
         default_factory=dict,
-        description="keyword options of sampler.model.CutInGMM (e.g. max_components)",
+        description="keyword options of sampler.model.gmm.CutInGMM (e.g. max_components)",
     )
 
 

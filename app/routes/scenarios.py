@@ -15,8 +15,7 @@ from app.deps import ContextDep
 from app.errors import InvalidInput
 from app.limits import check_constraints
 from app.schemas import ApiModel, PRegion, SamplingRequest
-from sampler.record import ScenarioRecord
-from sampler.scoring import score_part
+from sampler.scenario import ScenarioRecord, score_part
 
 router = APIRouter(prefix="/scenarios", tags=["scenarios"])
 

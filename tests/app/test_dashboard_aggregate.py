@@ -16,7 +16,7 @@ from app import domain
 from app.dashboard.aggregate import histogram, nice_edges, shared_edges, thin_scatter
 from app.dashboard.views import split_constraints
 from app.errors import InvalidInput
-from sampler.model import CutInGMM
+from sampler.model.gmm import CutInGMM
 
 
 # --------------------------------------------------------------------------- histogram

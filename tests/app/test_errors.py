@@ -18,7 +18,7 @@ from app.errors import (
 from datasets.errors import FormatError
 from riskcore.errors import SceneError
 from sampler import ConstraintError, EmptyRegionError, NotFittedError
-from sampler.constraints import Region, parse_constraint
+from sampler.region.constraints import Region, parse_constraint
 
 
 class Body(BaseModel):

@@ -15,7 +15,7 @@ from commonroad.common.file_reader import CommonRoadFileReader
 
 from app.exports import ExportError, build_manifest, export_catalogue
 from riskcore.scenario import ConcreteScenario, Track
-from sampler.builder import build_scenario
+from sampler.scenario.builder import build_scenario
 
 TOL = 1e-6
 PARAMS = [

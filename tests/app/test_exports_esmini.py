@@ -26,7 +26,7 @@ import pytest
 from app.exports import build_manifest, export_catalogue
 from riskcore.geometry import boxes_overlap
 from riskcore.scenario import ConcreteScenario, Track
-from sampler.builder import build_scenario
+from sampler.scenario.builder import build_scenario
 from tests.app.esmini_run import DEFAULT_ESMINI, ENV_VAR, EntityLog, esmini_binary, run_esmini
 
 pytestmark = pytest.mark.esmini

@@ -18,7 +18,7 @@ import pytest
 
 from app.exports import build_manifest, export_catalogue
 from riskcore.criticality import evaluate_criticality
-from sampler.builder import build_scenario
+from sampler.scenario.builder import build_scenario
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "scripts" / "qc_check.py"

@@ -139,8 +139,8 @@ def test_a_catalogue_of_an_empty_region_is_refused_up_front(client: Any) -> None
 def test_rejection_gives_up_after_the_pilot_on_an_empty_region() -> None:
     from datasets.embedded import default_parameter_table
     from sampler import EmptyRegionError
-    from sampler.model import CutInGMM
-    from sampler.sampleset import sample
+    from sampler.model.gmm import CutInGMM
+    from sampler.sampling import sample
 
     model = CutInGMM(k_range=(1, 2), n_init=1, cv_folds=2, n_report_samples=200)
     model.fit(default_parameter_table())

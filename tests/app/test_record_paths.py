@@ -17,7 +17,7 @@ from app.db.models import ScenarioRow
 from app.jobs import chunk as chunk_module
 from app.jobs.chunk import CatalogueSpec, compute_chunk
 from riskcore.criticality import CRITICALITY_FIELDS
-from sampler.record import ScenarioRecord
+from sampler.scenario.record import ScenarioRecord
 
 N, SEED = 4, 5
 CONSTRAINTS = ["ttc<3"]
@@ -113,7 +113,7 @@ def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
     import pandas as pd
 
     from app.jobs.executors import InlineExecutor, LocalPoolExecutor
-    from sampler.scoring import score_part
+    from sampler.scenario.scoring import score_part
     from tests.sampler.factories import base_params
 
     table = pd.DataFrame([base_params(gap=6.0 + i, dv=2.0) for i in range(4)])

@@ -10,7 +10,7 @@ import numpy as np
 
 from app.domain.risk import risk_report
 from riskcore import evaluate_scenario
-from sampler.builder import build_scenario
+from sampler.scenario.builder import build_scenario
 from tests.sampler.factories import base_params
 
 

@@ -81,10 +81,10 @@ def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) ->
 
 
 def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
-    from sampler import lifeline
+    from app.jobs import lifeline
 
     # the parent pid the worker was started by is not its parent: it ends at once
-    code = ("import os; from sampler.lifeline import die_with_parent; "
+    code = ("import os; from app.jobs.lifeline import die_with_parent; "
             "die_with_parent(os.getppid() + 100000); print('survived')")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                           text=True, timeout=60)
@@ -95,7 +95,7 @@ def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux process tree")
 def test_cli_scoring_workers_die_with_a_sigkilled_cli(store: Path, tmp_path: Path) -> None:
     """Issue 14 item 15: ``scengen sample --score --workers 2`` SIGKILLed mid-run leaves no
-    scoring worker behind (sampler.scoring's pool has the lifeline initializer)."""
+    scoring worker behind (sampler.scenario.scoring's pool has the lifeline initializer)."""
     out = tmp_path / "out.jsonl"
     cli = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())",
            "sample", "-n", "5000", "--seed", "3", "--score", "--workers", "2", "-q",
@@ -115,3 +115,19 @@ def test_cli_scoring_workers_die_with_a_sigkilled_cli(store: Path, tmp_path: Pat
         assert not out.exists() or out.stat().st_size == 0  # killed before writing
     finally:
         _reap(parent, children)
+
+
+@pytest.mark.parametrize(("args", "fragment"), [((0,), "n_workers"), ((1.5,), "n_workers"),
+                                                ((2, "nope"), "mp_context")])
+def test_lifeline_pool_refuses_bad_arguments(args: tuple[object, ...], fragment: str) -> None:
+    from app.jobs.lifeline import lifeline_pool
+
+    with pytest.raises(ValueError, match=fragment), lifeline_pool(*args):  # type: ignore[arg-type]
+        pass
+
+
+def test_lifeline_pool_of_one_runs_in_this_process() -> None:
+    from app.jobs.lifeline import lifeline_pool
+
+    with lifeline_pool(1) as pool:
+        assert pool is None

@@ -24,7 +24,7 @@ from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
 
-#: options of the quick model (sampler.model.CutInGMM keywords)
+#: options of the quick model (sampler.model.gmm.CutInGMM keywords)
 QUICK_MODEL_OPTIONS: dict[str, Any] = {"k_range": (1, 3), "n_init": 1, "cv_folds": 2,
                                        "n_report_samples": 2000}
 #: Chromium as installed by Debian, and the flags that keep it off the network

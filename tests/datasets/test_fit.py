@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from datasets.cutin_model import CutInParams, lateral_displacement, motion
 from datasets.errors import ExtractionError
-from datasets.extract import _crossing_time
+from datasets.extract_rows import _crossing_time
 from datasets.fit import _ramp_grid, fit_lateral, fit_pulse, lateral_model, max_lateral_speed
 
 

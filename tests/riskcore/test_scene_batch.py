@@ -15,7 +15,7 @@ from riskcore.criticality.drivers import _frames
 from riskcore.criticality.wagner import _Wagner
 from riskcore.scene import default_surfaces
 from riskcore.settings import RiskSettings
-from sampler.builder import build_scenario
+from sampler.scenario.builder import build_scenario
 from tests.sampler.factories import base_params
 
 

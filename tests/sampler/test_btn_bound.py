@@ -1,5 +1,5 @@
 """``btn_bound`` never lies below the simulated ``btn``, is tight enough to matter, and
-ruling rows out with it changes no region's rows (``sampler.btn_bound``)."""
+ruling rows out with it changes no region's rows (``sampler.region.btn_bound``)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import sampler.constraints as constraints_mod
+import sampler.region.constraints as constraints_mod
 from datasets.cutin_model import PARAM_NAMES
 from riskcore.criticality.record import CriticalitySettings
-from sampler.btn_bound import a_req_bound, btn_bound
-from sampler.constraints import Region, implied_bounds, parse_constraint
-from sampler.criticality import criticality_quantities
-from sampler.model import CutInGMM
-from sampler.problem import Problem
+from sampler.methods.problem import Problem
+from sampler.model.gmm import CutInGMM
+from sampler.region.btn_bound import a_req_bound, btn_bound
+from sampler.region.constraints import Region, implied_bounds, parse_constraint
+from sampler.region.criticality import criticality_quantities
 
 LW = 3.75
 DECEL_MAX = CriticalitySettings().decel_max
@@ -126,9 +126,9 @@ def test_auto_after_a_plain_pilot_keeps_its_estimate_and_avoids_mcmc(tno: CutInG
     hits come from rejection (cheap behind ``btn_bound``) while n / p_hat draws stay
     within ``max_draws``, else from subset-is; never from MCMC (whose chains ran for
     more than 15 minutes in ``btn > 0.4``). P(A) stays the plain run's own estimate."""
-    from sampler.problem import Pilot
-    from sampler.samplers import AutoSampler
-    from sampler.sampleset import sample
+    from sampler.methods.problem import Pilot
+    from sampler.methods.samplers import AutoSampler
+    from sampler.sampling import sample
 
     auto = AutoSampler()
     pilot = Pilot(n_draws=10_000_000, hits=np.zeros((80, 8)), plain=True)

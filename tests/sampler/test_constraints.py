@@ -18,14 +18,14 @@ from datasets.cutin_model import (
     speed,
 )
 from sampler import ConstraintError
-from sampler.constraints import (
+from sampler.region.constraints import (
     PHYSICAL_BOUNDS,
     Constraint,
     Region,
     derive,
     parse_constraint,
 )
-from sampler.kinematics import crossing_kinematics
+from sampler.region.kinematics import crossing_kinematics
 from tests.sampler.factories import base_params, synthetic_parameter_table
 
 

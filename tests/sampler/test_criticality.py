@@ -20,7 +20,7 @@ from sampler import (
     parse_constraint,
     sample,
 )
-from sampler.criticality import CRITICALITY_QUANTITIES, criticality_quantities
+from sampler.region.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from tests.riskcore.driver_reference import (
     clear_outcome,
     generated_cut_ins,

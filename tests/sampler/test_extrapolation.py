@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from sampler import ConstraintError
-from sampler.constraints import Region
-from sampler.extrapolation import density_percentile
-from sampler.model import CutInGMM
-from sampler.sampleset import sample
+from sampler.model.gmm import CutInGMM
+from sampler.model.support import density_percentile
+from sampler.region.constraints import Region
+from sampler.sampling import sample
 from tests.sampler.factories import synthetic_parameter_table
 
 

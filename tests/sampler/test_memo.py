@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from sampler import memo
-from sampler.bootstrap import bootstrap_fit
-from sampler.exposure import Exposure, region_report
-from sampler.model import CutInGMM
-from sampler.sampleset import sample
+from sampler.model import memo
+from sampler.model.bootstrap import bootstrap_fit
+from sampler.model.gmm import CutInGMM
+from sampler.rates.exposure import Exposure, region_report
+from sampler.sampling import sample
 from tests.sampler.factories import synthetic_parameter_table
 
 

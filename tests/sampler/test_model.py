@@ -15,8 +15,8 @@ from scipy.special import logsumexp
 
 from datasets.cutin_model import PARAM_NAMES
 from sampler import ModelError, NotFittedError
-from sampler.model import CutInGMM
-from sampler.transforms import FeatureTransform, transform_spec
+from sampler.model.gmm import CutInGMM
+from sampler.model.transforms import FeatureTransform, transform_spec
 from tests.sampler.factories import synthetic_parameter_table
 
 

@@ -1,4 +1,4 @@
-"""subset-is (``sampler.rare``): against closed-form P(A) under one Gaussian component and
+"""subset-is (``sampler.methods.rare``): against closed-form P(A) under one Gaussian component and
 under the mixture, against brute force on the real model, the independence chains'
 samples against the exact restricted law, hand-checked chain moves, determinism, bounds."""
 
@@ -14,18 +14,16 @@ from scipy.optimize import brentq
 
 from datasets.embedded import default_parameter_table
 from sampler import SamplerError
-from sampler.constraints import Region
-from sampler.envelope import find_envelope
-from sampler.importance import (
+from sampler.methods.envelope import find_envelope
+from sampler.methods.importance import (
     ImportanceStage,
     KernelMixture,
     KernelProposal,
     independence_chain,
 )
-from sampler.model import CutInGMM
-from sampler.probability import PRegionEstimator
-from sampler.problem import Problem
-from sampler.rare import (
+from sampler.methods.probability import PRegionEstimator
+from sampler.methods.problem import Problem
+from sampler.methods.rare import (
     RareResult,
     SubsetISSampler,
     _apportion,
@@ -33,9 +31,11 @@ from sampler.rare import (
     stratified_importance,
     subset_importance,
 )
-from sampler.samplers import make_sampler
-from sampler.sampleset import sample
-from sampler.strata import halfspace_strata, make_strata
+from sampler.methods.samplers import make_sampler
+from sampler.methods.strata import halfspace_strata, make_strata
+from sampler.model.gmm import CutInGMM
+from sampler.region.constraints import Region
+from sampler.sampling import sample
 from tests.sampler.test_subset import _halfspace_exact, _two_component
 
 REPS = 25
@@ -74,7 +74,7 @@ def _check_repetitions(model: CutInGMM, a: np.ndarray, b: float, p_true: float) 
     for r in res:
         assert (r.z @ a >= b).all()  # every importance draw kept lies inside A
         assert r.n_evaluations == r.n_subset_evaluations + r.n_adapt + r.n_is
-        # the plain result's scale (sampler.bootstrap reads P as sum(exp(log_w)) / n_is)
+        # the plain result's scale (sampler.model.bootstrap reads P as sum(exp(log_w)) / n_is)
         assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
 
 
@@ -392,7 +392,7 @@ def test_two_mode_union_needs_the_strata() -> None:
     for r in strat:
         assert ((r.z[:, 0] >= b1) | (r.z[:, 0] <= -b2)).all()
         assert r.n_evaluations == r.n_subset_evaluations + r.n_adapt + r.n_is
-        # the plain result's scale (sampler.bootstrap reads P as sum(exp(log_w)) / n_is)
+        # the plain result's scale (sampler.model.bootstrap reads P as sum(exp(log_w)) / n_is)
         assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
         shares = {s["stratum"]: s["contribution"] / r.probability
                   for s in r.proposal["strata"]}
@@ -650,7 +650,7 @@ def _band_brute_force(tno: CutInGMM, cons: list[str], n_ref: int, seed: int
     """(P(A and B), hits) of a ``2.9 < ttc < 3`` band region from ``n_ref`` exact draws of
     the model restricted to the ``ttc<3`` envelope (in blocks of 10^6), only the band's
     rows simulated."""
-    from sampler.constraints import derive
+    from sampler.region.constraints import derive
 
     region = Region.from_constraints(cons, lane_width=tno.lane_width_)
     problem = Problem(tno, region)
@@ -701,7 +701,7 @@ def test_thin_band_auto_is_plain_and_exact(tno: CutInGMM,
     0.86 spread and 12 of 20 intervals covering it. The estimate agrees with the brute force
     within 3 combined standard errors, for three seeds, and ``sample`` gives the same P(A)
     as ``estimate_p_region``."""
-    from sampler.sampleset import estimate_p_region
+    from sampler.sampling import estimate_p_region
 
     p_ref, hits_ref, _ = thin_band_ref
     for seed in (1, 2, 3):
@@ -763,7 +763,7 @@ def test_deep_thin_band_auto_is_plain_and_exact(tno: CutInGMM) -> None:
     as stalled and re-run). Checked against a brute force computed here: 12·10^6
     envelope draws, the band's rows simulated (~50 hits), within 3 combined standard
     errors."""
-    from sampler.sampleset import estimate_p_region
+    from sampler.sampling import estimate_p_region
 
     cons = ["ttc<3", "ttc>2.9", "btn>0.5"]
     p_ref, hits = _band_brute_force(tno, cons, 12_000_000, 23)
@@ -781,7 +781,7 @@ def test_stalled_levels_are_not_read_as_empty() -> None:
     EmptyRegionError says that its bound is not reliable and carries the threshold
     (``stalled``), which stratified subset-is reads as "retry with more points"."""
     from sampler import EmptyRegionError
-    from sampler.subset import STALL_LEVELS, _stalled, subset_simulation
+    from sampler.methods.subset import STALL_LEVELS, _stalled, subset_simulation
 
     assert STALL_LEVELS == 3
     assert _stalled([1e6, 0.3, 0.2, 0.15, 0.15, 0.15]) == 0.15
@@ -812,7 +812,7 @@ def test_rare_estimate_below_the_pilots_exact_bound_is_overruled(tno: CutInGMM) 
     one at 9e-6 (upper end 1.09e-5) is kept."""
     from types import SimpleNamespace
 
-    from sampler.problem import Pilot
+    from sampler.methods.problem import Pilot
 
     est = PRegionEstimator()
     problem = Problem(tno, Region.from_constraints(["btn>0.3"], lane_width=tno.lane_width_),
@@ -838,7 +838,7 @@ def test_unconverged_stratum_is_retried_then_refused(monkeypatch: pytest.MonkeyP
     """A stratum whose levels met the region but did not converge is re-run with
     ``THIN_RETRY`` times the points per level; when that fails too, the run refuses with
     ``LevelsNotConvergedError`` naming the stratum instead of counting it 0."""
-    import sampler.rare as rare
+    import sampler.methods.rare as rare
     from sampler import LevelsNotConvergedError
 
     model = _two_component()
@@ -877,8 +877,8 @@ def test_auto_takes_the_pilots_hits_when_they_suffice() -> None:
     (20 / p_hat = 4.7e6 rejection draws against ~1e6 for MCMC) it chose MCMC, which took
     150 s of simulated chains on ``2.9 < ttc < 3 & btn > 0.5``. For 200 samples the cost
     rule still decides."""
-    from sampler.problem import Pilot
-    from sampler.samplers import AutoSampler
+    from sampler.methods.problem import Pilot
+    from sampler.methods.samplers import AutoSampler
 
     pilot = Pilot(n_draws=24_000_000, hits=np.zeros((102, 8)))
     auto = AutoSampler()
@@ -893,7 +893,7 @@ def test_combine_sums_disjoint_parts_by_hand() -> None:
     (2e-5 - 0) / (2 * 1.959964) / 1e-5 * 1e-5 = 0.5102e-5; CoV = sqrt(0.3^2 + 0.5102^2)e-5
     / 4e-5 = 0.14797; log-normal interval 4e-5 exp(-+1.959964 sqrt(log(1 + 0.14797^2)))
     divided by P(B)'s upper / lower end."""
-    from sampler.probability import PRegion, PRegionEstimator
+    from sampler.methods.probability import PRegion, PRegionEstimator
 
     def part(p: float, lo: float, hi: float, cov: float | None) -> PRegion:
         return PRegion(estimate=p / 0.5, ci_low=lo / 0.5, ci_high=hi / 0.5, confidence=0.95,
@@ -928,12 +928,12 @@ def test_standalone_criticality_region_is_split_at_the_envelope(tno: CutInGMM) -
     catalogue chunk's known P(A) is not re-estimated. With the default budget the plain
     run reaches it (``btn_bound``): within 3 combined standard errors, for two seeds."""
     from app.domain.sampling import KnownRegion
-    from sampler.sampleset import estimate_p_region
+    from sampler.sampling import estimate_p_region
 
     def est() -> PRegionEstimator:
         return PRegionEstimator(exact_sims=0, exact_sims_thin=0)
 
-    from sampler.criticality import criticality_quantities
+    from sampler.region.criticality import criticality_quantities
 
     # the brute force simulates every draw inside the bounds (Region.contains would skip
     # those whose btn_bound stays below 0.15: not independent of the bound under test)
@@ -948,7 +948,7 @@ def test_standalone_criticality_region_is_split_at_the_envelope(tno: CutInGMM) -
     p_ref = hits / n_ref
     assert hits > 1000
     # the default: plain Monte Carlo, which simulates only the draws whose btn_bound
-    # reaches 0.15 (``sampler.btn_bound``), exact and unbiased
+    # reaches 0.15 (``sampler.region.btn_bound``), exact and unbiased
     for seed in (1, 2):
         d = sample(tno, ["btn>0.15"], 5, seed=seed)
         p = d.p_region
@@ -976,9 +976,9 @@ def test_an_empty_part_counts_with_its_bound_and_stalled_ones_raise(
         tno: CutInGMM, monkeypatch: pytest.MonkeyPatch) -> None:
     """``_split_estimate``: a part whose estimate ends "empty" adds 0 with its upper bound
     as the error; a stalled one (unreliable bound) or all parts empty raise."""
-    import sampler.sampleset as ss_mod
+    import sampler.sampling as ss_mod
     from sampler import EmptyRegionError
-    from sampler.probability import PRegion, PRegionEstimator
+    from sampler.methods.probability import PRegion, PRegionEstimator
 
     inside = PRegion(estimate=2e-5, ci_low=1.6e-5, ci_high=2.4e-5, confidence=0.95,
                      method="envelope", n_draws=1000, n_hits=100, p_bounds=0.5,

@@ -11,12 +11,12 @@ from scipy import stats
 
 from datasets.cutin_model import PARAM_NAMES
 from sampler import EmptyRegionError, SamplerError
-from sampler.constraints import Region, derive
-from sampler.envelope import find_envelope
-from sampler.model import CutInGMM
-from sampler.probability import PRegionEstimator
-from sampler.samplers import AutoSampler, MCMCSampler, Pilot, _tau
-from sampler.sampleset import SampleSet, estimate_p_region, sample
+from sampler.methods.envelope import find_envelope
+from sampler.methods.probability import PRegionEstimator
+from sampler.methods.samplers import AutoSampler, MCMCSampler, Pilot, _tau
+from sampler.model.gmm import CutInGMM
+from sampler.region.constraints import Region, derive
+from sampler.sampling import SampleSet, estimate_p_region, sample
 from tests.sampler.factories import synthetic_parameter_table
 
 MODERATE = ["ttc<8"]  # P(A) about 0.03 on the synthetic model
@@ -292,7 +292,7 @@ def test_practically_empty_region(model: CutInGMM) -> None:
 
 
 def test_rejection_budget_is_bounded(model: CutInGMM) -> None:
-    from sampler.samplers import RejectionSampler
+    from sampler.methods.samplers import RejectionSampler
 
     with pytest.raises(EmptyRegionError, match="use --sampler mcmc"):
         sample(model, ["ttc<3"], 5000, seed=1, use_envelope=False,

@@ -11,12 +11,12 @@ from scipy import stats
 
 from datasets.embedded import default_parameter_table
 from sampler import EmptyRegionError, SamplerError
-from sampler.constraints import Region
-from sampler.model import CutInGMM
-from sampler.probability import PRegionEstimator
-from sampler.samplers import AutoSampler, Pilot, make_sampler
-from sampler.sampleset import estimate_p_region, sample
-from sampler.subset import SubsetSampler, mixture_from_normal, subset_simulation
+from sampler.methods.probability import PRegionEstimator
+from sampler.methods.samplers import AutoSampler, Pilot, make_sampler
+from sampler.methods.subset import SubsetSampler, mixture_from_normal, subset_simulation
+from sampler.model.gmm import CutInGMM
+from sampler.region.constraints import Region
+from sampler.sampling import estimate_p_region, sample
 
 REPS = 40
 
@@ -102,7 +102,7 @@ def test_real_model_against_brute_force(tno: CutInGMM) -> None:
     k = int(region.contains(x).sum())
     p_ref = k / 2_000_000  # P(A and B), ~1500 hits: 2.6 % relative error
     assert k > 1000
-    from sampler.subset import region_limit_state
+    from sampler.methods.subset import region_limit_state
 
     est, cov = [], []
     for seed in range(20):
@@ -195,8 +195,8 @@ def test_ttc_margin_sign_is_membership_by_hand(op: str) -> None:
     (dv > 0), standing (dv = 0) and opening (dv < 0) cut-ins, on both sides of the
     threshold and on it."""
     from datasets.cutin_model import ttc_from_gap_dv
-    from sampler.constraints import OPERATORS
-    from sampler.subset import ttc_margin
+    from sampler.methods.subset import ttc_margin
+    from sampler.region.constraints import OPERATORS
 
     c = 2.0
     #            closing: ttc 1, 2 (threshold), 4 | standing | opening | gap <= 0
@@ -226,7 +226,7 @@ def test_region_limit_state_is_the_region_and_not_flat(tno: CutInGMM,
     physical rows where the quantities themselves are flat (ttc +inf, btn 0, ttr_true
     +inf for every cut-in the constant-speed ego never reaches), so subset levels can
     shrink there."""
-    from sampler.subset import region_limit_state
+    from sampler.methods.subset import region_limit_state
 
     region = Region.from_constraints(cons, lane_width=tno.lane_width_)
     z = tno.sample_z(6000, np.random.default_rng(3))
@@ -249,9 +249,9 @@ def test_layered_limit_state_simulates_only_inside_the_kinematic_part(
     ``ttc<3`` gets a value above every row inside it (the levels close in on the
     kinematic part first), and no row outside ``ttc<3`` is simulated, not even for the
     margins' scales (one criticality quantity) or for them (two: only model draws)."""
-    import sampler.subset as ss
-    from sampler.constraints import derive
-    from sampler.envelope import find_envelope
+    import sampler.methods.subset as ss
+    from sampler.methods.envelope import find_envelope
+    from sampler.region.constraints import derive
 
     region = Region.from_constraints(cons, lane_width=tno.lane_width_)
     env = find_envelope(tno, region)

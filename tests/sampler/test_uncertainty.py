@@ -12,9 +12,10 @@ from scipy import stats
 
 from app.cli import main
 from sampler import ModelError
-from sampler.bootstrap import bootstrap_ci, bootstrap_fit, pooled_interval
-from sampler.constraints import Region
-from sampler.exposure import (
+from sampler.model import bootstrap_fit
+from sampler.model.gmm import CutInGMM
+from sampler.rates import bootstrap_ci, pooled_interval
+from sampler.rates.exposure import (
     Exposure,
     cutin_rate,
     highd_exposure,
@@ -22,8 +23,8 @@ from sampler.exposure import (
     region_report,
     tno_exposure,
 )
-from sampler.model import CutInGMM
-from sampler.sampleset import sample
+from sampler.region.constraints import Region
+from sampler.sampling import sample
 from tests.sampler.factories import (
     base_params,
     closed_form,
@@ -287,7 +288,7 @@ def test_per_replicate_rare_estimates_match_the_closed_form(
     """``per_replicate``: each replicate's P(gap < 3 m) by its own subset-is run equals its
     closed form (a half-space in z) within the runs' noise; the runs are plain subset-is
     unless the caller's settings say otherwise."""
-    import sampler.rare as rare
+    import sampler.rates.bootstrap_interval as rare  # where the per-replicate runs call it
 
     asked: list[object] = []
     real = rare.rare_probability
@@ -319,7 +320,7 @@ def test_per_replicate_rare_estimates_match_the_closed_form(
 
 
 def test_report_text_says_what_a_zero_lower_end_means() -> None:
-    from sampler.exposure import report_text
+    from sampler.rates.exposure import report_text
 
     report = {"p_region": {"estimate": 2.5e-7, "mc_ci": [2.0e-7, 3.0e-7],
                            "model_ci": [0.0, 1.6e-5]},
@@ -340,7 +341,7 @@ def test_failed_model_interval_is_reported_not_raised(monkeypatch: pytest.Monkey
     reach: the API then answered 422 "empty region" for a region whose P(A) it had just
     estimated at 1.0e-7), the report keeps P(A), the Monte Carlo interval and the rates,
     has no model interval, and says why."""
-    import sampler.exposure as exposure
+    import sampler.rates.exposure as exposure
     from sampler import EmptyRegionError
 
     table = synthetic_parameter_table(300, seed=0)
@@ -371,9 +372,9 @@ def test_model_interval_takes_the_rare_path_for_a_thin_plain_run(
     ``model_ci: null``); a frequent one, or a kinematic region, keeps the plain path."""
     import dataclasses
 
-    import sampler.exposure as exposure
-    from sampler.constraints import Region
-    from sampler.probability import PRegion
+    import sampler.rates.exposure as exposure
+    from sampler.methods.probability import PRegion
+    from sampler.region.constraints import Region
 
     asked: list[bool] = []
 

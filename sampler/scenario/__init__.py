@@ -1,0 +1,33 @@
+"""The scenario: a parameter vector made concrete and scored.
+
+- :mod:`~sampler.scenario.builder` — vector -> :class:`~riskcore.scenario.ConcreteScenario`
+  (and the builder's constants: lead-in, time step, vehicle size);
+- :mod:`~sampler.scenario.record` — vector -> scenario -> scored
+  :class:`ScenarioRecord`: the one join of sampler and riskcore;
+- :mod:`~sampler.scenario.scoring` — many vectors, in parts, on an executor the caller
+  gives (sampler starts no processes).
+"""
+
+from sampler.scenario.builder import (
+    DEFAULT_DT,
+    DEFAULT_HORIZON,
+    DEFAULT_LEAD_IN,
+    DEFAULT_VEHICLE_SIZE,
+    build_scenario,
+)
+from sampler.scenario.record import SCORE_FIELDS, ScenarioRecord, score_rows, score_vector
+from sampler.scenario.scoring import score_part, score_samples
+
+__all__ = [
+    "DEFAULT_DT",
+    "DEFAULT_HORIZON",
+    "DEFAULT_LEAD_IN",
+    "DEFAULT_VEHICLE_SIZE",
+    "SCORE_FIELDS",
+    "ScenarioRecord",
+    "build_scenario",
+    "score_part",
+    "score_rows",
+    "score_samples",
+    "score_vector",
+]
