@@ -227,7 +227,7 @@ def test_embedded_dataset_name_gives_the_number_used() -> None:
 # --------------------------------------------------------------------------- item 6
 def test_a_stage_that_ends_early_shows_its_real_total(
         capsys: pytest.CaptureFixture[str]) -> None:
-    from app.cli_sampler import StageBars
+    from app.cli.sampling import StageBars
 
     bars = StageBars(quiet=False)
     bars("pilot", 20_480, 1 << 20)  # the pilot stops after 2 % of its budget

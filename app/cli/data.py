@@ -1,6 +1,6 @@
 """``scengen data ...``: convert, extract, synthesise, fit surfaces, describe.
 
-See app/cli.py for the conventions: user errors are ValueError/OSError, printed as one
+See app/cli/main.py for the conventions: user errors are ValueError/OSError, printed as one
 line with exit code 2. Long work shows a progress bar on stderr.
 """
 
@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli import add_out, add_quiet
+from app.cli.options import add_out, add_quiet
 
 
 def _convert_tno(args: argparse.Namespace) -> int:

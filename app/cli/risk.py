@@ -6,7 +6,7 @@ output is the same report as ``POST /risk``: summary, per-step series and per-ob
 the summary); +inf is written as "Infinity" (the service's JSON convention). Settings of Table
 II and the ego's capabilities can be overridden on the command line. User errors (missing
 file, bad JSON, a malformed scenario, bad settings) end as one line
-``scengen: error: ...`` naming the file and field, with exit code 2 (see app/cli.py).
+``scengen: error: ...`` naming the file and field, with exit code 2 (see app/cli/main.py).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli import add_out
+from app.cli.options import add_out
 
 #: command-line option → (RiskSettings field, type, help)
 _SETTING_OPTIONS: tuple[tuple[str, str, type, str], ...] = (

@@ -17,7 +17,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli import CliError, add_constraints, add_data_dir, add_n, add_out, add_quiet, store_label
+from app.cli.options import (
+    CliError,
+    add_constraints,
+    add_data_dir,
+    add_n,
+    add_out,
+    add_quiet,
+    store_label,
+)
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -150,7 +158,7 @@ def _in_store(exc: LookupError) -> CliError:
 def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
     from tqdm import tqdm
 
-    from app.cli_sampler import StageBars
+    from app.cli.sampling import StageBars
 
     bar: Any = None
 

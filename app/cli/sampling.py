@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from app import jsonconv
-from app.cli import add_constraints, add_data_dir, add_n, add_out, add_quiet
+from app.cli.options import add_constraints, add_data_dir, add_n, add_out, add_quiet
 
 _SUFFIXES = (".csv", ".parquet", ".pq")
 #: a command-line process is single-threaded: fork starts workers at once (spawn re-imports)
@@ -126,7 +126,7 @@ def _fit(args: argparse.Namespace) -> int:
                      random_state=args.seed, lane_width=args.lane_width)
     if args.bootstrap < 0 or args.bootstrap == 1:
         raise ValueError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
-    from app.cli_data import exposure_path
+    from app.cli.data import exposure_path
     from sampler.rates import Exposure, cutin_rate, tno_exposure
 
     exposure = None
@@ -215,7 +215,7 @@ def _load_model(ref: str | None, gmm: Any) -> Any:
     """A model file, a model id of the store, or (None / 'default') the default model."""
     if ref is not None and (ref.lower().endswith(".json") or Path(ref).is_file()):
         return gmm.load(ref)
-    from app.cli import store_label
+    from app.cli.options import store_label
     from app.context import ServiceContext
     from app.settings import get_settings
 
