@@ -1,8 +1,8 @@
-"""What the service and the CLI load once: database, embedded dataset, default model, jobs.
+"""What the service and the CLI hold once: database, fitted models, executor, caches.
 
-``ServiceContext.open(settings)`` migrates the database, registers the embedded TNO
-dataset and its default model (fitted at the first start and cached on disk under
-``<data_dir>/models/`` keyed by the data's hash), and builds the catalogue runner.
+``ServiceContext.open(settings)`` migrates the database and builds the context; the
+embedded dataset and its default model are registered by ``app.services.store``
+(``open_context``, which the service's lifespan and the CLI call).
 """
 
 from __future__ import annotations
@@ -11,27 +11,22 @@ import logging
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
-from app import domain, jsonconv
+from app import domain
 from app.cache import ViewCache
 from app.db import repository as repo
 from app.db.database import Database
-from app.db.models import DatasetRow, ModelRow
+from app.db.models import DatasetRow
 from app.errors import ServiceUnavailable
 from app.jobs.executors import ChunkExecutor, make_executor
 from app.jobs.runner import CatalogueRunner
 from app.schemas import DEFAULT_CONSTRAINTS
 from app.settings import Settings
+from sampler import CutInGMM
 
 log = logging.getLogger("scengen.app")
-
-EMBEDDED_ID = "tno-cutin"
-EMBEDDED_NAME = ("TNO real cut-ins (2017, MIT): 208 usable of 297 recorded (89 partial or "
-                 "implausible lane changes left out)")
-
 
 @dataclass
 class ServiceContext:
@@ -42,94 +37,23 @@ class ServiceContext:
     default_model_id: str | None = None
     startup_error: str | None = None
     _executor: ChunkExecutor | None = None
-    _models: dict[str, Any] = field(default_factory=dict)
+    _models: dict[str, CutInGMM] = field(default_factory=dict)
     #: named caches of this context's users (dashboard views, status statistics)
     _caches: dict[str, ViewCache] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     @classmethod
-    def open(cls, settings: Settings, *, load_defaults: bool = True) -> ServiceContext:
+    def open(cls, settings: Settings) -> ServiceContext:
+        """The store's context, its database migrated to head (nothing else loaded)."""
         data_dir = Path(settings.data_dir).resolve()
         data_dir.mkdir(parents=True, exist_ok=True)
         log.info("data dir %s", data_dir)
         db = Database(settings.resolved_database_url)
         db.migrate()
-        ctx = cls(settings=settings, db=db, data_dir=data_dir)
-        if load_defaults:
-            try:
-                ctx.load_defaults()
-            except (OSError, ValueError) as exc:
-                # embedded data unreadable or its model cannot be fitted: the service still
-                # answers (health, stored catalogues); the routes that need the model say why
-                ctx.startup_error = str(exc)
-                log.warning("embedded dataset/model not available: %s", exc)
-        return ctx
-
-    # ----------------------------------------------------------------- defaults
-    def load_defaults(self) -> None:
-        """Register the embedded dataset and the default model (fit or load the cache)."""
-        source = domain.embedded_source_hash()
-        table_rel = f"datasets/{EMBEDDED_ID}/table-{source[:16]}.parquet"
-        table_path = self.data_dir / table_rel
-        if not table_path.exists():
-            log.info("extracting the embedded TNO cut-ins (first start for this data)")
-            fresh = domain.embedded_parameter_table()
-            table_path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = table_path.with_name(f".{table_path.name}.tmp")
-            fresh.to_parquet(tmp, index=False)
-            tmp.replace(table_path)
-        table = pd.read_parquet(table_path)
-        data_hash = domain.table_hash(table)
-        with self.db.session() as s:
-            row = s.get(DatasetRow, EMBEDDED_ID)
-            if row is None:
-                row = DatasetRow(id=EMBEDDED_ID, name=EMBEDDED_NAME, kind="embedded",
-                                 embedded=True, data_hash=data_hash, n_cutins=len(table),
-                                 table_path=table_rel,
-                                 report={"source": "datasets.embedded (TNO cut-in.json, "
-                                         "de Gelder et al. 2021)", "licence": "MIT",
-                                         "provenance": "datasets/data/tno_cutin/PROVENANCE.md"})
-                s.add(row)
-            else:
-                row.data_hash, row.n_cutins, row.table_path = data_hash, len(table), table_rel
-        self.default_dataset_id = EMBEDDED_ID
-
-        options = dict(self.settings.default_model_options)
-        key = data_hash[:16] + (f"-{domain.options_hash(options)[:8]}" if options else "")
-        cache = self.data_dir / "models" / f"default-{key}.json"
-        if cache.exists():
-            log.info("loading the cached default model %s", cache)
-            fitted = domain.describe_model(cache.read_text())
-        else:
-            log.info("first start for this data (hash %s): fitting the default model on "
-                     "%d cut-ins (a few seconds; cached afterwards)", data_hash[:12], len(table))
-            fitted = domain.fit_model(table, options, source=EMBEDDED_ID)
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            repo.write_file_atomic(cache, fitted.model_json.encode())
-            log.info("fitted %d components; cached at %s", fitted.n_components, cache)
-        model_id = f"default-{key[:12]}" + (key[16:] if options else "")
-        with self.db.session() as s:
-            for other in repo.list_models(s):
-                if other.is_default and other.id != model_id:
-                    other.is_default = False
-            existing = s.get(ModelRow, model_id)
-            if existing is None:
-                s.add(self.model_row(model_id, EMBEDDED_ID, fitted, options, is_default=True))
-            else:
-                existing.is_default = True
-        self._models[model_id] = fitted.model
-        self.default_model_id = model_id
-
-    @staticmethod
-    def model_row(model_id: str, dataset_id: str, fitted: domain.FittedModel,
-                  options: dict[str, Any], is_default: bool = False) -> ModelRow:
-        return ModelRow(id=model_id, dataset_id=dataset_id, is_default=is_default,
-                        options=jsonconv.encode(options), n_components=fitted.n_components,
-                        model_hash=fitted.model_hash, model_json=fitted.model_json,
-                        bic_curve=fitted.bic_curve, fit_report=fitted.fit_report)
+        return cls(settings=settings, db=db, data_dir=data_dir)
 
     # ----------------------------------------------------------------- lookups
-    def model(self, model_id: str, field: str = "body.model") -> Any:
+    def model(self, model_id: str, field: str = "body.model") -> CutInGMM:
         """The fitted model object (cached in memory)."""
         with self._lock:
             if model_id in self._models:
@@ -140,6 +64,11 @@ class ServiceContext:
         with self._lock:
             self._models[model_id] = model
         return model
+
+    def remember_model(self, model_id: str, model: CutInGMM) -> None:
+        """Keep a model just fitted or loaded, so ``model(model_id)`` need not read it."""
+        with self._lock:
+            self._models[model_id] = model
 
     def resolve_model_id(self, model_id: str | None) -> str:
         if model_id in (None, "", "default"):

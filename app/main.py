@@ -15,13 +15,13 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from app import __version__
-from app.context import ServiceContext
 from app.docs_offline import install_offline_docs
 from app.errors import install_error_handlers
 from app.guards import RequestGuards
 from app.jobs.manager import JobManager
 from app.openapi_extras import install_openapi_extras
 from app.routes import catalogues, dashboard, datasets, health, models, risk, scenarios
+from app.services import store
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("scengen.app")
@@ -52,7 +52,7 @@ def _settings_of(app: FastAPI) -> Settings:
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings = _settings_of(app)
-    ctx = ServiceContext.open(settings)
+    ctx = store.open_context(settings)
     jobs = JobManager(ctx.runner())
     jobs.start(resume=settings.resume_jobs)
     if settings.warm_start:

@@ -6,6 +6,11 @@ the exit code. Errors a user can cause (bad files, bad values) are ``ValueError`
 ``OSError`` subclasses (or the service's ``ServiceError``): they end as one line on stderr
 and exit code 2, never a traceback. Output cut short by the reader (``scengen risk f.json |
 head``) ends quietly. The options every sub-command shares are in ``app.cli.options``.
+
+A command is a thin wrapper over ``app.services`` (or a domain package's function): it
+reads its arguments, calls the use case and prints. Handlers import the services when
+they run, not at module import, so that ``scengen --help`` and argument errors answer in
+0.2 s instead of the 3-6 s numba, scikit-learn and the store take to load.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.options import add_out
+from app.cli.options import CliError, add_out
 
 #: command-line option → (RiskSettings field, type, help)
 _SETTING_OPTIONS: tuple[tuple[str, str, type, str], ...] = (
@@ -58,42 +58,21 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     p.set_defaults(func=_run)
 
 
-def _read_scenario(path: str) -> Any:
-    from riskcore import ScenarioError
-
-    text = Path(path).read_text(encoding="utf-8")
-    # NaN / Infinity literals are parsed as floats here, so that the scenario's validation
-    # rejects them with the name of the field they are in.
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid JSON ({exc})") from None
-
-
 def _run(args: argparse.Namespace) -> int:
-    from riskcore import (
-        ConcreteScenario,
-        InputSurfaces,
-        RiskSettings,
-        ScenarioError,
-        SceneError,
-        evaluate_scenario,
-    )
+    from app import jsonconv
+    from app.errors import InvalidInput
+    from app.services import risk
+    from riskcore import InputSurfaces
 
     overrides = {dest: getattr(args, dest) for _, dest, _, _ in _SETTING_OPTIONS
                  if getattr(args, dest) is not None}
-    settings = RiskSettings().replace(**overrides)
+    settings = risk.risk_settings(overrides)
     surfaces = InputSurfaces.load(args.surfaces) if args.surfaces else None
-    data = _read_scenario(args.scenario)
+    data = risk.read_scenario_file(args.scenario)
     try:
-        scenario = ConcreteScenario.from_dict(data)
-        result = evaluate_scenario(scenario, settings, surfaces)
-    except (ScenarioError, SceneError) as exc:  # name the file as well as the field
-        raise ScenarioError(f"{args.scenario}: {exc}") from None
-    from app import jsonconv
-    from app.domain.risk import risk_report
-
-    report = risk_report(result, samples=args.samples, scenario=scenario)
+        report = risk.score(data, samples=args.samples, settings=settings, surfaces=surfaces)
+    except InvalidInput as exc:  # name the file as well as the field
+        raise CliError(f"{args.scenario}: {exc.message}") from None
     out = ({**report["summary"], "criticality": report["criticality"]} if args.summary
            else report)
     text = jsonconv.dumps(out)

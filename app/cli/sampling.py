@@ -26,17 +26,24 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import multiprocessing
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from app import jsonconv
-from app.cli.options import add_constraints, add_data_dir, add_n, add_out, add_quiet
+from app.cli.data import exposure_path
+from app.cli.options import (
+    add_constraints,
+    add_data_dir,
+    add_n,
+    add_out,
+    add_quiet,
+    store_label,
+)
+
+if TYPE_CHECKING:
+    from sampler import CutInGMM
 
 _SUFFIXES = (".csv", ".parquet", ".pq")
-#: a command-line process is single-threaded: fork starts workers at once (spawn re-imports)
-_POOL = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -116,46 +123,41 @@ def _read_table(path: str | None) -> tuple[Any, str]:
 
 
 def _fit(args: argparse.Namespace) -> int:
-    from sampler.model import CutInGMM
+    from app.services import models as models_service
+    from sampler.rates import Exposure, cutin_rate
 
     table, source = _read_table(args.dataset)
-    features = None
-    if args.features:
-        features = [f.strip() for f in args.features.split(",") if f.strip()]
-    model = CutInGMM(features=features, k_range=(args.k_min, args.k_max), n_init=args.n_init,
-                     random_state=args.seed, lane_width=args.lane_width)
     if args.bootstrap < 0 or args.bootstrap == 1:
         raise ValueError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
-    from app.cli.data import exposure_path
-    from sampler.rates import Exposure, cutin_rate, tno_exposure
-
-    exposure = None
+    options: dict[str, Any] = {"k_range": (args.k_min, args.k_max), "n_init": args.n_init,
+                               "random_state": args.seed, "n_bootstrap": args.bootstrap}
+    if args.features:
+        options["features"] = [f.strip() for f in args.features.split(",") if f.strip()]
+    if args.lane_width is not None:
+        options["lane_width"] = args.lane_width
+    exposure = None  # the embedded table's 63 h are the service's default
     if args.exposure_hours is not None or args.exposure_km is not None:
         exposure = Exposure(n_events=len(table), hours=args.exposure_hours,
                             km=args.exposure_km, source="given on the command line")
-    elif args.dataset is None:
-        exposure = tno_exposure(len(table))
-    elif exposure_path(args.dataset).is_file():  # written by 'scengen data extract' (highD)
+    elif args.dataset is not None and exposure_path(args.dataset).is_file():
+        # written by 'scengen data extract' (highD)
         exposure = Exposure.from_dict({**json.loads(exposure_path(args.dataset).read_text(
             encoding="utf-8")), "n_events": len(table)})
-    model.fit(table, source=source)
-    if exposure is not None:
-        model.exposure_ = exposure.to_dict()
-    if args.bootstrap:
-        from sampler.model import bootstrap_fit
-
-        bootstrap_fit(model, table, args.bootstrap, seed=args.seed, n_jobs=args.bootstrap_jobs)
+    fitted = models_service.fit_model(table, options, source=source, exposure=exposure,
+                                      bootstrap_jobs=args.bootstrap_jobs)
+    model = fitted.model
     model.save(args.output)
     print(f"fitted {source}: {len(table)} rows")
     print(model.report_text())
     if args.bootstrap:
         print(f"bootstrap: {args.bootstrap} refits stored (model interval of P(A))")
-    if exposure is not None:
-        rates = cutin_rate(exposure)
+    if model.exposure_ is not None:
+        used = Exposure.from_dict(model.exposure_)
+        rates = cutin_rate(used)
         print("exposure: " + "; ".join(
             f"{v['estimate']:.3g} cut-ins {k.replace('_', ' ').replace('1e6', '10^6')} "
             f"(95% {v['ci'][0]:.3g}-{v['ci'][1]:.3g})" for k, v in rates.items())
-            + f" [{exposure.source}]")
+            + f" [{used.source}]")
     print(f"wrote {args.output}")
     return 0
 
@@ -211,53 +213,40 @@ class StageBars:
         self.bars.clear()
 
 
-def _load_model(ref: str | None, gmm: Any) -> Any:
+def _load_model(ref: str | None) -> CutInGMM:
     """A model file, a model id of the store, or (None / 'default') the default model."""
-    if ref is not None and (ref.lower().endswith(".json") or Path(ref).is_file()):
-        return gmm.load(ref)
-    from app.cli.options import store_label
-    from app.context import ServiceContext
+    from app.services import store
     from app.settings import get_settings
 
-    ctx = ServiceContext.open(get_settings(), load_defaults=ref in (None, "", "default"))
     try:
-        if ctx.startup_error:
-            raise ValueError(f"no default model: {ctx.startup_error}")
-        model_id = ctx.resolve_model_id(ref)
-        try:
-            return ctx.model(model_id, field="--model")
-        except LookupError as exc:
-            raise LookupError(f"{exc.args[0] if exc.args else exc} in the store at "
-                              f"{store_label()}") from None
-    finally:
-        ctx.close()
+        return store.load_model(ref, get_settings(), field="--model")
+    except LookupError as exc:
+        raise LookupError(f"{exc.args[0] if exc.args else exc} in the store at "
+                          f"{store_label()}") from None
 
 
 def _sample(args: argparse.Namespace) -> int:
-    from sampler import sample
-    from sampler.model import CutInGMM
+    from app import jsonconv
+    from app.services import sampling as sampling_service
+    from sampler.rates import region_report, report_text
 
     if args.workers < 1:
         raise ValueError(f"--workers: must be >= 1, got {args.workers}")
     if args.model is not None and args.model_option is not None:
         raise ValueError("give the model once: as MODEL or as --model")
-    model = _load_model(args.model if args.model is not None else args.model_option,
-                        CutInGMM)
+    model = _load_model(args.model if args.model is not None else args.model_option)
     progress = StageBars(args.quiet)
     try:
-        ss = sample(model, args.constraints or [], args.n, args.seed, args.sampler,
-                    lane_width=args.lane_width, use_envelope=not args.no_envelope,
-                    progress=progress)
+        drawn = sampling_service.sample_local(
+            model, args.constraints or [], args.n, args.seed, method=args.sampler,
+            lane_width=args.lane_width, use_envelope=not args.no_envelope, progress=progress)
     finally:
         progress.close()
-    from app.jobs.lifeline import lifeline_pool
-    from sampler.scenario import score_samples
-
-    with lifeline_pool(args.workers, _POOL) as pool:
-        records = score_samples(ss, executor=pool, score=args.score,
-                                include_scenarios=args.scenarios,
-                                progress=(lambda d, t: progress("score", d, t)) if args.score
-                                else None)
+    ss = drawn.sample_set
+    assert ss is not None  # domain.sample keeps the sampler's set
+    records = sampling_service.score_on_pool(
+        drawn, workers=args.workers, score=args.score, include_scenarios=args.scenarios,
+        progress=(lambda d, t: progress("score", d, t)) if args.score else None)
     progress.close()
     d = ss.to_dict()
     lines = []
@@ -278,9 +267,7 @@ def _sample(args: argparse.Namespace) -> int:
         Path(args.summary_json).write_text(json.dumps(_clean(summary), indent=1) + "\n",
                                            encoding="utf-8")
     print(f"scengen sample: seed {ss.seed}: {ss.summary()}", file=sys.stderr)
-    if getattr(model, "bootstrap_", None) or getattr(model, "exposure_", None):
-        from sampler.rates import region_report, report_text
-
+    if model.bootstrap_ or model.exposure_:
         report = region_report(model, ss)
         print(report_text(report), file=sys.stderr)
         if args.summary_json:

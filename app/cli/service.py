@@ -15,7 +15,7 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from app.cli.options import (
     CliError,
@@ -26,6 +26,10 @@ from app.cli.options import (
     add_quiet,
     store_label,
 )
+from app.cli.sampling import StageBars
+
+if TYPE_CHECKING:
+    from app.context import ServiceContext
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -135,10 +139,10 @@ def _logging() -> None:
     logging.getLogger("alembic").setLevel(logging.WARNING)
 
 
-def _context(load_defaults: bool = True) -> Any:
+def _context(load_defaults: bool = True) -> ServiceContext:
     """The store's context. Commands that only read (``load_defaults=False``) never create
     a store: where there is none they say where they looked."""
-    from app.context import ServiceContext
+    from app.services import store
     from app.settings import get_settings
 
     settings = get_settings()
@@ -147,7 +151,7 @@ def _context(load_defaults: bool = True) -> Any:
         if not db_file.is_file():
             raise CliError(f"no store at {db_file.parent} (set --data-dir or "
                            "SCENGEN_DATA_DIR; the service and 'catalogue create' make one)")
-    return ServiceContext.open(settings, load_defaults=load_defaults)
+    return store.open_context(settings, load_defaults=load_defaults)
 
 
 def _in_store(exc: LookupError) -> CliError:
@@ -155,10 +159,10 @@ def _in_store(exc: LookupError) -> CliError:
     return CliError(f"{exc.args[0] if exc.args else exc} in the store at {store_label()}")
 
 
-def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
+def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
     from tqdm import tqdm
 
-    from app.cli.sampling import StageBars
+    from app.services import catalogues
 
     bar: Any = None
 
@@ -174,9 +178,9 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
 
     stages = StageBars(quiet=not show_progress)  # the P(A) estimate's stages
     try:
-        status = ctx.runner().run(catalogue_id, progress=progress,
-                                  note=(lambda text: tqdm.write(text, file=sys.stderr))
-                                  if show_progress else None, stage=stages)
+        status = catalogues.run(ctx, catalogue_id, progress=progress,
+                                note=(lambda text: tqdm.write(text, file=sys.stderr))
+                                if show_progress else None, stage=stages)
     except LookupError as exc:
         raise _in_store(exc) from None
     finally:
@@ -185,15 +189,13 @@ def _run(ctx: Any, catalogue_id: str, show_progress: bool) -> int:
             bar.close()
     print(json.dumps({"id": catalogue_id, "status": status}))
     if status != "done":
-        from app import catalogues
-
         error = catalogues.describe(ctx, catalogue_id).get("error")
         raise CliError(f"catalogue {catalogue_id} {status}: {error}")
     return 0
 
 
 def _create(args: argparse.Namespace) -> int:
-    from app import catalogues
+    from app.services import catalogues
 
     ctx = _context()
     try:
@@ -217,7 +219,7 @@ def _resume(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
-    from app import catalogues
+    from app.services import catalogues
 
     ctx = _context(load_defaults=False)
     try:
@@ -230,8 +232,7 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _scenarios(args: argparse.Namespace) -> int:
-    from app import catalogues
-    from app.db import repository as repo
+    from app.services import catalogues
 
     items = []
     for text in args.filters:
@@ -246,13 +247,11 @@ def _scenarios(args: argparse.Namespace) -> int:
         raise CliError("--limit must be >= 1 and --offset >= 0")
     ctx = _context(load_defaults=False)
     try:
-        with ctx.db.session() as s:
-            repo.get_catalogue(s, args.id)
-            total, rows = repo.page_scenarios(s, args.id, flt, args.offset, args.limit,
-                                              order_by=args.order_by, desc=desc)
-            for row in rows:
-                print(catalogues.record_of(row).model_dump_json())
-        print(json.dumps({"total": total, "offset": args.offset, "limit": args.limit}),
+        page = catalogues.page_scenarios(ctx, args.id, flt, args.offset, args.limit,
+                                         order_by=args.order_by, desc=desc)
+        for record in page.records:
+            print(record.model_dump_json())
+        print(json.dumps({"total": page.total, "offset": args.offset, "limit": args.limit}),
               file=sys.stderr)
     finally:
         ctx.close()
@@ -260,20 +259,19 @@ def _scenarios(args: argparse.Namespace) -> int:
 
 
 def _list(args: argparse.Namespace) -> int:
-    from app.db import repository as repo
+    from app.services import catalogues
 
     ctx = _context(load_defaults=False)
     try:
-        with ctx.db.session() as s:
-            for r in repo.list_catalogues(s):
-                print(f"{r.id}\t{r.status}\tn={r.n}\tseed={r.seed}\t{r.created_at:%Y-%m-%d %H:%M}")
+        for r in catalogues.list_catalogues(ctx):
+            print(f"{r.id}\t{r.status}\tn={r.n}\tseed={r.seed}\t{r.created_at:%Y-%m-%d %H:%M}")
     finally:
         ctx.close()
     return 0
 
 
 def _export(args: argparse.Namespace) -> int:
-    from app import catalogues
+    from app.services import catalogues
 
     out = Path(args.output)
     if not out.parent.is_dir():

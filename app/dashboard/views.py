@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from app import catalogues as catalogue_service
 from app import domain, jsonconv
 from app.cache import ViewCache
 from app.context import ServiceContext
@@ -43,6 +42,14 @@ from app.dashboard.aggregate import (
 from app.db import repository as repo
 from app.db.models import CatalogueRow
 from app.errors import Conflict, InvalidInput, NotFound
+from app.services import catalogues as catalogue_service
+from app.services.models import model_and_row
+from app.services.sampling import (
+    MODEL_DRAWS,
+    REFERENCE_SEED,
+    reference_draws,
+    split_constraints,
+)
 
 __all__ = [
     "CLASS_LABELS",
@@ -73,8 +80,6 @@ PARAM_LABELS: dict[str, str] = {
 CORNER_DEFAULT = ("p_t", "p_v0", "dv", "gap")
 #: points per group (data, model samples) in the corner view
 MAX_CORNER_POINTS = 400
-#: model draws behind the corner view and the unconstrained histograms
-MODEL_DRAWS = 5000
 #: points of a marginal density curve
 DENSITY_POINTS = 120
 #: bins of the per-parameter histograms
@@ -100,8 +105,6 @@ DRIVER_LABELS: dict[str, str] = {
 }
 #: largest n of a constrained preview drawn from the page
 PREVIEW_N_LIMIT = 5000
-#: the model's unconstrained reference draws come from this seed (documented)
-REFERENCE_SEED = 0
 
 
 def _views(ctx: ServiceContext) -> ViewCache:
@@ -119,13 +122,6 @@ def _key(ctx: ServiceContext, *parts: Any) -> tuple[Any, ...]:
 
 
 # --------------------------------------------------------------------------- helpers
-def split_constraints(text: str) -> list[str]:
-    """Constraints typed in the page: ``"ttc<3; v_ego>=20"`` (``;``, ``,`` or ``&``
-    separate them; blanks are dropped)."""
-    parts = [p.strip() for p in text.replace("&", ";").replace(",", ";").split(";")]
-    return [p for p in parts if p]
-
-
 def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
     if name not in frame.columns:
         return np.empty(0)
@@ -148,30 +144,11 @@ def _points(frame: pd.DataFrame, names: Sequence[str], limit: int) -> dict[str, 
     return {"n_total": len(frame), "n_shown": int(idx.size), "values": out}
 
 
-def _model_and_row(ctx: ServiceContext, model_id: str) -> tuple[str, Any, Any]:
-    mid = ctx.resolve_model_id(model_id)
-    model = ctx.model(mid, field="path.model_id")
-    with ctx.db.read_session() as s:
-        row = repo.get_model(s, mid)
-        s.expunge(row)
-    return mid, model, row
-
-
-def _reference_draws(ctx: ServiceContext, model_id: str, model: Any) -> pd.DataFrame:
-    """The model's unconstrained reference: draws inside the physical bounds only."""
-    def compute() -> pd.DataFrame:
-        drawn = domain.sample(model, [], MODEL_DRAWS, REFERENCE_SEED, method="rejection")
-        return drawn.params
-
-    frame: pd.DataFrame = _views(ctx).get(_key(ctx, "reference", model_id), compute)
-    return frame
-
-
 # --------------------------------------------------------------------------- view 1
 def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None) -> dict[str, Any]:
     """Data against model: per parameter the data histogram and the GMM marginal density,
     and the corner points (data and plain model draws)."""
-    mid, model, mrow = _model_and_row(ctx, model_id)
+    mid, model, mrow = model_and_row(ctx, model_id)
     ds_id = dataset_id or mrow.dataset_id
     with ctx.db.read_session() as s:
         drow = repo.get_dataset(s, ds_id, field="query.dataset")
@@ -264,11 +241,11 @@ def shift_preview(ctx: ServiceContext, model_id: str, constraint_text: str, n: i
         raise InvalidInput(f"n must be between 1 and {PREVIEW_N_LIMIT}, got {n}",
                            field="query.n")
     texts = split_constraints(constraint_text)
-    mid, model, _ = _model_and_row(ctx, model_id)
+    mid, model, _ = model_and_row(ctx, model_id)
     constraints = domain.parse_constraints(texts, field="query.constraints")
 
     def compute() -> dict[str, Any]:
-        reference = _reference_draws(ctx, mid, model)
+        reference = reference_draws(ctx, mid, model)
         drawn = domain.sample(model, constraints, n, seed)
         return {
             "source": "preview",
@@ -331,11 +308,11 @@ def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     """Constrained (the catalogue's samples) against unconstrained (the model's draws
     inside the physical bounds)."""
     crow = _catalogue(ctx, catalogue_id)
-    mid, model, _ = _model_and_row(ctx, crow.model_id)
+    mid, model, _ = model_and_row(ctx, crow.model_id)
 
     def compute() -> dict[str, Any]:
         constrained = _columns(ctx, crow)["params"]
-        reference = _reference_draws(ctx, mid, model)
+        reference = reference_draws(ctx, mid, model)
         return {
             "source": "catalogue",
             "catalogue": crow.id,

@@ -6,7 +6,7 @@ scoring a posted scenario) and turn the domain's errors into ``InvalidInput`` na
 request field:
 
 - ``app.domain.data``      the embedded TNO table, uploaded files, content hashes
-- ``app.domain.model``     fit, load and describe the cut-in GMM; the dashboard's densities
+- ``app.domain.model``     load and describe the cut-in GMM; the dashboard's densities
 - ``app.domain.sampling``  constraints, samples, P(A)
 - ``app.domain.risk``      score a posted scenario; a scenario's risk profile on demand
 
@@ -24,8 +24,8 @@ from app.domain.data import (
 )
 from app.domain.model import (
     FittedModel,
+    describe,
     describe_model,
-    fit_model,
     load_model,
     marginal_density,
     model_components,
@@ -51,11 +51,11 @@ __all__ = [
     "SampleResult",
     "add_region_report",
     "dataset_from_files",
+    "describe",
     "describe_model",
     "embedded_parameter_table",
     "embedded_source_hash",
     "estimate_region",
-    "fit_model",
     "load_model",
     "marginal_density",
     "model_components",

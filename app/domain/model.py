@@ -1,10 +1,10 @@
-"""The scenario model for the service: fit, load, describe, and the dashboard's views of it."""
+"""The scenario model for the service: load, describe, and the dashboard's views of it (the one
+fit path is ``app.services.models.fit_model``)."""
 
 from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,12 +14,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from app import jsonconv
 from app.errors import InvalidInput
-from datasets import EMBEDDED_SOURCE, PARAM_NAMES
-from sampler import CutInGMM, SamplerError
-from sampler.model import bootstrap_fit
-from sampler.rates import Exposure, tno_exposure
+from datasets import PARAM_NAMES
+from sampler import CutInGMM
 
-__all__ = ["FittedModel", "describe_model", "fit_model", "load_model", "marginal_density",
+__all__ = ["FittedModel", "describe", "describe_model", "load_model", "marginal_density",
            "model_components", "model_draws", "model_features", "model_lane_width"]
 
 
@@ -33,37 +31,8 @@ class FittedModel:
     fit_report: dict[str, Any]
 
 
-def fit_model(table: pd.DataFrame, options: Mapping[str, Any],
-              source: str | None = None,
-              exposure: Mapping[str, Any] | None = None) -> FittedModel:
-    """Fit the cut-in GMM on a parameter table with the sampler's options. ``exposure``:
-    the dataset's (``sampler.rates.exposure.Exposure`` as a dict), carried into the model; the
-    embedded TNO table gets its 63 hours."""
-    kwargs = dict(options)
-    n_boot = kwargs.pop("n_bootstrap", 100)  # issue 12: the model interval's refits
-    if isinstance(n_boot, bool) or not isinstance(n_boot, int) or n_boot == 1 or n_boot < 0:
-        raise InvalidInput(f"n_bootstrap: expected 0 or 2 ... 10000 refits, got {n_boot!r}",
-                           field="body.options.n_bootstrap")
-    if isinstance(kwargs.get("k_range"), list):
-        kwargs["k_range"] = tuple(kwargs["k_range"])
-    try:
-        model = CutInGMM(**kwargs)
-    except (TypeError, SamplerError) as exc:
-        raise InvalidInput(f"model options: {exc}", field="body.options") from None
-    try:
-        model.fit(table, source=source)
-        if n_boot:
-            bootstrap_fit(model, table, n_boot, seed=int(model.random_state))
-    except ValueError as exc:
-        raise InvalidInput(f"fitting the model failed: {exc}", field="body.options") from None
-    if exposure is not None:
-        model.exposure_ = Exposure.from_dict({**exposure, "n_events": len(table)}).to_dict()
-    elif "source" in table.columns and (table["source"] == EMBEDDED_SOURCE).all():
-        model.exposure_ = tno_exposure(len(table)).to_dict()  # 63 h (de Gelder et al. 2021)
-    return describe(model)
-
-
 def describe(model: CutInGMM) -> FittedModel:
+    """A fitted model with its JSON, hash, BIC curve and fit report (what is stored)."""
     text = model.to_json()
     return FittedModel(
         model=model,

@@ -100,16 +100,21 @@ def region_of(data: dict[str, Any]) -> PRegion:
     return PRegion.from_dict({k: v for k, v in values.items() if k in names})
 
 
-def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int,
+def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int | None,
            method: str = "auto", known_region: dict[str, Any] | None = None, *,
-           report: bool = True) -> SampleResult:
-    """``n`` samples of ``model`` in the region (``sampler.sample``). ``known_region``: the
-    region's P(A) dict when it is already estimated (reused, not estimated again).
-    ``report=False`` leaves the model interval and rates out of ``p_region`` for the caller
-    to add later (``add_region_report``, e.g. while the samples are being scored)."""
+           report: bool = True, lane_width: float | None = None, use_envelope: bool = True,
+           progress: ProgressFn | None = None) -> SampleResult:
+    """``n`` samples of ``model`` in the region (``sampler.sample``; ``seed`` None: a fresh
+    one, kept in the result's sample set). ``known_region``: the region's P(A) dict when it
+    is already estimated (reused, not estimated again). ``report=False`` leaves the model
+    interval and rates out of ``p_region`` for the caller to add later
+    (``add_region_report``, e.g. while the samples are being scored). ``lane_width``,
+    ``use_envelope`` and ``progress``: as ``sampler.sample``."""
     estimator = None if known_region is None else KnownRegion(region_of(known_region))
     try:
-        ss = sampler_sample(model, list(constraints), n, seed, method, estimator=estimator)
+        ss = sampler_sample(model, list(constraints), n, seed, method, estimator=estimator,
+                            lane_width=lane_width, use_envelope=use_envelope,
+                            progress=progress)
     except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
         raise _sampling_error(exc) from None
     diagnostics = jsonconv.encode(dict(ss.diagnostics))

@@ -11,13 +11,12 @@ from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import FileResponse, Response
 from pydantic import ConfigDict, Field
 
-from app import catalogues as service
 from app import jsonconv
-from app.db import repository as repo
-from app.deps import ContextDep, JobsDep, SessionDep
+from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.rates import RegionRates
 from app.schemas import ApiModel, SamplingRequest
+from app.services import catalogues as service
 from sampler.scenario import ScenarioRecord
 
 router = APIRouter(prefix="/catalogues", tags=["catalogues"])
@@ -123,11 +122,11 @@ def create_catalogue(body: CatalogueRequest, ctx: ContextDep, jobs: JobsDep) -> 
 
 
 @router.get("", response_model=CatalogueList, summary="List catalogues")
-def list_catalogues(session: SessionDep) -> CatalogueList:
+def list_catalogues(ctx: ContextDep) -> CatalogueList:
     return CatalogueList(catalogues=[
         CatalogueItem(id=r.id, status=r.status, n=r.n, seed=r.seed, model=r.model_id,
                       created_at=r.created_at.isoformat())
-        for r in repo.list_catalogues(session)])
+        for r in service.list_catalogues(ctx)])
 
 
 @router.get("/{catalogue_id}", response_model=CatalogueStatus,
@@ -152,7 +151,7 @@ _PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc", "class", "risk_
             summary="Page through the stored scenarios, ranked and filtered by criticality")
 def list_scenarios(
     catalogue_id: str,
-    session: SessionDep,
+    ctx: ContextDep,
     request: Request,
     offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
@@ -170,16 +169,16 @@ def list_scenarios(
     """Scenarios of a catalogue, sorted by ``order_by`` (default ``btn``, highest first;
     nulls last, ties by index) and filtered by ``<field>_min``/``<field>_max``
     (inclusive), ``<field>=true|false`` and ``class``."""
-    repo.get_catalogue(session, catalogue_id)
+    service.get_catalogue(ctx, catalogue_id)  # 404 before the filters' 422
     items = [(k, v) for k, v in request.query_params.multi_items() if k not in _PAGE_PARAMS]
     flt = dataclasses.replace(service.page_filter(items, classes or (), where="query"),
                               risk_min=risk_min, risk_max=risk_max, ttc_min=ttc_min,
                               ttc_max=ttc_max)
     descending = service.check_order(order_by, desc, where="query")
-    total, rows = repo.page_scenarios(session, catalogue_id, flt, offset, limit,
-                                      order_by=order_by, desc=descending)
-    return ScenarioPage(catalogue=catalogue_id, total=total, offset=offset, limit=limit,
-                        scenarios=[service.record_of(r) for r in rows])
+    page = service.page_scenarios(ctx, catalogue_id, flt, offset, limit, order_by=order_by,
+                                  desc=descending)
+    return ScenarioPage(catalogue=catalogue_id, total=page.total, offset=offset, limit=limit,
+                        scenarios=page.records)
 
 
 @router.get("/{catalogue_id}/export", summary="Export a finished catalogue",
@@ -208,8 +207,7 @@ def export_catalogue(
 @router.delete("/{catalogue_id}", status_code=204, response_model=None,
                summary="Delete a catalogue (stops its job) and its files")
 def delete_catalogue(catalogue_id: str, ctx: ContextDep, jobs: JobsDep) -> Response:
-    with ctx.db.session() as s:
-        repo.get_catalogue(s, catalogue_id)
+    service.get_catalogue(ctx, catalogue_id)
     jobs.cancel(catalogue_id)
     service.delete(ctx, catalogue_id)
     return Response(status_code=204)

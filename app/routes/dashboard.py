@@ -17,7 +17,7 @@ from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from app import jsonconv
-from app.dashboard import rates_views, views
+from app.dashboard import views
 from app.dashboard.schemas import (
     CatalogueCriticalityView,
     ModelFitView,
@@ -29,6 +29,7 @@ from app.deps import ConstraintsQuery, ContextDep, SeedQuery
 from app.errors import NotFound, ServiceError
 from app.limits import INDEX_MAX
 from app.rates import RegionReport
+from app.services import rates
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
 
@@ -142,7 +143,7 @@ def model_rates(
     seed: SeedQuery = 0,
 ) -> RegionReport:
     return RegionReport.model_validate(
-        jsonconv.encode(rates_views.region_rates(ctx, model_id, constraints, seed)))
+        jsonconv.encode(rates.region_rates(ctx, model_id, constraints, seed)))
 
 
 @router.get("/api/catalogues/{catalogue_id}/shift", response_model=ShiftView,

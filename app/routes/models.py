@@ -8,16 +8,13 @@ from fastapi import APIRouter, Query
 from pydantic import BaseModel, ConfigDict, Field
 
 from app import domain, jsonconv
-from app.context import ServiceContext
 from app.dashboard import rates_views
-from app.dashboard.views import PREVIEW_N_LIMIT
-from app.db import repository as repo
 from app.db.models import ModelRow
-from app.deps import ConstraintsQuery, ContextDep, SeedQuery, SessionDep
-from app.errors import InvalidInput
-from app.limits import check_model_options
+from app.deps import ConstraintsQuery, ContextDep, SeedQuery
 from app.rates import ModelComparison
 from app.schemas import ApiModel
+from app.services import models as models_service
+from app.services.rates import COMPARE_N_LIMIT
 
 router = APIRouter(prefix="/models", tags=["models"])
 
@@ -68,8 +65,9 @@ def model_view(row: ModelRow, components: list[dict[str, Any]]) -> ModelDetail:
 
 @router.get("", response_model=ModelList,
             summary="List fitted models (the default model first)")
-def list_models(session: SessionDep) -> ModelList:
-    return ModelList.model_validate({"models": [_info(r) for r in repo.list_models(session)]})
+def list_models(ctx: ContextDep) -> ModelList:
+    return ModelList.model_validate({"models": [_info(r)
+                                                for r in models_service.list_models(ctx)]})
 
 
 @router.get("/compare", response_model=ModelComparison,
@@ -80,7 +78,7 @@ def compare(
     a: Annotated[str, Query(max_length=64, description="a model id ('default' too)")],
     b: Annotated[str, Query(max_length=64, description="another model id")],
     constraints: ConstraintsQuery = "ttc<3",
-    n: Annotated[int, Query(ge=1, le=PREVIEW_N_LIMIT,
+    n: Annotated[int, Query(ge=1, le=COMPARE_N_LIMIT,
                             description="samples of each model in the region")] = 400,
     seed: SeedQuery = 0,
 ) -> ModelComparison:
@@ -91,27 +89,11 @@ def compare(
 @router.get("/{model_id}", response_model=ModelDetail,
             summary="A model: components, BIC curve, fit report")
 def show_model(model_id: str, ctx: ContextDep) -> ModelDetail:
-    mid = ctx.resolve_model_id(model_id)
-    model = ctx.model(mid, field="path.model_id")
-    with ctx.db.session() as s:
-        row = repo.get_model(s, mid)
+    _, model, row = models_service.model_and_row(ctx, model_id)
     return model_view(row, domain.model_components(model))
 
 
 @router.post("", status_code=201, response_model=ModelDetail, summary="Fit a GMM on a dataset")
 def fit(body: FitRequest, ctx: ContextDep) -> ModelDetail:
-    check_model_options(body.options, ctx.settings)
-    with ctx.db.session() as s:
-        dataset = repo.get_dataset(s, body.dataset, field="body.dataset")
-    try:
-        table = ctx.dataset_table(dataset)
-    except OSError as exc:
-        raise InvalidInput(f"dataset {body.dataset!r} has no readable table: {exc}",
-                                  field="body.dataset") from None
-    exposure = (dataset.report or {}).get("exposure")  # highD uploads: vehicle-h, vehicle-km
-    fitted = domain.fit_model(table, body.options, source=dataset.id,
-                              exposure=jsonconv.decode(exposure) if exposure else None)
-    row = ServiceContext.model_row(repo.new_id("mdl"), dataset.id, fitted, body.options)
-    with ctx.db.session() as s:
-        s.add(row)
-    return model_view(row, domain.model_components(fitted.model))
+    row, model = models_service.fit_on_dataset(ctx, body.dataset, body.options)
+    return model_view(row, domain.model_components(model))

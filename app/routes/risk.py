@@ -7,10 +7,10 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Query
 from pydantic import Field
 
-from app import domain, jsonconv
+from app import jsonconv
 from app.deps import SettingsDep
-from app.limits import check_posted_scenario
 from app.schemas import ApiModel
+from app.services import risk
 
 router = APIRouter(prefix="/risk", tags=["risk"])
 
@@ -48,7 +48,6 @@ def score(
     samples: Annotated[bool, Query(description="include every object's per-sample "
                                    "Monte-Carlo arrays (large: ~0.9 MB for 10 s)")] = False,
 ) -> RiskReport:
-    check_posted_scenario(scenario, settings)
     # encoded first: FastAPI loses ser_json_inf_nan inside ``Any`` and union values
-    return RiskReport.model_validate(jsonconv.encode(domain.score_posted(scenario,
-                                                                         samples=samples)))
+    return RiskReport.model_validate(jsonconv.encode(risk.score_posted(scenario, settings,
+                                                                       samples=samples)))

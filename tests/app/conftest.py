@@ -29,11 +29,11 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
 @pytest.fixture(scope="session")
 def model_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A data dir whose default model is fitted once per test process (then copied)."""
-    from app.context import ServiceContext
+    from app.services.store import open_context
     from tests.app.factories import make_settings
 
     data_dir = tmp_path_factory.mktemp("model-cache")
-    ctx = ServiceContext.open(make_settings(data_dir))
+    ctx = open_context(make_settings(data_dir))
     try:
         if ctx.startup_error:
             pytest.fail(f"the default model cannot be built: {ctx.startup_error}")

@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
-from app import catalogues
-from app.context import ServiceContext
 from app.jobs import DaskExecutor, LocalPoolExecutor
+from app.services import catalogues
+from app.services.store import open_context
 from tests.app.factories import copy_model_cache, make_settings
 
 
@@ -25,7 +25,7 @@ def cluster() -> Iterator[Any]:
 
 
 def _build(data_dir: Path, tmp_path: Path, name: str, **settings: Any) -> tuple[Path, str]:
-    ctx = ServiceContext.open(make_settings(data_dir, chunk_size=3, **settings))
+    ctx = open_context(make_settings(data_dir, chunk_size=3, **settings))
     try:
         row = catalogues.create(ctx, n=10, seed=2024, constraints=["ttc<3"], score=False)
         executor = ctx.executor

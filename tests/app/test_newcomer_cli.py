@@ -159,7 +159,7 @@ def test_an_export_failure_inside_the_service_is_one_line(
     def broken(*_: Any, **__: Any) -> Any:
         raise ServiceError("export of catalogue x failed: disk full")
 
-    monkeypatch.setattr("app.catalogues.export", broken)
+    monkeypatch.setattr("app.services.catalogues.export", broken)
     assert main(["catalogue", "create", "-n", "2", "--no-score", "-q"]) == 0
     cid = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["id"]
     assert main(["catalogue", "export", cid, "-o", str(store / "x.csv")]) == 2
@@ -217,7 +217,7 @@ def test_make_run_installs_only_the_runtime_dependencies(tmp_path: Path) -> None
 
 
 def test_embedded_dataset_name_gives_the_number_used() -> None:
-    from app.context import EMBEDDED_NAME
+    from app.services.store import EMBEDDED_NAME
     from datasets.embedded import default_parameter_table
 
     used = len(default_parameter_table())

@@ -11,11 +11,11 @@ from typing import Any
 
 import pytest
 
-from app.catalogues import record_of
 from app.cli import main
 from app.db.models import ScenarioRow
 from app.jobs import chunk as chunk_module
 from app.jobs.chunk import CatalogueSpec, compute_chunk
+from app.services.catalogues import record_of
 from riskcore.criticality import CRITICALITY_FIELDS
 from sampler.scenario.record import ScenarioRecord
 
@@ -161,12 +161,12 @@ def test_warm_loads_the_kernels_in_the_pool_workers_and_inline_does_nothing() ->
 
 def test_warm_start_estimates_the_default_regions_model_figures(model_cache_dir: Path,
                                                                 tmp_path: Path) -> None:
-    from app.context import ServiceContext
+    from app.services.store import open_context
     from tests.app.factories import copy_model_cache, make_settings
 
     data_dir = tmp_path / "data"
     copy_model_cache(model_cache_dir, data_dir)
-    ctx = ServiceContext.open(make_settings(data_dir))
+    ctx = open_context(make_settings(data_dir))
     try:
         assert ctx.default_model_id is not None
         model = ctx.model(ctx.default_model_id)

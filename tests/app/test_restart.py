@@ -12,11 +12,11 @@ from pathlib import Path
 
 from sqlalchemy import func, select
 
-from app import catalogues
-from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, ChunkRow
+from app.services import catalogues
+from app.services.store import open_context
 from tests.app.factories import copy_model_cache, make_settings, service_env, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -73,7 +73,7 @@ def test_killed_job_resumes_to_the_uninterrupted_result(database_url: str, tmp_p
     db.dispose()
 
     # the uninterrupted run, in this process, on the same store
-    ctx = ServiceContext.open(make_settings(data_dir, database_url=database_url,
+    ctx = open_context(make_settings(data_dir, database_url=database_url,
                                             chunk_size=CHUNK))
     try:
         clean = catalogues.create(ctx, n=N, seed=SEED, constraints=["ttc<3"])

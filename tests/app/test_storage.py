@@ -162,8 +162,8 @@ def test_sql_statistics_equal_numpy_on_the_finite_values(database_url: str, tmp_
 def test_status_statistics_hand_case_and_read_per_new_chunk(
         database_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # risk of idx i is i / 100 (scenario_rows); chunk 0 holds idx 0..4, chunk 1 idx 5..9
-    from app import catalogues
     from app.cache import ViewCache
+    from app.services import catalogues
 
     class Ctx:  # the part of ServiceContext the status uses
         def __init__(self) -> None:

@@ -23,6 +23,7 @@ from app import domain, jsonconv
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
+from app.services.models import fit_model
 
 #: options of the quick model (sampler.model.gmm.CutInGMM keywords)
 QUICK_MODEL_OPTIONS: dict[str, Any] = {"k_range": (1, 3), "n_init": 1, "cv_folds": 2,
@@ -38,7 +39,7 @@ EVASIONS = ("brake", "steer_left", "steer_right", "steer_left+brake", "none", No
 @lru_cache(maxsize=1)
 def _quick_model() -> tuple[str, str]:
     table = domain.embedded_parameter_table()
-    fitted = domain.fit_model(table, QUICK_MODEL_OPTIONS)
+    fitted = fit_model(table, QUICK_MODEL_OPTIONS)
     return domain.table_hash(table), fitted.model_json
 
 

@@ -224,7 +224,7 @@ def test_export_and_paging_errors(client: Any, catalogue: dict[str, Any]) -> Non
 
 
 def test_export_of_an_unfinished_catalogue_is_409(client: Any) -> None:
-    from app import catalogues
+    from app.services import catalogues
 
     ctx = client.app.state.ctx
     row = catalogues.create(ctx, n=3, seed=2, constraints=["ttc<3"])  # queued, never run
@@ -235,9 +235,9 @@ def test_export_of_an_unfinished_catalogue_is_409(client: Any) -> None:
 
 def test_status_of_a_running_catalogue_counts_the_workers_reports(client: Any) -> None:
     # issue 14 item 6: the status moves per scenario while a chunk is being computed
-    from app import catalogues
     from app.db import chunkfile
     from app.db import repository as repo
+    from app.services import catalogues
 
     ctx = client.app.state.ctx
     row = catalogues.create(ctx, n=12, seed=2, constraints=["ttc<3"], chunk_size=5)

@@ -1,11 +1,12 @@
-"""Catalogue use cases shared by the HTTP routes and the CLI: create, describe, page,
-export and delete. Routes and CLI commands stay thin wrappers around these."""
+"""Catalogue use cases shared by the HTTP routes and the CLI: create, run, describe, list,
+page, export and delete. Routes and CLI commands stay thin wrappers around these."""
 
 from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +89,47 @@ def _stat_values(ctx: ServiceContext, session: Session, catalogue_id: str) -> np
     if not parts:
         return np.zeros((0, len(repo.STAT_COLUMNS)))
     return np.concatenate(parts)
+
+
+def run(ctx: ServiceContext, catalogue_id: str, *,
+        progress: Callable[[int, int], None] | None = None,
+        note: Callable[[str], None] | None = None,
+        stage: Callable[[str, int, int], None] | None = None) -> str:
+    """Run (or resume) a catalogue's job in this process until it ends; its final status.
+    ``progress(done, total)`` per scenario, ``note(text)`` for messages, ``stage(name,
+    done, total)`` for the P(A) estimate's stages (``CatalogueRunner.run``)."""
+    return ctx.runner().run(catalogue_id, progress=progress, note=note, stage=stage)
+
+
+def get_catalogue(ctx: ServiceContext, catalogue_id: str) -> CatalogueRow:
+    """A stored catalogue (404 for an unknown id)."""
+    with ctx.db.read_session() as s:
+        return repo.get_catalogue(s, catalogue_id)
+
+
+def list_catalogues(ctx: ServiceContext) -> list[CatalogueRow]:
+    """Every catalogue, oldest first."""
+    with ctx.db.read_session() as s:
+        return list(repo.list_catalogues(s))
+
+
+@dataclass(frozen=True)
+class ScenarioPage:
+    """One page of a catalogue's stored scenarios: the records and how many match."""
+
+    total: int
+    records: list[ScenarioRecord]
+
+
+def page_scenarios(ctx: ServiceContext, catalogue_id: str, flt: repo.ScenarioFilter,
+                   offset: int, limit: int, *, order_by: str, desc: bool) -> ScenarioPage:
+    """Scenarios of a catalogue ranked by ``order_by`` and filtered (``page_filter``);
+    404 for an unknown catalogue."""
+    with ctx.db.read_session() as s:
+        repo.get_catalogue(s, catalogue_id)  # 404 for an unknown catalogue
+        total, rows = repo.page_scenarios(s, catalogue_id, flt, offset, limit,
+                                          order_by=order_by, desc=desc)
+        return ScenarioPage(total=total, records=[record_of(r) for r in rows])
 
 
 def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:

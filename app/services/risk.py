@@ -1,0 +1,50 @@
+"""Scoring a concrete scenario with riskcore (``POST /risk``, ``scengen risk``).
+
+``score(data)`` takes a scenario in its JSON form (a posted body, or a file's content),
+validates it and returns its risk report (``app.domain.risk.risk_report``: summary,
+per-step series, per-object series, the criticality record). A malformed scenario or bad
+settings are ``InvalidInput`` naming the field; ``read_scenario_file`` gives a file's
+JSON, a file that is not JSON a ``ScenarioError`` naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from app import domain
+from app.limits import check_posted_scenario
+from app.settings import Settings
+from riskcore import InputSurfaces, RiskSettings, ScenarioError
+
+__all__ = ["read_scenario_file", "risk_settings", "score", "score_posted"]
+
+
+def risk_settings(overrides: Mapping[str, Any]) -> RiskSettings:
+    """Table II's settings with some fields replaced (``RiskSettings.replace``)."""
+    return RiskSettings().replace(**dict(overrides))
+
+
+def read_scenario_file(path: str | Path) -> Any:
+    """A scenario file's JSON. NaN / Infinity literals are parsed as floats here, so that
+    the scenario's validation rejects them with the name of the field they are in."""
+    text = Path(path).read_text(encoding="utf-8")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid JSON ({exc})") from None
+
+
+def score(data: Any, *, samples: bool = False, settings: RiskSettings | None = None,
+          surfaces: InputSurfaces | None = None) -> dict[str, Any]:
+    """The risk report of a concrete scenario given in its JSON form; ``samples`` adds
+    each object's per-sample Monte-Carlo arrays."""
+    return domain.score_posted(data, samples=samples, settings=settings, surfaces=surfaces)
+
+
+def score_posted(data: Any, service: Settings, *, samples: bool = False) -> dict[str, Any]:
+    """``POST /risk``: :func:`score` after the service's size limits (objects, steps)."""
+    check_posted_scenario(data, service)
+    return score(data, samples=samples)
