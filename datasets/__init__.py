@@ -25,9 +25,11 @@ from datasets.cutin_model import (
     PARAM_UNITS,
     CutInParamError,
     CutInParams,
+    CutInTrajectory,
     crossing_time,
     motion,
     speed,
+    trajectory,
     ttc_from_gap_dv,
 )
 from datasets.errors import DatasetError, ExtractionError, FormatError
@@ -66,6 +68,7 @@ __all__ = [
     "TABLE_COLUMNS",
     "CutInParamError",
     "CutInParams",
+    "CutInTrajectory",
     "DatasetError",
     "ExtractionError",
     "FormatError",
@@ -91,6 +94,7 @@ __all__ = [
     "speed",
     "trajectories_from_egocentric",
     "trajectories_from_highd",
+    "trajectory",
     "ttc_from_gap_dv",
     "write_egocentric",
     "write_highd",

@@ -22,9 +22,11 @@ Position relative to the cutter's position at t = 0::
 
     x(t) = int_0^t v(s) cos psi(s) ds,   y(t) = int_0^t v(s) sin psi(s) ds
 
-integrated numerically on a fine grid (``substep`` s, composite trapezoid; the integrand is
-smooth between the pulse edges, which are inserted into the grid, so the error is
-O(substep^2) and below 1e-6 m for the default).
+integrated numerically during the lane change, 0 <= t <= 2 p_t, on a fine grid (``substep``
+s, composite trapezoid; the integrand is smooth between the pulse edges, which are inserted
+into the grid, so the error is O(substep^2) and below 1e-6 m for the default); outside it
+the heading is 0, y is constant and x is the exact integral of the piecewise linear speed.
+``trajectory(p)`` integrates once for many evaluations (the scenario builder).
 """
 
 from __future__ import annotations
@@ -170,6 +172,92 @@ def _with_points(base: FloatArray, points: list[float]) -> FloatArray:
     return np.insert(base, np.searchsorted(base, new), new) if new.size else base
 
 
+def _pulse_integral(p: CutInParams, t: FloatArray) -> FloatArray:
+    """``int_0^t v(s) ds`` in m, exact: v is piecewise linear (``speed``)."""
+    a2, a3 = p.p_a2, p.p_a3
+
+    def h(s: FloatArray | float) -> FloatArray:  # antiderivative of clip(s - a2, 0, a3)
+        u = np.clip(np.asarray(s, dtype=np.float64) - a2, 0.0, a3)
+        return np.asarray(0.5 * u * u + a3 * np.maximum(np.asarray(s) - a2 - a3, 0.0),
+                          dtype=np.float64)
+
+    c0 = min(max(-a2, 0.0), a3)
+    return np.asarray(p.p_v0 * t + p.p_a1 * (h(t) - h(0.0) - c0 * t), dtype=np.float64)
+
+
+class CutInTrajectory:
+    """The cutter's path of one vector, integrated once (``trajectory``).
+
+    Inside the lane change (0 <= t <= 2 p_t) x and y are integrated on a ``substep`` grid
+    (composite trapezoid, the pulse edges inserted); outside it the heading is 0, so y is
+    constant and x is the exact integral of the piecewise linear speed. ``motion(t)`` and
+    ``crossing_time(offset)`` then cost an interpolation, whatever the times asked for.
+    """
+
+    def __init__(self, p: CutInParams, substep: float = 1e-3) -> None:
+        self.p = p
+        end = 2.0 * p.p_t
+        n_sub = max(int(np.ceil(end / substep)), 1)
+        edges = [p.p_a2, p.p_a2 + p.p_a3]
+        grid = _with_points(np.linspace(0.0, end, n_sub + 1),
+                            [e for e in edges if 0.0 < e < end])
+        v = speed(p, grid)
+        psi = p.p_y1 * p.p_t / np.pi * (1.0 - np.cos(np.pi * grid / p.p_t))
+        vc = v * np.cos(psi)
+        vs = v * np.sin(psi)
+        h = np.diff(grid)
+        self.grid = grid
+        self.x = np.concatenate([[0.0], np.cumsum(0.5 * (vc[1:] + vc[:-1]) * h)])
+        self.y = np.concatenate([[0.0], np.cumsum(0.5 * (vs[1:] + vs[:-1]) * h)])
+        self.end = end
+        self._s_end = float(_pulse_integral(p, np.array([end]))[0])
+
+    def xy(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """x(t), y(t) in m relative to the position at t = 0."""
+        t_a = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        x = np.interp(t_a, self.grid, self.x)
+        y = np.interp(t_a, self.grid, self.y)
+        before = t_a < 0.0
+        after = t_a > self.end
+        if before.any():
+            x[before] = _pulse_integral(self.p, t_a[before])
+        if after.any():
+            x[after] = self.x[-1] + (_pulse_integral(self.p, t_a[after]) - self._s_end)
+        return x, y
+
+    def motion(self, t: ArrayLike) -> CutInMotion:
+        """The kinematics at times ``t`` (s, any order, may be negative)."""
+        p = self.p
+        t_a = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        x, y = self.xy(t_a)
+        return CutInMotion(t=t_a, x=x, y=y, psi=heading(p, t_a), v=speed(p, t_a),
+                           a=acceleration(p, t_a), yaw_rate=yaw_rate(p, t_a))
+
+    def crossing_time(self, offset: float) -> float:
+        """First t in [0, 2 p_t] at which |y(t)| reaches ``offset`` (m), linear between
+        the integration grid's points; raises CutInParamError when it never does."""
+        if offset <= 0:
+            raise CutInParamError(f"offset: must be > 0 m, got {offset}")
+        y = np.abs(self.y)
+        above = np.flatnonzero(y >= offset)
+        if above.size == 0:
+            raise CutInParamError(
+                f"lateral displacement {y.max():.3f} m never reaches {offset:.3f} m: "
+                "p_y1 * p_t too small for a lane change"
+            )
+        i = int(above[0])
+        if i == 0:
+            return 0.0
+        t = self.grid
+        frac = (offset - y[i - 1]) / (y[i] - y[i - 1])
+        return float(t[i - 1] + frac * (t[i] - t[i - 1]))
+
+
+def trajectory(p: CutInParams, substep: float = 1e-3) -> CutInTrajectory:
+    """The cutter's path of ``p`` (:class:`CutInTrajectory`), for many evaluations."""
+    return CutInTrajectory(p, substep)
+
+
 def motion(p: CutInParams, t: ArrayLike, substep: float = 1e-3) -> CutInMotion:
     """Evaluate the cut-in kinematics at times ``t`` (s, any order, may be negative).
 
@@ -178,43 +266,14 @@ def motion(p: CutInParams, t: ArrayLike, substep: float = 1e-3) -> CutInMotion:
     p : CutInParams
     t : array-like of shape (n,)
     substep : float
-        Integration step in s for x(t), y(t).
+        Integration step in s for x(t), y(t) during the lane change (outside it they
+        are exact).
     """
     t_a = np.atleast_1d(np.asarray(t, dtype=np.float64))
     if t_a.size == 0:
         empty = np.zeros(0)
         return CutInMotion(empty, empty, empty, empty, empty, empty, empty)
-    lo = min(float(t_a.min()), 0.0)
-    hi = max(float(t_a.max()), 0.0)
-    n_sub = max(int(np.ceil((hi - lo) / substep)), 1)
-    edges = [p.p_a2, p.p_a2 + p.p_a3, 0.0, 2.0 * p.p_t]
-    grid = _with_points(np.linspace(lo, hi, n_sub + 1), [e for e in edges if lo < e < hi])
-    v = speed(p, grid)
-    # heading(p, grid), cos and sin only where the cutter turns: psi = 0 elsewhere, where
-    # cos = 1 and sin = 0 exactly (the same numbers as evaluating them everywhere)
-    a = int(np.searchsorted(grid, 0.0, side="left"))  # first grid point >= 0
-    b = int(np.searchsorted(grid, 2.0 * p.p_t, side="right"))  # first one > 2 p_t
-    psi_in = p.p_y1 * p.p_t / np.pi * (1.0 - np.cos(np.pi * grid[a:b] / p.p_t))
-    vc = v.copy()
-    vc[a:b] = v[a:b] * np.cos(psi_in)
-    vs = np.zeros_like(v)
-    vs[a:b] = v[a:b] * np.sin(psi_in)
-    dx = 0.5 * (vc[1:] + vc[:-1]) * np.diff(grid)
-    dy = 0.5 * (vs[1:] + vs[:-1]) * np.diff(grid)
-    x_grid = np.concatenate([[0.0], np.cumsum(dx)])
-    y_grid = np.concatenate([[0.0], np.cumsum(dy)])
-    i0 = int(np.searchsorted(grid, 0.0))
-    x_grid -= x_grid[i0]
-    y_grid -= y_grid[i0]
-    return CutInMotion(
-        t=t_a,
-        x=np.interp(t_a, grid, x_grid),
-        y=np.interp(t_a, grid, y_grid),
-        psi=heading(p, t_a),
-        v=speed(p, t_a),
-        a=acceleration(p, t_a),
-        yaw_rate=yaw_rate(p, t_a),
-    )
+    return CutInTrajectory(p, substep).motion(t_a)
 
 
 def lateral_displacement(p: CutInParams, substep: float = 1e-3) -> float:
@@ -231,17 +290,4 @@ def crossing_time(p: CutInParams, offset: float, substep: float = 1e-3) -> float
     """
     if offset <= 0:
         raise CutInParamError(f"offset: must be > 0 m, got {offset}")
-    t = np.linspace(0.0, 2.0 * p.p_t, max(int(np.ceil(2.0 * p.p_t / substep)), 2) + 1)
-    y = np.abs(motion(p, t, substep=substep).y)
-    above = np.flatnonzero(y >= offset)
-    if above.size == 0:
-        raise CutInParamError(
-            f"lateral displacement {y.max():.3f} m never reaches {offset:.3f} m: "
-            "p_y1 * p_t too small for a lane change"
-        )
-    i = int(above[0])
-    if i == 0:
-        return 0.0
-    # linear interpolation between the bracketing grid points
-    frac = (offset - y[i - 1]) / (y[i] - y[i - 1])
-    return float(t[i - 1] + frac * (t[i] - t[i - 1]))
+    return CutInTrajectory(p, substep).crossing_time(offset)

@@ -168,8 +168,23 @@ class ConcreteScenario:
     provenance: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        # Validate through the same path as JSON input, so both entry points agree.
-        ConcreteScenario.from_dict(self.to_dict())
+        # Validate through the same path as JSON input, so both entry points agree (the
+        # arrays as they are: the JSON path takes arrays as well as lists, and converting
+        # every value to a Python float first cost a millisecond per built scenario)
+        ConcreteScenario.from_dict(self._arrays_dict())
+
+    def _arrays_dict(self) -> dict[str, Any]:
+        """``to_dict`` with the series left as arrays (for validation)."""
+
+        def track(tr: Track) -> dict[str, Any]:
+            out: dict[str, Any] = {"id": tr.id, "length": tr.length, "width": tr.width}
+            for key in (*_SERIES, *_OPTIONAL_SERIES):
+                out[key] = getattr(tr, key)
+            return out
+
+        return {"schema": SCHEMA, "t": self.t, "ego": track(self.ego),
+                "objects": [track(o) for o in self.objects], "params": self.params,
+                "seed": self.seed, "provenance": self.provenance}
 
     @property
     def dt(self) -> float:

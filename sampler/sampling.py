@@ -44,6 +44,9 @@ from sampler.scenario.builder import build_scenario
 
 __all__ = ["SampleSet", "estimate_p_region", "sample"]
 
+#: the derived quantities a model without training rows cannot give
+SUPPORT_QUANTITIES = ("support", "support_distance", "support_excess")
+
 FloatArray = NDArray[np.float64]
 SCHEMA = "scengen.sample-set/1"
 
@@ -93,6 +96,10 @@ class SampleSet:
     sampler_settings: dict[str, Any]
     region: Region
     model_info: dict[str, Any] = field(default_factory=dict)
+    #: each sample's data support (``sampler.model.support``: ``support`` class,
+    #: ``support_distance``, ``support_excess``, ``support_nearest``, ``density_pct``,
+    #: ``support_outside``); None when the model carries no training rows
+    support: list[dict[str, Any]] | None = None
 
     def __len__(self) -> int:
         return len(self.params)
@@ -171,6 +178,7 @@ class SampleSet:
             "constraints": self.constraints,
             "region": self.region.model_dump(),
             "model": self.model_info,
+            "support": self.support,
         }
 
     @classmethod
@@ -195,6 +203,7 @@ class SampleSet:
             sampler_settings=dict(data["sampler_settings"]),
             region=Region.model_validate(data["region"]),
             model_info=dict(data.get("model") or {}),
+            support=None if data.get("support") is None else list(data["support"]),
         )
 
 
@@ -401,8 +410,11 @@ def sample(
     for j, f in enumerate(model.features_):
         if f not in PARAM_NAMES:
             params[f] = x[:, j]
-    derived = pd.DataFrame(region.quantities(params[list(PARAM_NAMES)].to_numpy(),
-                                             list(DERIVED)))
+    full = params[list(PARAM_NAMES)].to_numpy()
+    has_support = model.support_ is not None
+    derived = pd.DataFrame(region.quantities(
+        full, [k for k in DERIVED if has_support or k not in SUPPORT_QUANTITIES]))
+    measures = model.support_measures(full, with_density=True) if has_support else None
     if not region.contains(params[list(PARAM_NAMES)].to_numpy()).all():  # pragma: no cover
         raise SamplerError("internal error: a sample violates its region")
     diag = dict(drawn.diagnostics)
@@ -426,6 +438,7 @@ def sample(
                           "use_envelope": use_envelope},
         region=region,
         model_info=_model_info(model),
+        support=None if measures is None else [measures.record(i) for i in range(n)],
     )
 
 

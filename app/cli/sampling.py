@@ -44,6 +44,8 @@ if TYPE_CHECKING:
     from sampler import CutInGMM
 
 _SUFFIXES = (".csv", ".parquet", ".pq")
+#: derived quantities a line carries in its record, not in "derived"
+_IN_RECORD = frozenset({"support", "support_distance", "support_excess", "density_pct"})
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -90,6 +92,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                    help="draw from the whole model, not the region's half-space envelope")
     s.add_argument("--lane-width", type=float, default=None, help="lane width in m")
     s.add_argument("--score", action="store_true", help="build and score every scenario")
+    s.add_argument("--wagner-scan", action="store_true",
+                   help="with --score: also alarm_time, risk_peak and Wagner's risk at the "
+                        "crossing (r_dep of the scripted ego at every step: about 2/3 of "
+                        "the scoring time)")
     s.add_argument("--scenarios", action="store_true",
                    help="include each concrete scenario (JSON form) in its line")
     s.add_argument("--workers", type=int, default=1, help="processes for scoring (1)")
@@ -246,13 +252,16 @@ def _sample(args: argparse.Namespace) -> int:
     assert ss is not None  # domain.sample keeps the sampler's set
     records = sampling_service.score_on_pool(
         drawn, workers=args.workers, score=args.score, include_scenarios=args.scenarios,
+        wagner_scan=args.wagner_scan,
         progress=(lambda d, t: progress("score", d, t)) if args.score else None)
     progress.close()
     d = ss.to_dict()
     lines = []
     for i, record in enumerate(records):
         row: dict[str, Any] = record.model_dump(exclude_none=not args.score)
-        row["derived"] = {str(k): float(v) for k, v in ss.derived.iloc[i].items()}
+        # the support quantities are in the record (with the class as a word)
+        row["derived"] = {str(k): float(v) for k, v in ss.derived.iloc[i].items()
+                          if k not in _IN_RECORD}
         row["log_density"] = d["log_density"][i]
         lines.append(jsonconv.dumps(row))
     text = "\n".join(lines) + "\n"

@@ -113,7 +113,7 @@ def sample_local(model: CutInGMM, constraints: Sequence[str], n: int, seed: int 
 
 
 def score_on_pool(drawn: domain.SampleResult, *, workers: int, score: bool,
-                  include_scenarios: bool,
+                  include_scenarios: bool, wagner_scan: bool = False,
                   progress: Callable[[int, int], None] | None = None) -> list[ScenarioRecord]:
     """Build and score the drawn vectors on a pool of ``workers`` processes that die with
     this one (``scengen sample``); records in sample order."""
@@ -121,7 +121,8 @@ def score_on_pool(drawn: domain.SampleResult, *, workers: int, score: bool,
         raise ValueError("score_on_pool: the draw has no sample set")
     with lifeline_pool(workers, _POOL) as pool:
         return score_samples(drawn.sample_set, executor=pool, score=score,
-                             include_scenarios=include_scenarios, progress=progress)
+                             include_scenarios=include_scenarios, wagner_scan=wagner_scan,
+                             progress=progress)
 
 
 def reference_draws(ctx: ServiceContext, model_id: str, model: CutInGMM) -> pd.DataFrame:

@@ -70,7 +70,8 @@ __all__ = ["evaluate_criticality"]
 def evaluate_criticality(scenario: ConcreteScenario, *, lane_width: float | None = None,
                          settings: CriticalitySettings | None = None,
                          risk_settings: RiskSettings | None = None,
-                         surfaces: InputSurfaces | None = None) -> Criticality:
+                         surfaces: InputSurfaces | None = None,
+                         wagner_scan: bool = True) -> Criticality:
     """The criticality record of one cut-in (see the module docstring and CONTRACT).
 
     Parameters
@@ -86,6 +87,10 @@ def evaluate_criticality(scenario: ConcreteScenario, *, lane_width: float | None
         Wagner's risk and the TTR scan's manoeuvres (riskcore's defaults when None).
     surfaces : InputSurfaces, optional
         Input distributions of Wagner's risk (the packaged default when None).
+    wagner_scan : bool
+        Compute ``alarm_time`` and ``risk_peak``, which need the scripted ego's r_dep at
+        the scenario's steps (most of the record's cost), and Wagner's risks at the
+        crossing; False: they are None (the risks at t_p are always computed).
 
     Returns
     -------
@@ -150,5 +155,6 @@ def evaluate_criticality(scenario: ConcreteScenario, *, lane_width: float | None
         rec[f"{name}_min_gap"] = float(gap)
     rec["r157_cc_t_brake"] = _braked(d.r157_t_brake, d.r157[0])
     rec["rss_t_brake"] = _braked(d.rss_t_brake, d.rss[0])
-    rec.update(_wagner_fields(scenario, f, t_p, t_cross, d, rs, surfaces, s))
+    rec.update(_wagner_fields(scenario, f, t_p, t_cross, d, rs, surfaces, s,
+                              scan=wagner_scan))
     return Criticality(values=rec)

@@ -156,9 +156,11 @@ def _driver_fields(name: str, label: str) -> dict[str, FieldSpec]:
 
 #: The flat record: name -> (unit, kind, meaning). The same names everywhere.
 CRITICALITY_FIELDS: dict[str, FieldSpec] = {
-    "t_p": FieldSpec("s", "float", "perception moment: the cutter has moved 0.375 m "
-                     "towards the ego lane (UN R157); null: never"),
-    "t_cross": FieldSpec("s", "float", "the cutter's centre crosses the lane marking"),
+    "t_p": FieldSpec("s", "float", "perception moment, scenario time (from the scenario's "
+                     "first sample): the cutter has moved 0.375 m towards the ego lane "
+                     "(UN R157); null: never"),
+    "t_cross": FieldSpec("s", "float", "the cutter's centre crosses the lane marking, "
+                         "scenario time (as t_p)"),
     "ttr_true": FieldSpec("s", "float", "time to react at t_p against the cutter's actual "
                           "path, s after t_p (inf: no collision at constant speed; "
                           "0: nothing avoids it)"),
@@ -166,26 +168,34 @@ CRITICALITY_FIELDS: dict[str, FieldSpec] = {
                                "nothing works; null without collision"),
     "a_req": FieldSpec("m/s²", "float", "constant deceleration needed when braking starts "
                        "0.75 s after t_p (0: none needed; inf: contact before)"),
-    "btn": FieldSpec("-", "float", "brake threat number a_req / (0.774 g); >= 1: the "
-                     "careful driver cannot prevent it"),
+    "btn": FieldSpec("-", "float", "brake threat number a_req / (0.774 g), the ranking "
+                     "(highest first); >= 1: even an instant full brake 0.75 s after t_p is "
+                     "too late. The class, not btn, says whether the careful driver (whose "
+                     "brake builds up over 0.6 s) prevents it: some cut-ins with btn below 1 "
+                     "are unpreventable"),
     "class": FieldSpec("", "str", "no_conflict | preventable | unpreventable | "
                        "unavoidable"),
     **_driver_fields("none", "ego at its scripted (constant) speed"),
     **_driver_fields("r157_cc", "UN R157 careful and competent driver"),
-    "r157_cc_t_brake": FieldSpec("s", "float", "R157 driver: braking starts (null: never)"),
+    "r157_cc_t_brake": FieldSpec("s", "float", "R157 driver: braking starts, scenario time "
+                                 "(null: never)"),
     **_driver_fields("rss", "RSS longitudinal response"),
-    "rss_t_brake": FieldSpec("s", "float", "RSS driver: braking starts (null: never)"),
+    "rss_t_brake": FieldSpec("s", "float", "RSS driver: braking starts, scenario time "
+                             "(null: never)"),
     "r_dep_tp": FieldSpec("-", "float", "Wagner's risk r_dep at t_p, scripted ego"),
     "r_ind_tp": FieldSpec("-", "float", "Wagner's r_ind at t_p, scripted ego"),
-    "r_dep_cross": FieldSpec("-", "float", "r_dep at the crossing, scripted ego"),
+    "r_dep_cross": FieldSpec("-", "float", "r_dep at the crossing, scripted ego (null: not "
+                             "asked for, wagner_scan)"),
     "r_ind_cross": FieldSpec("-", "float", "r_ind at the crossing, scripted ego"),
     "r_dep_tp_r157": FieldSpec("-", "float", "r_dep at t_p, ego = R157 driver"),
     "r_ind_tp_r157": FieldSpec("-", "float", "r_ind at t_p, ego = R157 driver"),
     "r_dep_cross_r157": FieldSpec("-", "float", "r_dep at the crossing, ego = R157 driver"),
     "r_ind_cross_r157": FieldSpec("-", "float", "r_ind at the crossing, ego = R157 driver"),
     "alarm_time": FieldSpec("s", "float", "from t_p until the scripted-ego r_dep first "
-                            "reaches 0.5 (null: never)"),
-    "risk_peak": FieldSpec("-", "float", "maximum r_dep over the run, scripted ego"),
+                            "reaches 0.5 (null: never, or not asked for: wagner_scan)"),
+    "risk_peak": FieldSpec("-", "float", "maximum r_dep over the run, scripted ego that never "
+                           "reacts, so 1 on nearly every collision course: not a ranking "
+                           "(null: not asked for, wagner_scan)"),
 }
 
 

@@ -177,13 +177,18 @@ class _Wagner:
 
 def _wagner_fields(scenario: ConcreteScenario, f: _Frames, t_p: float | None,
                    t_cross: float | None, d: _Drivers, rs: RiskSettings,
-                   surfaces: InputSurfaces | None, s: CriticalitySettings
-                   ) -> dict[str, float | bool | str | None]:
+                   surfaces: InputSurfaces | None, s: CriticalitySettings,
+                   scan: bool = True) -> dict[str, float | bool | str | None]:
+    """Wagner's risk fields of the record. ``scan=False`` keeps the scenes at t_p (scripted
+    and R157 ego) and leaves out the rest (null): the scenes at the crossing and what
+    needs r_dep at every step of the run (``alarm_time``, ``risk_peak``), which cost more
+    than the rest of the record together (the peak is 1 for nearly every cut-in on a
+    collision course: the scripted ego never reacts)."""
     w = _Wagner(scenario, f, rs, surfaces or default_surfaces(), s)
     out: dict[str, float | bool | str | None] = {}
     t_b = d.r157_t_brake
     for label, when in (("tp", t_p), ("cross", t_cross)):
-        if when is None:
+        if when is None or (label == "cross" and not scan):
             for suffix in ("", "_r157"):
                 out[f"r_dep_{label}{suffix}"] = None
                 out[f"r_ind_{label}{suffix}"] = None
@@ -192,6 +197,10 @@ def _wagner_fields(scenario: ConcreteScenario, f: _Frames, t_p: float | None,
         out[f"r_dep_{label}"], out[f"r_ind_{label}"] = sc
         sr = sc if math.isnan(t_b) else w.scene(when, t_b)
         out[f"r_dep_{label}_r157"], out[f"r_ind_{label}_r157"] = sr
+    if not scan:
+        out["alarm_time"] = None
+        out["risk_peak"] = None
+        return out
     t = w.t
     cache: dict[int, float] = {}
     contact = d.none[0]

@@ -54,6 +54,7 @@ from scipy import stats
 from sampler.errors import EmptyRegionError, LevelsNotConvergedError, SamplerError
 from sampler.methods.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
 from sampler.model.gmm import CutInGMM
+from sampler.model.support import support_margin
 from sampler.region.constraints import OPERATORS, Region
 from sampler.region.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 
@@ -402,8 +403,10 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     crit = [name for name in names if name in CRITICALITY_QUANTITIES]
     flat = any(c.name in FLAT_VALUES for c in cons)
     extra = ["gap", "dv"] if flat or "ttc" in names else []
+    # the support classes' continuous margin (support_margin) needs both of these
+    support_extra = ["support_distance", "support_excess"] if "support" in names else []
     other = sorted({*(n for n in names if n not in CRITICALITY_QUANTITIES and n != "ttc"),
-                    *extra})
+                    *extra, *support_extra})
     with_ttr = "ttr_true" in crit  # the TTR scan is the costliest part: only when asked
     kin_cons = [c for c in cons if c.name not in CRITICALITY_QUANTITIES]
     crit_cons = [c for c in cons if c.name in CRITICALITY_QUANTITIES]
@@ -424,6 +427,9 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
         """The constraint's unscaled margin (the continuous one for ttc)."""
         if c.name == "ttc":
             return ttc_margin(q["gap"], q["dv"], c.op, float(c.value))
+        if c.name == "support":  # the class codes are flat: a continuous margin instead
+            return support_margin(model, q["support_distance"], q["support_excess"], c.op,
+                                  float(c.value))
         sgn = 1.0 if c.op in ("<", "<=") else -1.0
         return sgn * (q[c.name] - float(c.value))
 
@@ -480,7 +486,8 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
                 m = np.where(outside, max(base, 0.0) + np.logaddexp(0.0, h), m)
         # a strict constraint excludes its threshold (discrete quantities such as ttr_true,
         # a multiple of the step, put mass on it): margin 0 counts as outside
-        return np.where(m == 0.0, tiny, m) if c.op in "<>" else m
+        # (support_margin places its own boundary)
+        return np.where(m == 0.0, tiny, m) if c.op in "<>" and c.name != "support" else m
 
     def largest(q: dict[str, FloatArray], group: list[Any]) -> FloatArray:
         with np.errstate(invalid="ignore", over="ignore"):

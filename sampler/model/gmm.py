@@ -44,7 +44,12 @@ from sampler.intervals import clopper_pearson
 from sampler.model import memo
 from sampler.model.fit_report import fit_report, report_text
 from sampler.model.io import FORMAT, model_from_dict, model_to_dict
-from sampler.model.support import density_percentile
+from sampler.model.support import (
+    SupportMeasures,
+    density_percentile,
+    support_dict,
+    support_measures,
+)
 from sampler.model.transforms import FeatureTransform, transform_spec
 
 __all__ = ["FORMAT", "CutInGMM", "clopper_pearson"]
@@ -130,6 +135,9 @@ class CutInGMM:
     exposure_: dict[str, Any] | None = None
     bootstrap_: dict[str, Any] | None = None
     tail_calibration_: dict[str, Any] | None = None
+    #: the training rows and the data-support rule (``sampler.model.support``); None for a
+    #: model file written before data support
+    support_: dict[str, Any] | None = None
 
     def __init__(
         self,
@@ -286,6 +294,7 @@ class CutInGMM:
                           _full_covariances(gm, d))
         self.bic_curve_ = curve
         self.training_ = {"n_rows": n, "sha256": self._hash(x, features), "source": source}
+        self.support_ = support_dict(x, features)
         self.sklearn_version_ = sklearn.__version__
         self.fit_report_ = self._report(x, z, logj, best[0])
         return self
@@ -479,6 +488,14 @@ class CutInGMM:
         share of the model's physical cut-ins less probable than each
         (:mod:`sampler.model.support`)."""
         return density_percentile(self, np.asarray(params, dtype=np.float64))
+
+    def support_measures(self, params: ArrayLike, *, with_density: bool = False
+                         ) -> SupportMeasures:
+        """How far full parameter vectors (n, 8) in ``PARAM_NAMES`` order lie from the
+        training data: per parameter, nearest real cut-in, class
+        (:mod:`sampler.model.support`)."""
+        return support_measures(self, np.asarray(params, dtype=np.float64),
+                                with_density=with_density)
 
     def params_matrix(self, x: ArrayLike) -> FloatArray:
         """Full parameter vectors (n, 8) in ``PARAM_NAMES`` order from model features (n, d).

@@ -16,6 +16,7 @@ import sklearn
 
 from datasets import DEFAULT_LANE_WIDTH, PARAM_NAMES
 from sampler.errors import ModelError
+from sampler.model.support import check_support_dict
 from sampler.model.transforms import FeatureTransform, transform_spec
 
 if TYPE_CHECKING:
@@ -49,6 +50,9 @@ def model_to_dict(model: CutInGMM) -> dict[str, Any]:
         "exposure": getattr(model, "exposure_", None),
         "bootstrap": getattr(model, "bootstrap_", None),
         "tail_calibration": getattr(model, "tail_calibration_", None),
+        # issue 25: the training rows and the data-support rule (sampler.model.support);
+        # absent in older files, which still load (without data support)
+        "support": getattr(model, "support_", None),
         "settings": {"k_range": list(model.k_range), "n_init": model.n_init,
                      "reg_covar": model.reg_covar, "max_iter": model.max_iter,
                      "random_state": model.random_state, "cv_folds": model.cv_folds,
@@ -132,6 +136,10 @@ def model_from_dict(cls: type[CutInGMM], data: Any) -> CutInGMM:
     boot = getattr(model, "bootstrap_", None)
     if boot is not None:
         _check_bootstrap(boot, len(features), int(model.n_components_))
+    support = data.get("support")
+    if support is not None:
+        check_support_dict(support, features, model.training_.get("sha256"))
+        model.support_ = dict(support)
     return model
 
 

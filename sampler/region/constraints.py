@@ -7,10 +7,15 @@ the conjunction of its constraints and, unless switched off, the physical bounds
 ``PHYSICAL_BOUNDS`` (the vectors a real car could drive: positive speeds, positive gap,
 non-negative durations, a lane change that actually crosses the marking).
 
-Derived quantities (road frame, SI units; ``t = 0`` is the start of the lateral motion)::
+Derived quantities (road frame, SI units; the motion is described from ``t = 0``, the start
+of the lateral motion, but the two moments ``t_cross`` and ``t_p`` are reported in scenario
+time, as in the built scenario: t = 0 at its first sample, the lateral motion starting at
+the builder's lead-in of 2.5 s)::
 
     ttc           s    gap / dv at the crossing moment if dv > 0, else +inf
-    t_cross       s    crossing moment: first t with |y(t)| = lane_width / 2 (NaN if never)
+    t_cross       s    crossing moment: first t with |y(t)| = lane_width / 2 (NaN if never),
+                       in *scenario time* like t_p: the built scenario's lead-in (2.5 s)
+                       plus the time from the start of the lateral motion
     v_cross       m/s  cutter speed at t_cross
     v_ego         m/s  ego speed = v_cross + dv (the ego drives at constant speed)
     thw           s    gap / v_ego (+inf if v_ego <= 0)
@@ -48,6 +53,15 @@ Model quantities (``sampler.model.support``; need the model, which ``sample`` an
 
     density_pct       -     share of the model's physical cut-ins less probable than this
                             one (0: beyond every reference draw; caps extrapolation)
+    support           -     data support class: 0 inside, 1 near, 2 extrapolated; also
+                            written with words: support!=extrapolated, support==inside,
+                            support<=near
+    support_distance  -     distance to the nearest real cut-in of the training data in the
+                            model's standardised transformed space
+    support_excess    sd    largest excess of a parameter beyond the training data's range,
+                            in the data's standard deviations (0: inside every range)
+
+Model quantities are evaluated after the cheap constraints, on the rows still inside.
 
 Short form (CLI): ``ttc<3``, ``v_ego>=20``, ``lat_offset > -0.5`` — a name, one of the
 operators ``< <= > >=`` and a finite number, parsed by a regular expression (never eval).
@@ -55,6 +69,7 @@ operators ``< <= > >=`` and a finite number, parsed by a regular expression (nev
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -63,7 +78,15 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from datasets import DEFAULT_LANE_WIDTH, PARAM_NAMES, ttc_from_gap_dv
 from riskcore.criticality import CriticalitySettings
@@ -71,12 +94,14 @@ from sampler.errors import ConstraintError
 from sampler.region.btn_bound import btn_bound
 from sampler.region.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from sampler.region.kinematics import crossing_kinematics, plateau_speeds
+from sampler.scenario.builder import DEFAULT_LEAD_IN
 
 __all__ = [
     "DERIVED",
     "OPERATORS",
     "PHYSICAL_BOUNDS",
     "QUANTITY_NAMES",
+    "SUPPORT_CLASSES",
     "Constraint",
     "Region",
     "derive",
@@ -110,7 +135,8 @@ DERIVED: dict[str, _Quantity] = {
     "direction": _Quantity("-", "+1 if the cutter moves left (p_y1 > 0), else -1", False),
     "psi_max": _Quantity("rad", "peak heading 2 |p_y1| p_t / pi", False),
     "v_cut_min": _Quantity("m/s", "the cutter's lowest speed at any time", False),
-    "t_cross": _Quantity("s", "crossing moment (|y| = lane_width / 2)", True),
+    "t_cross": _Quantity("s", "crossing moment (|y| = lane_width / 2), scenario time (lead-in "
+                         "2.5 s included, like t_p)", True),
     "v_cross": _Quantity("m/s", "cutter speed at the crossing moment", True),
     "v_ego": _Quantity("m/s", "ego speed = v_cross + dv", True),
     "thw": _Quantity("s", "gap / v_ego at the crossing moment", True),
@@ -126,7 +152,21 @@ DERIVED: dict[str, _Quantity] = {
        for name, (unit, doc) in CRITICALITY_QUANTITIES.items()},
     "density_pct": _Quantity("-", "share of the model's physical cut-ins less probable than "
                              "this one (sampler.model.support)", False, model=True),
+    "support": _Quantity("-", "data support class: 0 inside, 1 near, 2 extrapolated; words "
+                         "allowed: support!=extrapolated, support==inside "
+                         "(sampler.model.support)", False, model=True),
+    "support_distance": _Quantity("-", "distance to the nearest real cut-in of the training "
+                                  "data in the model's standardised space "
+                                  "(sampler.model.support)", False, model=True),
+    "support_excess": _Quantity("sd", "largest excess of a parameter beyond the training "
+                                "data's range, in the data's standard deviations (0: inside "
+                                "every range)", False, model=True),
 }
+
+#: the data-support classes in order (``sampler.model.support.CLASSES``): a vector's
+#: ``support`` value is its position
+SUPPORT_CLASSES: tuple[str, ...] = ("inside", "near", "extrapolated")
+_SUPPORT_NAMES = ("support", "support_distance", "support_excess")
 
 #: Every name a constraint may use.
 QUANTITY_NAMES: tuple[str, ...] = (*PARAM_NAMES, *DERIVED)
@@ -141,13 +181,24 @@ class Constraint(BaseModel):
     op: str = Field(description="one of < <= > >=")
     value: float = Field(description="threshold in the quantity's SI unit; finite")
 
+    @model_validator(mode="before")
+    @classmethod
+    def _support_words(cls, data: Any) -> Any:
+        """``{"name": "support", "op": "!=", "value": "extrapolated"}`` in JSON too; every
+        support constraint in one form (``<=`` or ``>=`` a class code), so that equal sets
+        are equal constraints."""
+        if isinstance(data, Mapping) and data.get("name") == "support":
+            op, value = _support_comparison(str(data.get("op")), str(data.get("value")),
+                                            f"support{data.get('op')}{data.get('value')}")
+            return {**data, "op": op, "value": value}
+        return data
+
     @field_validator("name")
     @classmethod
     def _known_name(cls, v: str) -> str:
         if v not in QUANTITY_NAMES:
-            raise ValueError(
-                f"unknown quantity {v!r}; valid names: {', '.join(QUANTITY_NAMES)}"
-            )
+            raise ValueError(f"unknown quantity {v!r}{did_you_mean(v)}; valid names: "
+                             f"{', '.join(QUANTITY_NAMES)}")
         return v
 
     @field_validator("op")
@@ -177,7 +228,20 @@ class Constraint(BaseModel):
             return 0
         return 2 if q.criticality else 1
 
+    @property
+    def needs_model(self) -> bool:
+        """True for the model quantities (``density_pct``, ``support``, ...)."""
+        q = DERIVED.get(self.name)
+        return q is not None and q.model
+
     def __str__(self) -> str:
+        if self.name == "support":
+            allowed = tuple(k for k in range(len(SUPPORT_CLASSES))
+                            if bool(OPERATORS[self.op](np.full(1, float(k)), self.value)[0]))
+            words = {(0,): "==inside", (0, 1): "!=extrapolated", (1, 2): "!=inside",
+                     (2,): "==extrapolated"}
+            if allowed in words:
+                return f"support{words[allowed]}"
         return f"{self.name}{self.op}{self.value:g}"
 
     def mask(self, values: FloatArray) -> BoolArray:
@@ -203,6 +267,63 @@ _SHORT = re.compile(
 )
 
 
+def did_you_mean(name: str) -> str:
+    """``"; did you mean 'ttc'?"`` for a name close to a quantity's, else ``""``."""
+    close = difflib.get_close_matches(name, QUANTITY_NAMES, n=3, cutoff=0.6)
+    if not close:
+        close = [q for q in QUANTITY_NAMES if q.lower() == name.lower()]
+    if not close:
+        return ""
+    return "; did you mean " + " or ".join(repr(c) for c in close) + "?"
+
+
+def _support_comparison(op: str, raw: str, text: str) -> tuple[str, float]:
+    """``support`` compared with a class word (or ``==``/``!=`` a class) as one of the
+    four operators on the class codes (0 inside, 1 near, 2 extrapolated)."""
+    word = raw.strip().strip("'\"").lower()
+    last = len(SUPPORT_CLASSES) - 1
+    if word in SUPPORT_CLASSES:
+        k = SUPPORT_CLASSES.index(word)
+    else:
+        try:
+            k = int(float(word))
+        except (ValueError, OverflowError):
+            raise ConstraintError(
+                f"constraint {text!r}: support is one of {', '.join(SUPPORT_CLASSES)}, got "
+                f"{raw!r}", field="value", problem="unknown class", value=raw,
+                constraint=text) from None
+        if k not in range(len(SUPPORT_CLASSES)) or float(word) != k:
+            raise ConstraintError(
+                f"constraint {text!r}: support is one of {', '.join(SUPPORT_CLASSES)} "
+                f"(0, 1, 2), got {raw!r}", field="value", problem="unknown class",
+                value=raw, constraint=text)
+    if op == "<":
+        return "<=", float(k - 1)
+    if op == ">":
+        return ">=", float(k + 1)
+    if op in ("<=", ">="):
+        return op, float(k)
+    if op in ("==", "="):
+        if k == 0:
+            return "<=", 0.0
+        if k == last:
+            return ">=", float(last)
+    elif op == "!=":
+        if k == 0:
+            return ">=", 1.0
+        if k == last:
+            return "<=", float(last - 1)
+    else:
+        raise ConstraintError(f"constraint {text!r}: unknown operator {op!r}; valid "
+                              f"operators: {' '.join(OPERATORS)} == !=", field="op",
+                              problem="unknown operator", value=op, constraint=text)
+    raise ConstraintError(
+        f"constraint {text!r}: 'near' lies between the other two classes; use "
+        "'support>=near' and 'support<=near' (two constraints) for support==near, or "
+        "'support!=extrapolated' / 'support!=inside'", field="value",
+        problem="not one comparison", value=raw, constraint=text)
+
+
 def parse_constraint(text: str) -> Constraint:
     """Parse the short form ``name op value`` (e.g. ``"ttc<3"``, ``"v_ego >= 20"``).
 
@@ -222,15 +343,18 @@ def parse_constraint(text: str) -> Constraint:
             f"(operators: {' '.join(OPERATORS)})", problem="malformed", value=text,
             constraint=text)
     name, op, raw = m.group("name"), m.group("op"), m.group("value")
+    if name == "support":
+        op_s, value_s = _support_comparison(op, raw, text)
+        return Constraint(name=name, op=op_s, value=value_s)
     if op not in OPERATORS:
         raise ConstraintError(
             f"constraint {text!r}: unknown operator {op!r}; valid operators: {' '.join(OPERATORS)}",
             field="op", problem="unknown operator", value=op, constraint=text)
     if name not in QUANTITY_NAMES:
         raise ConstraintError(
-            f"constraint {text!r}: unknown quantity {name!r}; valid names: "
-            f"{', '.join(QUANTITY_NAMES)}", field="name", problem="unknown quantity", value=name,
-            constraint=text)
+            f"constraint {text!r}: unknown quantity {name!r}{did_you_mean(name)} (valid "
+            f"names: {', '.join(QUANTITY_NAMES)})", field="name", problem="unknown quantity",
+            value=name, constraint=text)
     try:
         value = float(raw)
     except ValueError:
@@ -333,16 +457,23 @@ class _Quantities:
                 if name != "ttr_true":
                     del q["ttr_true"]
                 c.update(q)
-            elif name == "density_pct":
+            elif name == "density_pct" or name in _SUPPORT_NAMES:
                 if self.model is None:
-                    raise ConstraintError("density_pct needs the model: use sample() or "
+                    raise ConstraintError(f"{name} needs the model: use sample() or "
                                           "estimate_p_region(), or Region.bind(model)")
                 # the model knows its own support (sampler.model.support); the region only
                 # asks it, so that this layer does not import the model's
-                c[name] = np.asarray(self.model.density_percentile(self.p), dtype=np.float64)
+                if name == "density_pct":
+                    c[name] = np.asarray(self.model.density_percentile(self.p),
+                                         dtype=np.float64)
+                else:
+                    sm = self.model.support_measures(self.p)
+                    c["support"] = np.asarray(sm.code, dtype=np.float64)
+                    c["support_distance"] = np.asarray(sm.distance, dtype=np.float64)
+                    c["support_excess"] = np.asarray(sm.largest, dtype=np.float64)
             elif name in DERIVED:
                 kin = crossing_kinematics(self.p, self.lane_width / 2.0)
-                c["t_cross"] = kin.t_cross
+                c["t_cross"] = kin.t_cross + DEFAULT_LEAD_IN  # scenario time, as t_p
                 c["v_cross"] = kin.v_cross
                 c["v_ego"] = kin.v_cross + col["dv"]
                 c["thw"] = np.where(c["v_ego"] > 0, col["gap"] / np.where(
@@ -473,16 +604,22 @@ class Region(BaseModel):
         return " & ".join(parts) if parts else "everything"
 
     def _mask(self, arr: FloatArray, constraints: Sequence[Constraint]) -> BoolArray:
+        needs = [c.name for c in constraints if c.needs_model]
+        if needs and self._model is None:
+            raise ConstraintError(f"{needs[0]} needs the model: use sample() or "
+                                  "estimate_p_region(), or Region.bind(model)")
         mask: BoolArray = np.asarray(np.isfinite(arr).all(axis=1), dtype=bool)
         q = _Quantities(arr, self.lane_width, self._model)
         for c in constraints:
-            if c.tier == 0:
+            if c.tier == 0 and not c.needs_model:
                 mask &= c.mask(q[c.name])
-        # the costly groups only on the rows that are still in: the btn bound (stated or
+        # the costly groups only on the rows that are still in: the model quantities (a
+        # density and a nearest-neighbour query per row), the btn bound (stated or
         # implied; cheap where it is far below its limit), the kinematics, the criticality
         bound = [c for c in (*constraints, *implied_bounds(constraints))
                  if c.name == "btn_bound"]
-        groups = (bound, [c for c in constraints if c.tier == 1 and c.name != "btn_bound"],
+        groups = ([c for c in constraints if c.needs_model], bound,
+                  [c for c in constraints if c.tier == 1 and c.name != "btn_bound"],
                   [c for c in constraints if c.tier == 2])
         for costly in groups:
             idx = np.flatnonzero(mask)

@@ -15,7 +15,14 @@ from sampler.scenario.builder import (
     DEFAULT_VEHICLE_SIZE,
     build_scenario,
 )
-from sampler.scenario.record import SCORE_FIELDS, ScenarioRecord, score_rows, score_vector
+from sampler.scenario.record import (
+    SCORE_FIELDS,
+    SUPPORT_FIELDS,
+    OutsideParameter,
+    ScenarioRecord,
+    score_rows,
+    score_vector,
+)
 from sampler.scenario.scoring import score_part, score_samples
 
 __all__ = [
@@ -24,6 +31,8 @@ __all__ = [
     "DEFAULT_LEAD_IN",
     "DEFAULT_VEHICLE_SIZE",
     "SCORE_FIELDS",
+    "SUPPORT_FIELDS",
+    "OutsideParameter",
     "ScenarioRecord",
     "build_scenario",
     "score_part",

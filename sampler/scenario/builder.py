@@ -25,7 +25,7 @@ Geometry (road frame: x along the road, y to the left, positions are vehicle cen
   ``datasets.cutin_model.motion``: yaw rate ``p_y1 sin(pi tau / p_t)``, the acceleration
   pulse ``(p_a1, p_a2, p_a3)``, speed ``p_v0`` at ``tau = 0``. Before ``tau = 0`` it drives
   straight (at constant speed unless the pulse starts earlier).
-* Crossing moment ``tau_c = crossing_time(p, lane_width / 2)``: the cutter's centre is on
+* Crossing moment ``tau_c = trajectory(p).crossing_time(lane_width / 2)``: the cutter's centre is on
   the lane marking. The cutter's initial x is chosen so that at ``tau_c`` the
   bumper-to-bumper gap ``x_cut - x_ego - (length_cut + length_ego) / 2`` equals ``gap``;
   ``dv = v_ego - v_cut(tau_c)`` holds by the choice of ``v_ego``. Both hold exactly on the
@@ -49,9 +49,9 @@ from datasets import (
     PARAM_NAMES,
     CutInParamError,
     CutInParams,
-    crossing_time,
-    motion,
+    CutInTrajectory,
     speed,
+    trajectory,
 )
 from riskcore import ConcreteScenario, Track
 from riskcore.criticality import conflict_resolution
@@ -168,8 +168,9 @@ def build_scenario(
     cut_len, cut_wid = _size(cutter_size, "cutter_size")
     if p.p_y1 == 0.0:
         raise BuilderError("params.p_y1: is 0, the cutter would not change lanes")
+    path = trajectory(p)  # integrated once: the crossing and both grids below use it
     try:
-        tau_c = crossing_time(p, lane_width / 2.0)
+        tau_c = path.crossing_time(lane_width / 2.0)
     except CutInParamError as exc:
         raise BuilderError(f"params: {exc}") from None
     v_cut_c = float(speed(p, tau_c))
@@ -179,8 +180,8 @@ def build_scenario(
             f"params: ego speed v_cutter(t_cross) + dv = {v_cut_c:.3f} + {p.dv:.3f} m/s "
             "is not positive"
         )
-    geometry = _Geometry(p, lead_in, tau_c, v_ego, lane_width, ego_len, ego_wid, cut_len,
-                         cut_wid)
+    geometry = _Geometry(p, path, lead_in, tau_c, v_ego, lane_width, ego_len, ego_wid,
+                         cut_len, cut_wid)
     # after t_settle nothing changes speed or heading: the resolution is exact from there
     pulse_end = p.p_a2 + p.p_a3 if p.p_a3 > 0 else 0.0
     t_settle = lead_in + max(2.0 * p.p_t, pulse_end, 0.0)
@@ -240,10 +241,11 @@ def build_scenario(
 class _Geometry:
     """The ego and cutter tracks of one vector on any time grid (module docstring)."""
 
-    def __init__(self, p: CutInParams, lead_in: float, tau_c: float, v_ego: float,
-                 lane_width: float, ego_len: float, ego_wid: float, cut_len: float,
-                 cut_wid: float) -> None:
+    def __init__(self, p: CutInParams, path: CutInTrajectory, lead_in: float, tau_c: float,
+                 v_ego: float, lane_width: float, ego_len: float, ego_wid: float,
+                 cut_len: float, cut_wid: float) -> None:
         self.p = p
+        self.path = path
         self.lead_in = lead_in
         self.tau_c = tau_c
         self.v_ego = v_ego
@@ -254,8 +256,8 @@ class _Geometry:
     def tracks(self, t: np.ndarray) -> tuple[Track, Track]:
         p = self.p
         tau = t - self.lead_in
-        # one call, one integration grid: the crossing point is consistent with the samples
-        m = motion(p, np.concatenate([tau, [self.tau_c]]))
+        # one integration: the crossing point is consistent with the samples
+        m = self.path.motion(np.concatenate([tau, [self.tau_c]]))
         if (m.v[:-1] < 0).any():
             raise BuilderError("params: the cutter's speed becomes negative within the "
                                "scenario")

@@ -37,7 +37,8 @@ from riskcore import ConcreteScenario, InputSurfaces, RiskSettings
 from riskcore.criticality import CRITICALITY_FIELDS, CriticalitySettings, evaluate_criticality
 from sampler.scenario.builder import build_scenario
 
-__all__ = ["SCORE_FIELDS", "ScenarioRecord", "score_rows", "score_vector"]
+__all__ = ["SCORE_FIELDS", "SUPPORT_FIELDS", "OutsideParameter", "ScenarioRecord",
+           "score_rows", "score_vector"]
 
 #: the record's score fields: the criticality record's flat names, in order (all None when
 #: unscored or on error)
@@ -54,6 +55,23 @@ def _criticality(name: str) -> Any:
     return Field(default=None, description=_doc(name))
 
 
+class OutsideParameter(BaseModel):
+    """A parameter of the vector outside the range of the data the model was fitted on."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str = Field(description="the parameter")
+    excess: float = Field(description="beyond the data's range, in the parameter's unit: "
+                          "+ above the largest value seen, - below the smallest")
+    excess_sd: float = Field(description="|excess| in standard deviations of the data")
+    unit: str = Field(description="the parameter's unit")
+
+
+#: the record's data-support fields (``sampler.model.support``; docs/sampler.md)
+SUPPORT_FIELDS: tuple[str, ...] = ("support", "support_distance", "support_excess",
+                                   "support_nearest", "density_pct", "support_outside")
+
+
 class ScenarioRecord(BaseModel):
     """A sampled cut-in with its scores: one row of a catalogue, one item of
     ``POST /scenarios``, one line of ``scengen sample --score``."""
@@ -63,9 +81,29 @@ class ScenarioRecord(BaseModel):
 
     index: int = Field(description="position in the request or catalogue (0 .. n-1)")
     params: dict[str, float] = Field(description="the cut-in parameter vector (SI units)")
-    ttc: float = Field(description="initial time to collision gap / dv in s (+inf: opening)")
+    ttc: float = Field(description="time to collision gap / dv in s at the moment the "
+                       "cutter's centre crosses the lane marking (+inf: not closing)")
     exposure_weight: float | None = Field(
         default=None, description="the scenario's share of P(A) (weight for rates on the road)")
+    # what the data support (sampler.model.support; null: the model has no training rows)
+    support: str | None = Field(
+        default=None, description="data support: inside (among the real cut-ins the model "
+        "was fitted on), near, or extrapolated (the model invents it); docs/sampler.md")
+    support_distance: float | None = Field(
+        default=None, description="distance to the nearest real cut-in in the model's "
+        "standardised transformed space (1 = one standard deviation of the data)")
+    support_excess: float | None = Field(
+        default=None, description="largest excess of a parameter beyond the data's range, "
+        "in the data's standard deviations (0: every parameter inside the range)")
+    support_nearest: int | None = Field(
+        default=None, description="row of the nearest real cut-in in the model's training "
+        "table")
+    density_pct: float | None = Field(
+        default=None, description="share of the model's physical cut-ins less probable than "
+        "this one (the model's own view of how unusual it is)")
+    support_outside: list[OutsideParameter] | None = Field(
+        default=None, description="the parameters outside the data's range, largest excess "
+        "first")
     # the criticality record (riskcore.criticality.CRITICALITY_FIELDS; null: not scored)
     t_p: float | None = _criticality("t_p")
     t_cross: float | None = _criticality("t_cross")
@@ -101,6 +139,14 @@ class ScenarioRecord(BaseModel):
         default=None, description="the concrete scenario (scengen.concrete-scenario/1) when "
         "asked for")
 
+    def support_fields(self) -> dict[str, Any]:
+        """The data-support fields (``SUPPORT_FIELDS``) as a flat dict (the outside
+        parameters as plain dicts)."""
+        out: dict[str, Any] = {name: getattr(self, name) for name in SUPPORT_FIELDS}
+        if self.support_outside is not None:
+            out["support_outside"] = [o.model_dump() for o in self.support_outside]
+        return out
+
     def scores(self) -> dict[str, float | bool | str | None]:
         """The score fields (``SCORE_FIELDS``, the criticality record) as a flat dict."""
         return {name: getattr(self, "class_" if name == "class" else name)
@@ -115,12 +161,14 @@ def score_vector(
     seed: int | None = None,
     provenance: Mapping[str, Any] | None = None,
     exposure_weight: float | None = None,
+    support: Mapping[str, Any] | None = None,
     score: bool = True,
     include_scenario: bool = False,
     builder_kwargs: Mapping[str, Any] | None = None,
     settings: RiskSettings | None = None,
     surfaces: InputSurfaces | None = None,
     criticality: CriticalitySettings | None = None,
+    wagner_scan: bool = False,
 ) -> tuple[ScenarioRecord, ConcreteScenario | None]:
     """Build and score one parameter vector.
 
@@ -138,6 +186,9 @@ def score_vector(
         Merged into the scenario's provenance.
     exposure_weight : float, optional
         Copied to the record.
+    support : mapping, optional
+        The vector's data support (``SUPPORT_FIELDS``, from the model:
+        ``CutInGMM.support_measures(...).record(i)``), copied to the record.
     score : bool
         False: build nothing unless ``include_scenario`` (the record has no scores).
     include_scenario : bool
@@ -149,6 +200,11 @@ def score_vector(
         scan (defaults when None).
     criticality : CriticalitySettings, optional
         The reference drivers' settings (defaults when None).
+    wagner_scan : bool
+        Also ``alarm_time`` and ``risk_peak`` (Wagner's r_dep of the scripted ego at every
+        step until it reaches the level: about two thirds of the record's cost; the peak
+        is 1 for 97 % of a ``ttc<3`` catalogue) and the risks at the crossing
+        (``r_dep_cross`` ...). Default False: null; the risks at t_p are always there.
 
     Returns
     -------
@@ -159,6 +215,8 @@ def score_vector(
     fields: dict[str, Any] = {"index": index, "params": vector,
                               "ttc": float(ttc_from_gap_dv(vector["gap"], vector["dv"])),
                               "exposure_weight": exposure_weight}
+    if support is not None:
+        fields.update({k: support[k] for k in SUPPORT_FIELDS if k in support})
     if not (score or include_scenario):
         return ScenarioRecord(**fields), None
     kwargs: dict[str, Any] = dict(builder_kwargs or {})
@@ -173,7 +231,8 @@ def score_vector(
     if score:
         try:
             crit = evaluate_criticality(scenario, lane_width=lane_width, settings=criticality,
-                                        risk_settings=settings, surfaces=surfaces)
+                                        risk_settings=settings, surfaces=surfaces,
+                                        wagner_scan=wagner_scan)
         except ValueError as exc:  # riskcore's errors are ValueErrors
             return ScenarioRecord(**fields, error=f"score: {exc}"), scenario
         fields.update(crit.to_record())
@@ -186,13 +245,15 @@ def score_rows(
     start: int = 0,
     exposure_weights: Sequence[float] | np.ndarray | float | None = None,
     provenance: Callable[[int], Mapping[str, Any]] | None = None,
+    support: Sequence[Mapping[str, Any] | None] | None = None,
     **kwargs: Any,
 ) -> Iterator[tuple[ScenarioRecord, ConcreteScenario | None]]:
     """:func:`score_vector` of every row of a parameter table (columns ``PARAM_NAMES``),
     with indices ``start, start + 1, ...``.
 
     ``exposure_weights`` is one weight per row or one for all; ``provenance(index)`` gives
-    each scenario's provenance; ``kwargs`` go to :func:`score_vector`.
+    each scenario's provenance; ``support`` one data-support dict per row (or None);
+    ``kwargs`` go to :func:`score_vector`.
     """
     names = list(PARAM_NAMES)
     values = table[names].to_numpy(dtype=np.float64)
@@ -205,5 +266,6 @@ def score_rows(
         index = start + k
         yield score_vector(dict(zip(names, row, strict=True)), index=index,
                            exposure_weight=weights[k],
+                           support=None if support is None else support[k],
                            provenance=None if provenance is None else provenance(index),
                            **kwargs)

@@ -49,11 +49,14 @@ def _provenance(index: int) -> dict[str, Any]:
 
 @single_threaded
 def score_part(table: pd.DataFrame, start: int, weights: list[float] | None,
-               kwargs: dict[str, Any]) -> list[ScenarioRecord]:
+               kwargs: dict[str, Any], support: list[dict[str, Any] | None] | None = None
+               ) -> list[ScenarioRecord]:
     """Records of the rows of ``table`` with indices ``start, start + 1, ...`` (a pool
-    task: module-level, picklable; the scenarios' provenance is their sample index)."""
+    task: module-level, picklable; the scenarios' provenance is their sample index);
+    ``support``: each row's data support (``SampleSet.support``), copied to its record."""
     return [record for record, _ in score_rows(table, start=start, exposure_weights=weights,
-                                                provenance=_provenance, **kwargs)]
+                                                provenance=_provenance, support=support,
+                                                **kwargs)]
 
 
 def _is_sample_set(samples: object) -> TypeGuard[_Samples]:
@@ -91,6 +94,7 @@ def score_samples(
     surfaces: InputSurfaces | None = None,
     score: bool = True,
     include_scenarios: bool = False,
+    wagner_scan: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[ScenarioRecord]:
     """Build and score every sample; records in input order.
@@ -112,6 +116,8 @@ def score_samples(
         False: only build (with ``include_scenarios``) or nothing; the records have no scores.
     include_scenarios : bool
         Put each scenario's JSON form in its record (~20 kB each).
+    wagner_scan : bool
+        Also ``alarm_time`` and ``risk_peak`` (``score_vector``; most of the cost).
     progress : callable(done, total), optional
 
     Returns
@@ -123,24 +129,29 @@ def score_samples(
     table = _table(samples)
     kw: dict[str, Any] = {"builder_kwargs": dict(builder_kwargs or {}), "settings": settings,
                           "surfaces": surfaces, "score": score,
-                          "include_scenario": include_scenarios}
+                          "include_scenario": include_scenarios,
+                          "wagner_scan": wagner_scan}
     weights: list[float] | None = None
+    support: list[dict[str, Any] | None] | None = None
     if _is_sample_set(samples):
         kw["lane_width"] = samples.lane_width
         kw["seed"] = samples.seed
         weights = [float(w) for w in samples.exposure_weights]
+        support = getattr(samples, "support", None)
     total = len(table)
     starts = list(range(0, total, chunk_size))
     parts = [(table.iloc[s:s + chunk_size].reset_index(drop=True), s,
-              None if weights is None else weights[s:s + chunk_size]) for s in starts]
+              None if weights is None else weights[s:s + chunk_size],
+              None if support is None else support[s:s + chunk_size]) for s in starts]
     out: list[ScenarioRecord] = []
     if executor is None or len(parts) <= 1:
-        for part, start, w in parts:
-            out.extend(score_part(part, start, w, kw))
+        for part, start, w, sup in parts:
+            out.extend(score_part(part, start, w, kw, sup))
             if progress is not None:
                 progress(len(out), total)
         return out
-    futures = [executor.submit(score_part, part, start, w, kw) for part, start, w in parts]
+    futures = [executor.submit(score_part, part, start, w, kw, sup)
+               for part, start, w, sup in parts]
     for fut in futures:
         out.extend(fut.result())
         if progress is not None:

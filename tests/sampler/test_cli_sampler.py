@@ -64,7 +64,19 @@ def test_sample_with_score(model_path: Path, tmp_path: Path) -> None:
     assert main(["sample", str(model_path), "-c", "ttc<4", "-n", "3", "--seed", "2",
                  "--score", "-o", str(out), "-q"]) == 0
     rows = [json.loads(x) for x in out.read_text().splitlines()]
-    assert all(0.0 <= r["risk_peak"] <= 1.0 and r["class"] for r in rows)  # the flat record
+    assert all(r["class"] and r["btn"] is not None for r in rows)  # the flat record
+    # the Wagner scan is asked for, not always made
+    assert all(r["risk_peak"] is None and r["alarm_time"] is None for r in rows)
+    assert all(r["support"] in ("inside", "near", "extrapolated") for r in rows)
+    assert all("support" not in r["derived"] for r in rows)
+    # one time axis: t_p, t_cross (record) and the derived crossing are scenario time
+    assert all(abs(r["t_cross"] - r["derived"]["t_cross"]) < 2e-3 for r in rows)
+    assert all(r["t_p"] < r["t_cross"] for r in rows)
+    scanned = tmp_path / "scanned.jsonl"
+    assert main(["sample", str(model_path), "-c", "ttc<4", "-n", "3", "--seed", "2",
+                 "--score", "--wagner-scan", "-o", str(scanned), "-q"]) == 0
+    rows = [json.loads(x) for x in scanned.read_text().splitlines()]
+    assert all(0.0 <= r["risk_peak"] <= 1.0 for r in rows)
 
 
 @pytest.mark.parametrize(
