@@ -15,18 +15,21 @@ Modes (``MODES``):
 ``test``
     The ego is the system under test: ``Properties/Property type=ego_vehicle`` (the role
     CARLA ScenarioRunner looks for), an initial position and speed, no action (it keeps its
-    speed unless a controller takes over). The cutter drives straight at its initial speed
-    until the step ``k`` where the scenario's cutter first leaves constant-speed straight
-    driving (``manoeuvre_step``); it then follows the rest of its trajectory with timing
-    relative to that moment and positions relative to where it is then. The trigger is
-    the ego's arrival: the longitudinal distance ego -> cutter (rear axle to rear axle)
-    reaching its value at step k in the scenario (``trigger_for``), so the sampled gap and
-    speed difference hold whenever the ego arrives with its sampled speed.
+    speed unless a controller takes over). Nothing the cutter does depends on the ego: it
+    follows its own trajectory from simulation time 0 (timing relative to that start,
+    positions relative to where it starts), so the cut-in happens at the scenario's own
+    times whatever the ego does, and after the scenario's end it keeps its last speed
+    along its lane (``continued``: one more polyline vertex at the time limit), so that a
+    slower ego still meets it. The
+    run stops (``stop_trigger_test``) on a collision; once the scenario's duration has passed
+    and the conflict is over (``conflict_over``: the ego not faster than the cutter, or
+    closing on it with contact beyond the follow horizon, or the cutter out of the ego's
+    path, or the ego ahead of it and not slower); or at the time limit,
+    ``STOP_SLACK`` s after the scenario's duration. The road (``reach_of_test_run``) is long
+    enough for any vehicle within its performance limits until the time limit.
 
-Both modes stop on a collision of the two vehicles, when the cutter's trajectory ends
-(the scenario's own end: scengen's builder ends a scenario once the conflict is resolved)
-or, as a fallback when the trigger never fires, ``STOP_SLACK`` s after the scenario's
-duration.
+``replay`` stops on a collision, when the trajectories end (the scenario's own end:
+scengen's builder ends a scenario once the conflict is resolved) or at that end's time.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from lxml import etree
 
 from datasets import PARAM_DOCS, PARAM_NAMES, PARAM_UNITS
 from riskcore import ConcreteScenario, Track
+from riskcore.criticality import CriticalitySettings
 
 MODES: tuple[str, ...] = ("test", "replay")
 DEFAULT_MODE = "test"
@@ -58,20 +62,15 @@ MAX_ACCELERATION = 10.0
 MAX_DECELERATION = 10.0
 #: the ScenarioRunner role of the system under test
 EGO_ROLE = "ego_vehicle"
-#: distance trigger tolerance (m): floating-point slack around the sampled distance
-TRIGGER_TOLERANCE = 1e-6
-#: below this closing speed (m/s) a distance trigger is ill-conditioned: trigger on time
-MIN_CLOSING_SPEED = 1e-3
-#: fallback stop (s after the scenario's duration) when the cutter's trigger never fires
+#: test mode: the run's time limit, s after the scenario's duration (a reacting ego may
+#: resolve the conflict later than the scripted one)
 STOP_SLACK = 30.0
+#: test mode: a conflict whose contact lies further ahead than this (s, time to collision)
+#: is over (riskcore's ``CriticalitySettings.follow_horizon``)
+FOLLOW_HORIZON = CriticalitySettings().follow_horizon
 #: esmini merges polyline vertices closer than 0.1 m (its default ``--traj_filter``);
 #: vertices are thinned to at least this spacing (m) so that no player drops any
 MIN_VERTEX_SPACING = 0.12
-#: a track is "straight at constant speed" up to these tolerances (rad, m/s, m)
-_STRAIGHT_PSI = 1e-12
-_STRAIGHT_V = 1e-9
-_STRAIGHT_POS = 1e-6
-
 EGO = "ego"
 
 
@@ -89,28 +88,6 @@ def reference_points(track: Track) -> tuple[np.ndarray, np.ndarray]:
     """Rear-axle positions (m) of a track whose x, y are box centres."""
     back = REAR_AXLE_FRACTION * track.length
     return track.x - back * np.cos(track.psi), track.y - back * np.sin(track.psi)
-
-
-def manoeuvre_step(track: Track, t: np.ndarray) -> int:
-    """Last step k up to which ``track`` drives straight along +x at constant speed.
-
-    0 when it never does (it starts turning or accelerating at once or does not start
-    along +x); at most ``len(t) - 2`` so that a trajectory of at least two vertices
-    follows.
-    """
-    n = int(t.shape[0])
-    if n < 2 or abs(float(track.psi[0])) > _STRAIGHT_PSI:
-        return 0
-    v0 = float(track.v[0])
-    ok = (
-        (np.abs(track.psi) <= _STRAIGHT_PSI)
-        & (np.abs(track.v - v0) <= _STRAIGHT_V)
-        & (np.abs(track.y - track.y[0]) <= _STRAIGHT_POS)
-        & (np.abs(track.x - track.x[0] - v0 * (t - t[0])) <= _STRAIGHT_POS)
-    )
-    bad = np.flatnonzero(~ok)
-    k = n - 1 if bad.size == 0 else int(bad[0]) - 1
-    return max(0, min(k, n - 2))
 
 
 def thinned(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -133,40 +110,48 @@ def thinned(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.asarray(keep)
 
 
-@dataclass(frozen=True)
-class Trigger:
-    """When the cutter starts its manoeuvre in ``test`` mode.
-
-    ``kind`` ``"distance"``: the first moment the longitudinal distance ego -> cutter
-    (rear axles, m) satisfies ``rule value``; ``"time"``: simulation time >= ``time``
-    (used when the manoeuvre starts at once or the two cars barely close on each other).
-    ``step`` is the scenario step the trigger stands for, ``time`` its simulation time.
-    """
-
-    kind: str
-    rule: str
-    distance: float
-    time: float
-    step: int
+def run_end_and_limit(scenario: ConcreteScenario) -> tuple[float, float]:
+    """(end, limit) of a ``test`` run in simulation time (s): the scenario's duration,
+    from which a resolved conflict stops the run, and the time limit."""
+    end = float(scenario.t[-1] - scenario.t[0])
+    return end, end + STOP_SLACK
 
 
-def trigger_for(scenario: ConcreteScenario, cutter: Track) -> Trigger:
-    """The test-mode trigger of ``cutter`` (see ``Trigger``)."""
-    t = scenario.t
-    k = manoeuvre_step(cutter, t)
-    t_k = float(t[k] - t[0])
-    ego_x, _ = reference_points(scenario.ego)
-    cut_x, _ = reference_points(cutter)
-    # the ego of test mode keeps its initial speed: where it is at step k then
-    ego_vx = float(scenario.ego.v[0]) * math.cos(float(scenario.ego.psi[0]))
-    ego_x_k = float(ego_x[0]) + ego_vx * t_k
-    distance = float(cut_x[k]) - ego_x_k
-    closing = float(scenario.ego.v[0]) - float(cutter.v[k])
-    if k > 0 and closing > MIN_CLOSING_SPEED:
-        return Trigger("distance", "lessOrEqual", distance + TRIGGER_TOLERANCE, t_k, k)
-    if k > 0 and closing < -MIN_CLOSING_SPEED:
-        return Trigger("distance", "greaterOrEqual", distance - TRIGGER_TOLERANCE, t_k, k)
-    return Trigger("time", "greaterOrEqual", distance, t_k, k)
+def continued(track: Track, t: np.ndarray, limit: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The track's rear axles (time from its first step, x, y, heading) plus one vertex at
+    simulation time ``limit``: after the scenario's end it keeps its last speed along its
+    lane (+x, or -x for a track that ends heading back; its last y). The builder's cutters
+    end straight (heading 0), so for them this is their last velocity. No vertex is added
+    when it would lie less than ``MIN_VERTEX_SPACING`` away: a vehicle at rest stays."""
+    x, y = reference_points(track)
+    times = t - t[0]
+    span = limit - float(times[-1])
+    reach = float(track.v[-1]) * span
+    if span <= 0 or abs(reach) < MIN_VERTEX_SPACING:
+        return times, x, y, track.psi
+    back = math.cos(float(track.psi[-1])) < 0
+    return (np.append(times, limit), np.append(x, x[-1] + (-reach if back else reach)),
+            np.append(y, y[-1]), np.append(track.psi, math.pi if back else 0.0))
+
+
+def reach_of_test_run(scenario: ConcreteScenario) -> tuple[float, float]:
+    """The x interval (m, box ends) a ``test`` run can reach by its time limit: every
+    vehicle from where it starts at up to ``MAX_SPEED`` forwards, and the cutters to the
+    end of their continued trajectories (``continued``; backwards for one heading back)."""
+    _, limit = run_end_and_limit(scenario)
+    lo, hi = math.inf, -math.inf
+    for track in (scenario.ego, *scenario.objects):
+        half = track.length / 2
+        start = float(track.x[0])
+        lo = min(lo, start - half)
+        hi = max(hi, start + MAX_SPEED * limit + half)
+        if track is not scenario.ego:
+            _, x, _, psi = continued(track, scenario.t, limit)
+            back = REAR_AXLE_FRACTION * track.length
+            end = float(x[-1]) + back * math.cos(float(psi[-1]))  # the box centre
+            lo, hi = min(lo, end - half), max(hi, end + half)
+    return lo, hi
 
 
 # ----------------------------------------------------------------------------- XML helpers
@@ -348,20 +333,80 @@ def entity_condition(group: etree._Element, name: str, triggering: str,
     return el(by_entity, "EntityCondition")
 
 
-def stop_trigger(storyboard: etree._Element, objects: Iterable[str], end_time: str) -> None:
-    """Stop on a collision of the ego with an object, once every object's trajectory is
-    done (the scenario's own end), or at simulation time ``end_time``."""
+def stop_trigger_replay(storyboard: etree._Element, objects: Iterable[str],
+                        end_time: str) -> None:
+    """``replay``: stop on a collision of the ego with an object, once every object's
+    trajectory is done (the scenario's own end), or at simulation time ``end_time``."""
     names = list(objects)
     trig = el(storyboard, "StopTrigger")
-    for name in names:
-        cond = entity_condition(el(trig, "ConditionGroup"), f"ego collides with {name}", EGO)
-        el(el(cond, "CollisionCondition"), "EntityRef", entityRef=name)
+    _collisions(trig, names)
     done = el(trig, "ConditionGroup")
     for name in names:
         state = el(condition(done, f"{name} trajectory done"), "ByValueCondition")
         el(state, "StoryboardElementStateCondition", storyboardElementType="event",
            storyboardElementRef=event_name(name), state="completeState")
     sim_time_condition(el(trig, "ConditionGroup"), "end", end_time)
+
+
+def _collisions(trig: etree._Element, names: list[str]) -> None:
+    for name in names:
+        cond = entity_condition(el(trig, "ConditionGroup"), f"ego collides with {name}", EGO)
+        el(el(cond, "CollisionCondition"), "EntityRef", entityRef=name)
+
+
+def stop_trigger_test(storyboard: etree._Element, objects: Iterable[str], end_time: str,
+                      limit: str) -> None:
+    """``test``: stop on a collision of the ego with an object; from simulation time
+    ``end_time`` on, once the conflict is over (``conflict_over``); or at ``limit``."""
+    names = list(objects)
+    trig = el(storyboard, "StopTrigger")
+    _collisions(trig, names)
+    conflict_over(trig, names, end_time)
+    sim_time_condition(el(trig, "ConditionGroup"), "time limit", limit)
+
+
+def conflict_over(trig: etree._Element, names: list[str], end_time: str) -> None:
+    """Condition groups that end a ``test`` run from ``end_time`` on: the conflict with
+    every object is over in the same way, one of (as the builder's resolution and the
+    closed-loop simulator take it):
+
+    * the ego is not faster than the object (no gap to one ahead shrinks);
+    * it closes on the object so slowly that contact lies more than ``FOLLOW_HORIZON``
+      ahead (time to collision, box to box along the ego's heading);
+    * no object overlaps the ego's path (lateral clearance box to box > 0);
+    * the ego is ahead of the object (the object's time headway to it > 0) and not
+      slower (the object does not catch up with it).
+    """
+    def group(label: str) -> etree._Element:
+        out = el(trig, "ConditionGroup")
+        sim_time_condition(out, f"scenario over ({label})", end_time)
+        return out
+
+    slower = group("not faster")
+    for name in names:
+        cond = entity_condition(slower, f"ego not faster than {name}", EGO)
+        el(cond, "RelativeSpeedCondition", entityRef=name, rule="lessOrEqual", value="0.0")
+    slow = group("closing slowly")
+    for name in names:
+        cond = entity_condition(slow, f"contact with {name} beyond the follow horizon", EGO)
+        ttc = el(cond, "TimeToCollisionCondition", freespace="true", rule="greaterThan",
+                 value=num(FOLLOW_HORIZON), relativeDistanceType="longitudinal",
+                 coordinateSystem="entity")
+        el(el(ttc, "TimeToCollisionConditionTarget"), "EntityRef", entityRef=name)
+    aside = group("out of the path")
+    for name in names:
+        cond = entity_condition(aside, f"{name} beside the ego's path", EGO)
+        el(cond, "RelativeDistanceCondition", entityRef=name, freespace="true",
+           relativeDistanceType="lateral", rule="greaterThan", value="0.0",
+           coordinateSystem="entity")
+    ahead = group("ahead")
+    for name in names:
+        cond = entity_condition(ahead, f"ego not slower than {name}", EGO)
+        el(cond, "RelativeSpeedCondition", entityRef=name, rule="greaterOrEqual", value="0.0")
+        # a positive time headway of the object to the ego: the ego is ahead of it
+        cond = entity_condition(ahead, f"ego ahead of {name}", name)
+        el(cond, "TimeHeadwayCondition", entityRef=EGO, freespace="true", rule="greaterThan",
+           value="0.0", coordinateSystem="entity", relativeDistanceType="longitudinal")
 
 
 def event_name(obj: str) -> str:
@@ -400,6 +445,7 @@ def scenario_document(
     t = scenario.t
     t0 = float(t[0])
     duration = float(t[-1]) - t0
+    end, limit = run_end_and_limit(scenario)
     root = root_element()
     file_header(root, description, date, properties)
     declare(root, declarations)
@@ -434,32 +480,20 @@ def scenario_document(
             start = el(event, "StartTrigger")
             sim_time_condition(el(start, "ConditionGroup"), f"{track.id} starts", "0.0")
         else:
-            trig = trigger_for(scenario, track)
-            k = trig.step
+            times, xs, ys, hs = continued(track, t, limit)
             ref = follow(event, f"{track.id} follows its trajectory", "relative")
-            trajectory(ref, f"{track.id} trajectory", t[k:] - t[k], x[k:] - x[k],
-                       y[k:] - y[k], track.psi[k:], relative_to=track.id)
+            trajectory(ref, f"{track.id} trajectory", times, xs - xs[0], ys - ys[0], hs,
+                       relative_to=track.id)
             start = el(event, "StartTrigger")
-            write_trigger(start, track.id, trig.kind, trig.rule, num(trig.distance),
-                          num(trig.time))
+            sim_time_condition(el(start, "ConditionGroup"), f"{track.id} starts", "0.0")
     start = el(act, "StartTrigger")
     sim_time_condition(el(start, "ConditionGroup"), "act starts", "0.0")
-    end = duration if mode == "replay" else duration + STOP_SLACK
-    stop_trigger(storyboard, [o.id for o in scenario.objects], num(end))
+    names = [o.id for o in scenario.objects]
+    if mode == "replay":
+        stop_trigger_replay(storyboard, names, num(duration))
+    else:
+        stop_trigger_test(storyboard, names, num(end), num(limit))
     return root
-
-
-def write_trigger(start: etree._Element, obj: str, kind: str, rule: str, distance: str,
-                  time: str) -> None:
-    """The test-mode start of ``obj``'s manoeuvre (see ``Trigger``)."""
-    group = el(start, "ConditionGroup")
-    if kind == "time":
-        sim_time_condition(group, f"{obj} manoeuvre time", time)
-        return
-    cond = entity_condition(group, f"ego at the sampled distance to {obj}", EGO)
-    el(cond, "RelativeDistanceCondition", entityRef=obj, freespace="false",
-       relativeDistanceType="longitudinal", rule=rule, value=distance,
-       coordinateSystem="entity")
 
 
 # ------------------------------------------------------------ the catalogue as one scenario
@@ -467,9 +501,6 @@ def write_trigger(start: etree._Element, obj: str, kind: str, rule: str, distanc
 #: the Trajectory catalogue of the logical scenario: its name and directory
 TRAJECTORY_CATALOG = "scengen_cutter_trajectories"
 CATALOG_DIR = "catalogs"
-#: value of a trigger that never fires (the other trigger of the pair is the real one)
-NEVER = 1e9
-
 #: parameters that place the vehicles and start the cutter in the logical scenario,
 #: (name, type, unit, meaning); values per tuple from ``control_values``
 CONTROL_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
@@ -484,14 +515,11 @@ CONTROL_PARAMETERS: tuple[tuple[str, str, str, str], ...] = (
           ("h0", "rad", "initial heading"),
           ("v0", "m/s", "initial speed"),
       )),
-    ("trigger_rule", "string", "", "rule of the distance trigger (lessOrEqual: the ego "
-     "closes in; greaterOrEqual: it falls back)"),
-    ("trigger_distance", "double", "m", f"longitudinal rear-axle distance ego -> cutter "
-     f"that starts the cut-in ({-NEVER:g}: the time trigger is used)"),
-    ("trigger_time", "double", "s", f"simulation time that starts the cut-in when the "
-     f"distance trigger is ill-conditioned ({NEVER:g}: not used)"),
     ("cutter_trajectory", "string", "", f"entry of the {TRAJECTORY_CATALOG} catalogue"),
-    ("stop_time", "double", "s", "fallback end of the run (simulation time)"),
+    ("end_time", "double", "s", "the scenario's duration: from then on a resolved conflict "
+     "ends the run (simulation time)"),
+    ("stop_time", "double", "s", f"time limit of the run: end_time + {STOP_SLACK:g} s "
+     "(simulation time)"),
 )
 
 
@@ -508,29 +536,19 @@ def control_values(scenario: ConcreteScenario, entry: str) -> dict[str, str]:
         out[f"{prefix}_y0"] = num(y[0])
         out[f"{prefix}_h0"] = num(track.psi[0])
         out[f"{prefix}_v0"] = num(track.v[0])
-    trig = trigger_for(scenario, scenario.objects[0])
-    if trig.kind == "distance":
-        out["trigger_rule"] = trig.rule
-        out["trigger_distance"] = num(trig.distance)
-        out["trigger_time"] = num(NEVER)
-    else:
-        out["trigger_rule"] = "lessOrEqual"
-        out["trigger_distance"] = num(-NEVER)
-        out["trigger_time"] = num(trig.time)
+    end, limit = run_end_and_limit(scenario)
     out["cutter_trajectory"] = entry
-    out["stop_time"] = num(float(scenario.t[-1] - scenario.t[0]) + STOP_SLACK)
+    out["end_time"] = num(end)
+    out["stop_time"] = num(limit)
     return out
 
 
 def cutter_trajectory(parent: etree._Element, scenario: ConcreteScenario,
                       name: str) -> etree._Element:
-    """The cutter's test-mode trajectory (from its trigger on, relative to itself)."""
-    cutter = scenario.objects[0]
-    k = trigger_for(scenario, cutter).step
-    x, y = reference_points(cutter)
-    t = scenario.t
-    return trajectory(parent, name, t[k:] - t[k], x[k:] - x[k], y[k:] - y[k],
-                      cutter.psi[k:], relative_to="cutter")
+    """The cutter's test-mode trajectory (relative to where it starts, continued)."""
+    _, limit = run_end_and_limit(scenario)
+    times, x, y, h = continued(scenario.objects[0], scenario.t, limit)
+    return trajectory(parent, name, times, x - x[0], y - y[0], h, relative_to="cutter")
 
 
 def logical_document(*, description: str, date: dt.datetime,
@@ -561,9 +579,8 @@ def logical_document(*, description: str, date: dt.datetime,
     ref = follow(event, "cutter follows its trajectory", "relative")
     el(ref, "CatalogReference", catalogName=TRAJECTORY_CATALOG, entryName="$cutter_trajectory")
     start = el(event, "StartTrigger")
-    write_trigger(start, "cutter", "distance", "$trigger_rule", "$trigger_distance", "")
-    sim_time_condition(el(start, "ConditionGroup"), "cutter manoeuvre time", "$trigger_time")
+    sim_time_condition(el(start, "ConditionGroup"), "cutter starts", "0.0")
     start = el(act, "StartTrigger")
     sim_time_condition(el(start, "ConditionGroup"), "act starts", "0.0")
-    stop_trigger(storyboard, ["cutter"], "$stop_time")
+    stop_trigger_test(storyboard, ["cutter"], "$end_time", "$stop_time")
     return root

@@ -20,7 +20,8 @@ line is the road's left edge; all lanes are right lanes (ids -1, -2, ...) drivin
 ``lane_width`` wide (``params["lane_width"]``, else ``provenance["lane_width"]``, else
 ``DEFAULT_LANE_WIDTH``; all scenarios of a catalogue must agree); at least one lane left
 and one right of the ego lane, more as the vehicles' centres need; the road spans every
-vehicle's x range plus ``ROAD_MARGIN`` m on both sides.
+vehicle's x range plus ``ROAD_MARGIN`` m on both sides, in ``test`` mode also whatever
+a vehicle can reach until the run's time limit (``_osc.reach_of_test_run``).
 
 Validation: each ``.xosc`` against ``OpenSCENARIO_1_2.xsd`` and the ``.xodr`` against
 ``opendrive_17_core.xsd``, both shipped with ``scenariogeneration``; any error fails the
@@ -226,6 +227,11 @@ class RoadExtent:
             self.x_max = max(self.x_max, float(np.max(track.x)) + half)
             self.y_min = min(self.y_min, float(np.min(track.y)))
             self.y_max = max(self.y_max, float(np.max(track.y)))
+
+    def reach(self, x_lo: float, x_hi: float) -> None:
+        """Also cover the x interval [x_lo, x_hi] (m)."""
+        self.x_min = min(self.x_min, x_lo)
+        self.x_max = max(self.x_max, x_hi)
 
     def lanes(self) -> tuple[int, int]:
         """Lanes left and right of the ego lane (>= 1 each) holding every vehicle centre."""
@@ -531,6 +537,8 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
                 f"{extent.lane_width} m; one xosc export shares one road"
             )
         extent.add(scenario)
+        if mode == "test":
+            extent.reach(*osc.reach_of_test_run(scenario))
         try:
             data = scenario_xosc(scenario, index=index, row=row, mode=mode, date=date)
         except ExportError as exc:
@@ -566,8 +574,17 @@ def write_xosc_zip(items: Iterator[Item], manifest: Mapping[str, Any], path: Pat
             "reference_point": "rear axle, 0.3 length behind the bounding-box centre "
                                "(BoundingBox Center x = 0.3 length, RearAxle positionX = 0)",
             "time": "simulation time 0 = the scenario's first step (t[0] in the scengen.t0 "
-                    "header property); replay: absolute timing; test: the cutter's timing "
-                    "relative to its trigger",
+                    "header property); replay: absolute timing; test: the cutters' timing "
+                    "relative to their start at simulation time 0",
+            **({"test_run": {
+                "cutter_after_end": "keeps its last velocity up to the time limit",
+                "stop": "collision; from the scenario's duration on, the conflict over (the "
+                        "ego not faster than any cutter, or ahead of every cutter and not "
+                        "slower); the time limit",
+                "time_limit_after_duration_s": osc.STOP_SLACK,
+                "road": "every vehicle's reach at up to max speed "
+                        f"{osc.MAX_SPEED:g} m/s until the time limit",
+            }} if mode == "test" else {}),
         }
         entries: dict[str, bytes | Path] = {
             INDEX_FILE: scratch_csv,

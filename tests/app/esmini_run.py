@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from lxml import etree
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_ESMINI = REPO.parent / "shared" / "tools" / "esmini" / "bin" / "esmini"
@@ -98,3 +99,32 @@ def run_esmini(binary: Path, xosc: Path, out_csv: Path, *, step: float,
         text = log.read_text(errors="replace")[-2000:] if log.exists() else ""
         raise RuntimeError(f"esmini failed ({proc.returncode}) on {xosc}: {proc.stderr}\n{text}")
     return read_csv_log(out_csv)
+
+
+#: esmini's own controllers that can stand in for a system under test on the ego:
+#: label -> (controller type, properties); ACC with its default 1.5 s time gap, the ALKS
+#: R157 models of ControllerALKS_R157SM.cpp
+ESMINI_SUTS: dict[str, tuple[str, dict[str, str]]] = {
+    "ACC": ("ACCController", {}),
+    **{f"R157 {model}": ("ALKS_R157SM_Controller", {"model": model})
+       for model in ("ReferenceDriver", "Regulation", "RSS", "FSM")},
+}
+
+
+def with_controller(xosc: bytes, controller: str, properties: dict[str, str] | None = None,
+                    entity: str = "ego") -> bytes:
+    """A copy of an OpenSCENARIO document whose ``entity`` is driven (longitudinally) by
+    esmini's ``controller``: an ``ObjectController`` in its entity definition with the
+    ``esminiController`` property, activated in ``Init``."""
+    doc = etree.fromstring(xosc)
+    [obj] = doc.xpath(f"/OpenSCENARIO/Entities/ScenarioObject[@name='{entity}']")
+    ctrl = etree.SubElement(etree.SubElement(obj, "ObjectController"), "Controller",
+                            name=controller)
+    props = etree.SubElement(ctrl, "Properties")
+    for name, value in {"esminiController": controller, **(properties or {})}.items():
+        etree.SubElement(props, "Property", name=name, value=value)
+    [private] = doc.xpath(f"/OpenSCENARIO/Storyboard/Init/Actions/Private[@entityRef='{entity}']")
+    action = etree.SubElement(etree.SubElement(private, "PrivateAction"), "ControllerAction")
+    etree.SubElement(action, "ActivateControllerAction", longitudinal="true", lateral="false")
+    out: bytes = etree.tostring(doc, xml_declaration=True, encoding="UTF-8")
+    return out

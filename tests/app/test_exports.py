@@ -572,7 +572,25 @@ def scenario_c() -> ConcreteScenario:
     )
 
 
-def test_xosc_test_mode_ego_is_the_system_under_test_and_the_cutter_starts_on_a_trigger(
+def _condition_groups(doc: etree._Element) -> list[list[tuple[str, ...]]]:
+    """The storyboard's stop trigger as groups of (condition kind, its key attributes)."""
+    out = []
+    for group in doc.xpath("/OpenSCENARIO/Storyboard/StopTrigger/ConditionGroup"):
+        conds = []
+        for cond in group.iterfind("Condition"):
+            [leaf] = cond.xpath("ByValueCondition/* | ByEntityCondition/EntityCondition/*")
+            who = cond.xpath("ByEntityCondition/TriggeringEntities/EntityRef/@entityRef")
+            keys = ("entityRef", "rule", "value", "freespace", "relativeDistanceType",
+                    "coordinateSystem", "storyboardElementRef", "state")
+            attrs = dict(leaf.attrib)
+            attrs.update(("entityRef", r) for r in leaf.xpath(".//EntityRef/@entityRef"))
+            conds.append((etree.QName(leaf).localname, *who,
+                          *(f"{k}={attrs[k]}" for k in keys if k in attrs)))
+        out.append(conds)
+    return out
+
+
+def test_xosc_test_mode_ego_is_the_system_under_test_and_the_cutter_ignores_it(
         tmp_path: Path) -> None:
     path = _export(tmp_path, "xosc", data=[(scenario_c(), {"exposure_weight": 0.5})])
     with zipfile.ZipFile(path) as zf:
@@ -584,29 +602,72 @@ def test_xosc_test_mode_ego_is_the_system_under_test_and_the_cutter_starts_on_a_
     assert (teleport.get("x"), teleport.get("y")) == ("-1.2", "0.0")
     [timing] = doc.xpath("//FollowTrajectoryAction/TimeReference/Timing")
     assert timing.get("domainAbsoluteRelative") == "relative"
-    # the cutter is straight at 25 m/s up to step 2 (t = 0.2 s): its trajectory starts
-    # there, relative to where it is then; the ego (30 m/s) closes in
+    # the cutter follows its whole trajectory from simulation time 0, relative to where it
+    # starts (rear axle (18.8, 3.5)): no condition on the ego starts it
+    assert doc.xpath("//Event/StartTrigger//ByEntityCondition") == []
+    assert doc.xpath("//Event/StartTrigger//SimulationTimeCondition/@value") == ["0.0"]
     vertices = _vertices(doc, "cutter")
-    assert [float(v.get("time")) for v in vertices] == pytest.approx([0.0, 0.1, 0.2])
-    rel = vertices[1].find("Position/RelativeWorldPosition")
-    assert rel is not None and rel.get("entityRef") == "cutter"
-    # step 3: rear axle (27.6 - 1.2 cos 0.1, 3.4 + 1.2 sin 0.1) minus step 2's (23.8, 3.5)
-    assert (float(rel.get("dx")), float(rel.get("dy"))) == pytest.approx(
-        (2.60599500166636, 0.01980009997619), abs=1e-12)
-    assert float(rel.find("Orientation").get("h")) == -0.1
-    # trigger: rear axles 23.8 - (-1.2 + 30 * 0.2) = 19 m apart at step 2, closing
-    [dist] = doc.xpath("//Event/StartTrigger//RelativeDistanceCondition")
-    assert dist.get("rule") == "lessOrEqual" and dist.get("entityRef") == "cutter"
-    assert dist.get("relativeDistanceType") == "longitudinal"
-    assert dist.get("freespace") == "false"
-    assert float(dist.get("value")) == pytest.approx(19.0 + 1e-6, abs=1e-9)
-    assert dist.xpath("../../TriggeringEntities/EntityRef/@entityRef") == ["ego"]
-    # stop: collision, the cutter's trajectory done, or 0.4 s + 30 s
-    [done] = doc.xpath("//StopTrigger//StoryboardElementStateCondition")
-    assert (done.get("storyboardElementRef"), done.get("state")) == (
-        "cutter manoeuvre", "completeState")
-    [stop] = doc.xpath("//StopTrigger//SimulationTimeCondition/@value")
-    assert float(stop) == pytest.approx(30.4)
+    assert [float(v.get("time")) for v in vertices] == pytest.approx(
+        [0.0, 0.1, 0.2, 0.3, 0.4, 30.4])
+    rel = [v.find("Position/RelativeWorldPosition") for v in vertices]
+    assert all(r is not None and r.get("entityRef") == "cutter" for r in rel)
+    # step 3: rear axle (27.6 - 1.2 cos 0.1, 3.4 + 1.2 sin 0.1) minus step 0's (18.8, 3.5)
+    assert (float(rel[3].get("dx")), float(rel[3].get("dy"))) == pytest.approx(
+        (7.60599500166636, 0.01980009997619), abs=1e-12)
+    assert float(rel[3].find("Orientation").get("h")) == -0.1
+    # after the scenario's end (0.4 s) it keeps its last speed, 27 m/s, along its lane up
+    # to the time limit 30.4 s: step 4's rear axle (29.20599500166636, 3.31980009997619)
+    # plus 27 * 30 = 810 m in x
+    assert (float(rel[5].get("dx")), float(rel[5].get("dy"))) == pytest.approx(
+        (820.40599500166636, -0.18019990002381), abs=1e-9)
+    assert float(rel[5].find("Orientation").get("h")) == 0.0
+    # stop: a collision; from 0.4 s on, the ego not faster than the cutter, or closing
+    # with contact beyond 60 s, or the cutter beside its path, or the ego ahead of the
+    # cutter (the cutter's headway to the ego > 0) and not slower; at the latest at 30.4 s
+    later = ("SimulationTimeCondition", "rule=greaterOrEqual", "value=0.4")
+    assert _condition_groups(doc) == [
+        [("CollisionCondition", "ego", "entityRef=cutter")],
+        [later, ("RelativeSpeedCondition", "ego", "entityRef=cutter", "rule=lessOrEqual",
+                 "value=0.0")],
+        [later, ("TimeToCollisionCondition", "ego", "entityRef=cutter", "rule=greaterThan",
+                 "value=60.0", "freespace=true", "relativeDistanceType=longitudinal",
+                 "coordinateSystem=entity")],
+        [later, ("RelativeDistanceCondition", "ego", "entityRef=cutter", "rule=greaterThan",
+                 "value=0.0", "freespace=true", "relativeDistanceType=lateral",
+                 "coordinateSystem=entity")],
+        [later, ("RelativeSpeedCondition", "ego", "entityRef=cutter", "rule=greaterOrEqual",
+                 "value=0.0"),
+         ("TimeHeadwayCondition", "cutter", "entityRef=ego", "rule=greaterThan", "value=0.0",
+          "freespace=true", "relativeDistanceType=longitudinal", "coordinateSystem=entity")],
+        [("SimulationTimeCondition", "rule=greaterOrEqual", "value=30.4")],
+    ]
+
+
+def test_xosc_replay_keeps_its_stop_trigger(xosc_replay_zip: Path) -> None:
+    with zipfile.ZipFile(xosc_replay_zip) as zf:
+        doc = etree.fromstring(zf.read("scenario_0000000.xosc"))
+    assert _condition_groups(doc) == [
+        [("CollisionCondition", "ego", "entityRef=cutin")],
+        [("StoryboardElementStateCondition", "storyboardElementRef=cutin manoeuvre",
+          "state=completeState")],
+        [("SimulationTimeCondition", "rule=greaterOrEqual", "value=0.3")],
+    ]
+
+
+def test_xosc_test_mode_road_reaches_as_far_as_any_vehicle_can_drive(
+        xosc_zip: Path, xosc_replay_zip: Path) -> None:
+    # time limits: a 0.3 s + 30 s, b 1 s + 30 s; at 70 m/s from their starts the farthest
+    # box end is b's "car 1": 110 + 70 * 31 + 4.25 / 2 = 2282.125 m, the road 50 m more;
+    # behind: the rearmost box end -2.25 m, 50 m more
+    ranges = {}
+    for mode, path in (("test", xosc_zip), ("replay", xosc_replay_zip)):
+        with zipfile.ZipFile(path) as zf:
+            doc = etree.fromstring(zf.read("road.xodr"))
+            ranges[mode] = json.loads(zf.read("manifest.json"))["export"]["road_x_range"]
+        geometry = doc.find("road/planView/geometry")
+        x0, length = float(geometry.get("x", "nan")), float(geometry.get("length", "nan"))
+        assert [x0, x0 + length] == ranges[mode]
+    assert ranges == {"test": [-53.0, 2333.0], "replay": [-53.0, 195.0]}
 
 
 def test_xosc_declares_the_cut_in_parameters_and_ttc_with_units(xosc_zip: Path) -> None:
@@ -907,23 +968,6 @@ def test_thinned_vertices_are_spaced_for_esmini_and_keep_both_ends(steps: list[f
     assert np.all(gaps >= MIN_VERTEX_SPACING) or keep.tolist() == [0, x.shape[0] - 1]
     if np.all(np.hypot(np.diff(x), np.diff(y)) >= MIN_VERTEX_SPACING):
         assert keep.tolist() == list(range(x.shape[0]))  # nothing to thin: all kept
-
-
-@settings(max_examples=40, deadline=None)
-@given(st.integers(min_value=2, max_value=30), st.integers(min_value=0, max_value=29),
-       st.floats(min_value=1.0, max_value=40.0))
-def test_manoeuvre_step_is_the_last_straight_constant_speed_step(n: int, m: int,
-                                                                 v: float) -> None:
-    from app.exports._osc import manoeuvre_step
-
-    m = min(m, n - 1)
-    t = np.arange(n + 1) * 0.1
-    x = 10.0 + v * t
-    psi = np.zeros_like(t)
-    psi[m + 1:] = -0.05  # turns right after step m
-    y = np.where(t > t[m], -0.1 * (t - t[m]), 0.0)
-    track = Track("c", 4.0, 1.8, x=x, y=y, psi=psi, v=np.full_like(t, v))
-    assert manoeuvre_step(track, t) == min(m, n - 1)
 
 
 def test_row_step_and_duration_carry_no_float_noise() -> None:

@@ -16,18 +16,29 @@ the export has to be right without special options. What is compared:
 
 from __future__ import annotations
 
+import importlib.metadata
+import json
 import subprocess
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from lxml import etree
 
 from app.exports import build_manifest, export_catalogue
 from riskcore.geometry import boxes_overlap
 from riskcore.scenario import ConcreteScenario, Track
 from sampler.scenario.builder import build_scenario
-from tests.app.esmini_run import DEFAULT_ESMINI, ENV_VAR, EntityLog, esmini_binary, run_esmini
+from tests.app.esmini_run import (
+    DEFAULT_ESMINI,
+    ENV_VAR,
+    ESMINI_SUTS,
+    EntityLog,
+    esmini_binary,
+    run_esmini,
+    with_controller,
+)
 
 pytestmark = pytest.mark.esmini
 
@@ -206,3 +217,144 @@ def test_a_slow_cutter_keeps_every_vertex_esmini_would_otherwise_merge(
         # cutter is below 1.2 m/s: the box stays within 1 cm, the heading within 3e-3 rad
         assert box <= BOX_TOL, mode
         assert heading <= 3e-3, mode
+
+
+# ------------------------------------------------- esmini's own controllers on the ego
+
+#: a cut-in where esmini's R157 FSM model brakes, falls back and re-accelerates: it is
+#: still closing on the cutter when the scenario's duration (9.0 s) is over
+LATE = {"p_y1": 0.0899, "p_t": 1.644, "p_a1": -0.5114, "p_a2": -0.2856, "p_a3": 0.1218,
+        "p_v0": 33.0558, "dv": 3.0909, "gap": 6.473}
+#: the export's vehicle performance (app.exports._osc.MAX_SPEED) and run time limit
+MAX_SPEED = 70.0
+STOP_SLACK = 30.0
+FOLLOW_HORIZON = 60.0
+
+
+def _schema() -> etree.XMLSchema:
+    files = importlib.metadata.files("scenariogeneration") or []
+    [path] = [f for f in files if f.name == "OpenSCENARIO_1_2.xsd"]
+    return etree.XMLSchema(etree.parse(str(path.locate())))
+
+
+@pytest.fixture(scope="module")
+def sut_runs(esmini: Path, tmp_path_factory: pytest.TempPathFactory
+             ) -> tuple[list[ConcreteScenario], dict[tuple[str, int], dict[str, EntityLog]],
+                        tuple[float, float]]:
+    """Every test-mode scenario driven by each of esmini's controllers (and none)."""
+    tmp = tmp_path_factory.mktemp("esmini_suts")
+    scenarios = _scenarios([*PARAMS, LATE])
+    folder = _unzipped(tmp, scenarios, "test")
+    road = json.loads((folder / "manifest.json").read_text())["export"]["road_x_range"]
+    schema = _schema()
+    out: dict[tuple[str, int], dict[str, EntityLog]] = {}
+    for i in range(len(scenarios)):
+        name = f"scenario_{i:07d}"
+        source = (folder / f"{name}.xosc").read_bytes()
+        out[("none", i)] = run_esmini(esmini, folder / f"{name}.xosc",
+                                      folder / f"{name}_none.csv", step=STEP)
+        for j, (label, (controller, props)) in enumerate(ESMINI_SUTS.items()):
+            xosc = folder / f"{name}_{j}.xosc"
+            data = with_controller(source, controller, props)
+            assert schema.validate(etree.fromstring(data)), (label, schema.error_log)
+            xosc.write_bytes(data)
+            out[(label, i)] = run_esmini(esmini, xosc, xosc.with_suffix(".csv"), step=STEP)
+    return scenarios, out, (float(road[0]), float(road[1]))
+
+
+def _cutter_error(s: ConcreteScenario, log: EntityLog) -> float:
+    """Largest distance (m) of the logged cutter box centre from the scenario's, at the
+    logged scenario steps up to its duration and, after it, from its last velocity kept."""
+    c = s.objects[0]
+    t = s.t - s.t[0]
+    lt = np.asarray(log.t)
+    cx, cy = log.centres()
+    steps, rows = _steps(log, t)
+    err = np.hypot(cx[rows] - c.x[steps], cy[rows] - c.y[steps])
+    after = lt > t[-1] + 1e-9
+    span = lt[after] - t[-1]
+    ex = c.x[-1] + c.v[-1] * np.cos(c.psi[-1]) * span
+    ey = c.y[-1] + c.v[-1] * np.sin(c.psi[-1]) * span
+    err_after = np.hypot(cx[after] - ex, cy[after] - ey)
+    return float(max(err.max(), err_after.max(initial=0.0)))
+
+
+def _conflict_over(s: ConcreteScenario, ego: EntityLog, cut: EntityLog, row: int) -> bool:
+    """The export's conflict-over rule on logged states (both headings 0 after the
+    scenario's duration): the ego not faster; contact beyond the follow horizon; the
+    cutter beside the ego's path; or the ego ahead and not slower."""
+    (ex, ey), (cx, cy) = (np.array([a[row] for a in e.centres()]) for e in (ego, cut))
+    c = s.objects[0]
+    dv = ego.speed[row] - cut.speed[row]
+    gap = cx - ex - (s.ego.length + c.length) / 2
+    behind = ex - cx - (s.ego.length + c.length) / 2
+    return bool(dv <= 1e-6 or (gap > 0 and gap / dv > FOLLOW_HORIZON)
+                or abs(cy - ey) > (s.ego.width + c.width) / 2
+                or (behind > 0 and dv >= -1e-6))
+
+
+def test_the_cut_in_happens_as_sampled_whatever_the_ego_does(
+        sut_runs: tuple[list[ConcreteScenario], dict[tuple[str, int], dict[str, EntityLog]],
+                        tuple[float, float]]) -> None:
+    scenarios, runs, _ = sut_runs
+    early = set()
+    for (label, i), logs in runs.items():
+        s = scenarios[i]
+        assert _cutter_error(s, logs["cutter"]) <= BOX_TOL, (label, i)
+        ego = logs["ego"]
+        lead_in = float(s.provenance["lead_in"])  # the cutter starts moving sideways then
+        if any(v < ego.speed[0] - 0.5 for t, v in zip(ego.t, ego.speed, strict=True)
+               if t < lead_in):
+            early.add(label)
+    # some controllers brake before the cut-in starts (the old distance trigger then
+    # started it late or never): RSS and FSM on the second cut-in
+    assert {"R157 RSS", "R157 FSM"} <= early
+
+
+def test_vehicles_stay_on_the_road_and_every_collision_is_real(
+        sut_runs: tuple[list[ConcreteScenario], dict[tuple[str, int], dict[str, EntityLog]],
+                        tuple[float, float]]) -> None:
+    scenarios, runs, (x_start, x_end) = sut_runs
+    braked = set()
+    for (label, i), logs in runs.items():
+        s = scenarios[i]
+        for track, log in ((s.ego, logs["ego"]), (s.objects[0], logs["cutter"])):
+            x = np.asarray(log.x)
+            # never at either end of the road, where esmini holds a vehicle
+            assert x_start + 1.0 < x.min() and x.max() < x_end - 1.0, (label, i, track.id)
+            step = np.hypot(np.diff(log.x), np.diff(log.y)) / np.diff(log.t)
+            assert step.max() <= MAX_SPEED, (label, i, track.id)  # no jumps
+        ego, cut = logs["ego"], logs["cutter"]
+        braked |= {label} if min(ego.speed) < ego.speed[0] - 0.5 else set()
+        hits = [k for k, ids in enumerate(ego.collisions) if ids]
+        for k in hits:
+            c = s.objects[0]
+            (ex, ey), (cx, cy) = ([a[k] for a in e.centres()] for e in (ego, cut))
+            boxes = (np.array([[ex, ey, ego.h[k], s.ego.length + 2e-3, s.ego.width + 2e-3]]),
+                     np.array([[cx, cy, cut.h[k], c.length + 2e-3, c.width + 2e-3]]))
+            assert boxes_overlap(*boxes)[0], (label, i, ego.t[k])
+            assert abs(ego.speed[k] - cut.speed[k]) <= MAX_SPEED
+    assert braked == set(ESMINI_SUTS)  # every controller did brake
+
+
+def test_a_run_ends_at_a_collision_a_resolved_conflict_or_the_time_limit(
+        sut_runs: tuple[list[ConcreteScenario], dict[tuple[str, int], dict[str, EntityLog]],
+                        tuple[float, float]]) -> None:
+    scenarios, runs, _ = sut_runs
+    for (label, i), logs in runs.items():
+        s = scenarios[i]
+        ego, cut = logs["ego"], logs["cutter"]
+        duration = float(s.t[-1] - s.t[0])
+        end = ego.t[-1]
+        if any(ego.collisions):
+            assert ego.collisions[-1], (label, i)  # stopped on the collision
+            continue
+        assert end >= duration - 1e-9, (label, i)
+        if end < duration + STOP_SLACK - STEP:
+            assert _conflict_over(s, ego, cut, -1), (label, i, end)
+        if end > duration + STEP:  # ran on: the conflict was not over a step earlier
+            assert not _conflict_over(s, ego, cut, -2), (label, i, end)
+    # the late cut-in: the braking FSM model still closes in when the cutter's scripted
+    # motion ends; the run goes on until contact lies beyond the follow horizon
+    late = len(PARAMS)
+    assert runs[("R157 FSM", late)]["ego"].t[-1] > float(scenarios[late].t[-1]) + 1.0
