@@ -1,0 +1,34 @@
+"""Campaigns: a system under test driven through importance-sampled cut-ins, and its
+collision probability per cut-in and rate per hour with both intervals (docs/evaluation.md).
+
+- :mod:`~sampler.campaign.runners` — the ``Runner`` protocol and stand-in runners with a
+  known answer;
+- :mod:`~sampler.campaign.proposal` — the defensive mixture the runs are drawn from;
+- :mod:`~sampler.campaign.evaluate` — ``evaluate()``, its chunks and its figures.
+"""
+
+from sampler.campaign.evaluate import CampaignResult, ChunkResult, evaluate
+from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
+from sampler.campaign.runners import (
+    Outcomes,
+    Runner,
+    StandInRuns,
+    halfspace_probability,
+    halfspace_runner,
+    late_brake_runner,
+)
+
+__all__ = [
+    "DEFAULT_ENVELOPES",
+    "CampaignResult",
+    "ChunkResult",
+    "Outcomes",
+    "Proposal",
+    "Runner",
+    "StandInRuns",
+    "build_proposal",
+    "evaluate",
+    "halfspace_probability",
+    "halfspace_runner",
+    "late_brake_runner",
+]

@@ -1,0 +1,614 @@
+"""A campaign: a system under test driven through importance-sampled cut-ins, and its
+collision probability per cut-in and rate per hour (docs/evaluation.md).
+
+Target: the model restricted to the physical bounds B (and to a user's region A when
+``constraints`` are given), the law every other part of scengen samples. With runs
+``z_i ~ q`` (``sampler.campaign.proposal``), ``w_i = p(z_i) / q(z_i)`` (both exact,
+normalised densities in the model's z-space) and ``c_i`` = 1 if run i lies in A and B and
+collided::
+
+    P(C and A | B) = (1 / N) sum_i w_i c_i / P(B)
+
+over all N draws (a draw outside A or B is not simulated and counts 0). ``P(B)`` is the
+model's mass inside the bounds, from 2^18 plain draws (no simulation; its own relative
+error, about 1e-3, enters the standard error). Chunk k's proposal is fixed before its draws
+(it depends on the chunks before it only), so every term has expectation P given the past
+and the pooled mean is unbiased.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import logsumexp
+from scipy.stats import norm
+
+from datasets import PARAM_NAMES
+from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
+from sampler.campaign.runners import Runner
+from sampler.errors import SamplerError
+from sampler.model.bootstrap import log_density_z_boot, pooled_model
+from sampler.model.gmm import CutInGMM
+from sampler.model.memo import MODEL_SEED, memoised
+from sampler.rates.bootstrap_interval import bootstrap_ci
+from sampler.rates.exposure import Exposure
+from sampler.region.constraints import Region
+from sampler.sampling import estimate_p_region
+
+__all__ = ["CampaignResult", "ChunkResult", "evaluate"]
+
+FloatArray = NDArray[np.float64]
+#: progress callback: (stage, runs done, runs planned)
+ProgressFn = Callable[[str, int, int], None]
+
+#: plain model draws behind P(B) (no simulation)
+N_BOUNDS = 1 << 18
+#: draws of the replicates' average behind each replicate's P_b(B)
+N_BOUNDS_BOOT = 1 << 16
+#: the collisions the stop rule needs besides the relative half-width
+MIN_COLLISIONS = 10
+#: -ln(0.05): the one-sided 95 % "rule of three" factor
+RULE_OF_THREE = -math.log(0.05)
+
+
+# --------------------------------------------------------------------------- chunks
+
+def _enc(a: NDArray[Any]) -> dict[str, Any]:
+    """A (n,) or (n, d) array as JSON-safe lists, lossless (floats by repr; non-finite
+    as the strings "nan", "inf", "-inf")."""
+    if a.dtype == np.bool_:
+        return {"dtype": "bool", "values": a.astype(bool).tolist()}
+    if a.dtype.kind in "iu":
+        return {"dtype": str(a.dtype), "values": a.tolist()}
+    if a.dtype.kind in "US":
+        return {"dtype": "str", "values": a.astype(str).tolist()}
+    if a.dtype.kind == "O":
+        return {"dtype": "str", "values": [str(v) for v in a.tolist()]}
+    f = np.asarray(a, dtype=np.float64)
+
+    def one(v: float) -> float | str:
+        return v if math.isfinite(v) else ("nan" if v != v else ("inf" if v > 0 else "-inf"))
+
+    if f.ndim == 1:
+        return {"dtype": "float64", "values": [one(v) for v in f.tolist()]}
+    return {"dtype": "float64", "values": [[one(v) for v in row] for row in f.tolist()]}
+
+
+def _dec(d: Mapping[str, Any]) -> NDArray[Any]:
+    dtype = d["dtype"]
+    if dtype == "bool":
+        return np.asarray(d["values"], dtype=bool)
+    if dtype == "str":
+        return np.asarray(d["values"], dtype=str)
+    if dtype == "float64":
+        def one(v: Any) -> float:
+            return float(v)  # float("nan"), float("inf") parse the strings
+        vals = d["values"]
+        if vals and isinstance(vals[0], list):
+            return np.asarray([[one(v) for v in row] for row in vals], dtype=np.float64)
+        return np.asarray([one(v) for v in vals], dtype=np.float64)
+    return np.asarray(d["values"], dtype=np.dtype(dtype))
+
+
+@dataclass
+class ChunkResult:
+    """One chunk of a campaign: its draws, weights and outcomes (arrays of n rows).
+
+    ``params`` (n, 8) in ``PARAM_NAMES`` order; ``z`` (n, d) the model's z-space rows;
+    ``seeds`` (n,) uint64; ``part`` the proposal part each row came from (index into
+    ``proposal``); ``log_p``, ``log_q`` the model's and the proposal's log-densities in
+    z-space; ``weights = exp(log_p - log_q)``; ``simulated`` the rows inside the region
+    and the bounds (the others were not run); ``outcome`` name -> (n,) array (``collided``,
+    ``impact_speed`` and whatever else the runner gave; rows not run: False / 0 / NaN / "").
+    """
+
+    index: int
+    params: FloatArray
+    z: FloatArray
+    seeds: NDArray[np.uint64]
+    part: NDArray[np.int64]
+    log_p: FloatArray
+    log_q: FloatArray
+    weights: FloatArray
+    simulated: NDArray[np.bool_]
+    outcome: dict[str, NDArray[Any]]
+    proposal: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return int(self.weights.shape[0])
+
+    @property
+    def collided(self) -> NDArray[np.bool_]:
+        return np.asarray(self.outcome["collided"], dtype=bool) & self.simulated
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe and lossless (``from_dict`` gives back equal arrays, bit for bit)."""
+        return {
+            "format": "scengen.campaign-chunk/1",
+            "index": int(self.index),
+            "params": _enc(self.params), "z": _enc(self.z),
+            "seeds": [int(s) for s in self.seeds.tolist()],
+            "part": _enc(self.part), "log_p": _enc(self.log_p), "log_q": _enc(self.log_q),
+            "weights": _enc(self.weights), "simulated": _enc(self.simulated),
+            "outcome": {k: _enc(v) for k, v in self.outcome.items()},
+            "proposal": list(self.proposal),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ChunkResult:
+        try:
+            if d.get("format") != "scengen.campaign-chunk/1":
+                raise SamplerError(f"chunk: unknown format {d.get('format')!r}",
+                                   field="format")
+            return cls(index=int(d["index"]), params=_dec(d["params"]), z=_dec(d["z"]),
+                       seeds=np.asarray(d["seeds"], dtype=np.uint64),
+                       part=_dec(d["part"]).astype(np.int64), log_p=_dec(d["log_p"]),
+                       log_q=_dec(d["log_q"]), weights=_dec(d["weights"]),
+                       simulated=_dec(d["simulated"]),
+                       outcome={str(k): _dec(v) for k, v in d["outcome"].items()},
+                       proposal=list(d.get("proposal", [])))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SamplerError(f"chunk: not a stored campaign chunk ({exc})",
+                               field="chunk") from None
+
+
+def _outcome_arrays(batch: Any, m: int) -> dict[str, NDArray[Any]]:
+    """The (m,) array attributes of a runner's result (``profiles`` and scalars left out)."""
+    if is_dataclass(batch):
+        names = [f.name for f in fields(batch)]
+    else:
+        names = [k for k in vars(batch) if not k.startswith("_")]
+    out: dict[str, NDArray[Any]] = {}
+    for name in names:
+        v = getattr(batch, name, None)
+        if isinstance(v, np.ndarray) and v.ndim == 1 and v.shape[0] == m:
+            out[name] = v
+    if "collided" not in out or "impact_speed" not in out:
+        raise SamplerError("runner: its result needs (n,) arrays collided and impact_speed",
+                           field="runner")
+    return out
+
+
+def _fill(values: NDArray[Any], rows: NDArray[np.int64], n: int, name: str) -> NDArray[Any]:
+    if values.dtype == np.bool_:
+        out: NDArray[Any] = np.zeros(n, dtype=bool)
+    elif values.dtype.kind in "iu":
+        out = np.zeros(n, dtype=values.dtype)
+    elif values.dtype.kind in "USO":
+        out = np.full(n, "", dtype=object)
+    else:
+        out = np.full(n, 0.0 if name == "impact_speed" else np.nan)
+    out[rows] = values
+    if out.dtype == object:
+        out = out.astype(str)
+    return out
+
+
+def _run(runner: Runner, params: FloatArray, seeds: NDArray[np.uint64],
+         executor: Executor | None, part_size: int) -> dict[str, NDArray[Any]]:
+    m = params.shape[0]
+    if executor is None or m <= part_size:
+        return _outcome_arrays(runner(params, seeds), m)
+    cuts = list(range(0, m, part_size))
+    futures = [executor.submit(runner, params[i:i + part_size], seeds[i:i + part_size])
+               for i in cuts]
+    parts = [_outcome_arrays(f.result(), min(part_size, m - i))
+             for f, i in zip(futures, cuts, strict=True)]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+# --------------------------------------------------------------------------- figures
+
+def _num(v: Any) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _p_bounds(model: CutInGMM, region: Region) -> tuple[float, float]:
+    """P(B) and its relative standard error (exactly 1, 0 without physical bounds)."""
+    if not region.physical_bounds:
+        return 1.0, 0.0
+
+    def compute() -> int:
+        z = model.sample_z(N_BOUNDS, np.random.default_rng(MODEL_SEED))
+        return int(region.in_bounds(model.params_matrix(model.from_z(z))).sum())
+
+    k = memoised(model, ("campaign_p_bounds", region.lane_width, N_BOUNDS), compute)
+    if k == 0:
+        raise SamplerError("no model draw satisfies the physical bounds: the model does not "
+                           "describe physical cut-ins", field="model")
+    p = k / N_BOUNDS
+    return p, math.sqrt((1 - p) / (N_BOUNDS * p))
+
+
+def _p_bounds_boot(model: CutInGMM, region: Region) -> FloatArray:
+    """Each bootstrap replicate's P_b(B), by reweighting draws of the replicates' average
+    ``qb = (1/B) sum_b p_b`` (``p_b / qb <= B``): shape (B,)."""
+    n_boot = len(model.bootstrap_["weights"]) if model.bootstrap_ else 0
+    if not region.physical_bounds:
+        return np.ones(n_boot)
+
+    def compute() -> FloatArray:
+        pooled = memoised(model, ("campaign_pooled",), lambda: pooled_model(model))
+        z = pooled.sample_z(N_BOUNDS_BOOT, np.random.default_rng(MODEL_SEED + 1))
+        inb = region.in_bounds(model.params_matrix(model.from_z(z)))
+        lp = log_density_z_boot(model, z[inb])
+        lq = logsumexp(lp, axis=0) - math.log(lp.shape[0])
+        return np.asarray(np.exp(lp - lq).sum(axis=1) / N_BOUNDS_BOOT, dtype=np.float64)
+
+    out: FloatArray = memoised(model, ("campaign_p_bounds_boot", region.lane_width,
+                                       N_BOUNDS_BOOT), compute)
+    return out
+
+
+@dataclass
+class _Estimate:
+    estimate: float
+    se: float
+    n: int
+    hits: int
+    ess: float
+
+
+def _estimate(chunks: Sequence[ChunkResult], key: str, pb: float, cv_b: float) -> _Estimate:
+    n = sum(c.n for c in chunks)
+    ys = [np.where(c.simulated & np.asarray(c.outcome.get(key, np.zeros(c.n, dtype=bool)),
+                                            dtype=bool), c.weights, 0.0) for c in chunks]
+    y = np.concatenate(ys) if ys else np.zeros(0)
+    hits = int(np.count_nonzero(y))
+    if n == 0:
+        return _Estimate(math.nan, math.nan, 0, 0, 0.0)
+    p = float(y.sum() / n / pb)
+    sd = float(y.std(ddof=1)) if n > 1 else math.nan
+    se = math.sqrt((sd / math.sqrt(n) / pb) ** 2 + (p * cv_b) ** 2)
+    ess = float(y.sum() ** 2 / (y * y).sum()) if hits else 0.0
+    return _Estimate(p, se, n, hits, ess)
+
+
+def _lognormal_ci(p: float, cv: float, z: float) -> list[float | None]:
+    if not (p > 0 and math.isfinite(cv)):
+        return [None, None]
+    return [_num(p * math.exp(-z * cv)), _num(p * math.exp(z * cv))]
+
+
+@dataclass
+class CampaignResult:
+    """The chunks of a campaign and its figures (``summary()``, ``records()``)."""
+
+    chunks: list[ChunkResult]
+    stop_reason: str
+    model: CutInGMM = field(repr=False)
+    region: Region = field(repr=False)
+    seed: int = 0
+    sut: str | None = None
+    exposure: Exposure | None = None
+    bootstrap: bool = True
+    confidence: float = 0.95
+    rhw_target: float | None = 0.3
+    alpha: float = 0.15
+    p_region: Any = None  # PRegion of the user's region (None without constraints)
+    _summary: dict[str, Any] | None = field(default=None, repr=False)
+
+    @property
+    def runs(self) -> int:
+        return sum(c.n for c in self.chunks)
+
+    @property
+    def sut_runs(self) -> int:
+        return sum(int(c.simulated.sum()) for c in self.chunks)
+
+    def _model_replicates(self, key: str, pb_b: FloatArray) -> FloatArray | None:
+        """P_b(key and A | B) of each bootstrap replicate from the same runs:
+        ``(1/N) sum_i w_i c_i p_b(z_i) / p(z_i) / P_b(B)``."""
+        n = self.runs
+        zs, ws, lps = [], [], []
+        for c in self.chunks:
+            sel = c.simulated & np.asarray(c.outcome.get(key, np.zeros(c.n, dtype=bool)),
+                                           dtype=bool)
+            zs.append(c.z[sel])
+            ws.append(c.weights[sel])
+            lps.append(c.log_p[sel])
+        z = np.concatenate(zs)
+        if not z.shape[0]:
+            return np.zeros(pb_b.shape[0])
+        lpb = log_density_z_boot(self.model, z)  # (B, m)
+        r = np.exp(lpb - np.concatenate(lps)[None, :])
+        return np.asarray((r * np.concatenate(ws)[None, :]).sum(axis=1) / n / pb_b,
+                          dtype=np.float64)
+
+    def summary(self) -> dict[str, Any]:
+        """The campaign's figures, JSON-safe (None for undefined); docs/evaluation.md."""
+        if self._summary is not None:
+            return self._summary
+        zq = float(norm.ppf(0.5 + self.confidence / 2))
+        pb, cv_b = _p_bounds(self.model, self.region)
+        col = _estimate(self.chunks, "collided", pb, cv_b)
+        has_boot = bool(self.bootstrap and getattr(self.model, "bootstrap_", None))
+        pb_b = _p_bounds_boot(self.model, self.region) if has_boot else None
+        # the user's region: P(A | B) from the existing machinery, and its relative error
+        pa, cv_a = 1.0, 0.0
+        if self.p_region is not None:
+            pa = float(self.p_region.estimate)
+            lo, hi = float(self.p_region.ci_low), float(self.p_region.ci_high)
+            cv_a = ((math.log(hi) - math.log(lo)) / (2 * zq)
+                    if lo > 0 and hi > 0 and pa > 0 else math.inf)
+
+        def block(est: _Estimate, key: str) -> tuple[dict[str, Any], FloatArray | None]:
+            p_joint = est.estimate
+            cv_joint = est.se / p_joint if p_joint > 0 else math.inf
+            p = p_joint / pa
+            cv = math.sqrt(cv_joint ** 2 + cv_a ** 2)
+            reps = None
+            if pb_b is not None:
+                reps = self._model_replicates(key, pb_b)
+            model_ci: list[float | None] | None = None
+            if reps is not None and self.p_region is None and p > 0:
+                lo, hi = bootstrap_ci(reps, p, method="percentile",
+                                      confidence=self.confidence)
+                model_ci = [_num(lo), _num(hi)]
+            upper = None
+            if est.hits == 0 and self.runs > 0:
+                upper = RULE_OF_THREE / (self.alpha * self.runs * pb) / pa
+            out = {"estimate": _num(p), "ci": _lognormal_ci(p, cv, zq), "model_ci": model_ci,
+                   "se": _num(p * cv) if p > 0 else _num(est.se / pa),
+                   "rhw": _num(zq * cv) if p > 0 else None,
+                   "upper_bound": _num(upper), "hits": est.hits, "ess": _num(est.ess)}
+            return out, reps
+
+        p_col, reps_col = block(col, "collided")
+        viol_known = all("violation" in c.outcome for c in self.chunks) and self.chunks
+        p_viol = block(_estimate(self.chunks, "violation", pb, cv_b), "violation")[0] \
+            if viol_known else None
+        # rates: lambda P(C and A | B), the count's Poisson replicates in the model interval
+        rates: dict[str, Any] = {"rate_per_hour": None, "rate_per_1e6_km": None}
+        if self.exposure is not None:
+            exp = self.exposure
+            counts = np.random.default_rng(self.seed).poisson(
+                exp.n_events, size=0 if reps_col is None else reps_col.size)
+            p_joint = col.estimate
+            cv_joint = col.se / p_joint if p_joint > 0 else math.inf
+            for unit, amount in (("rate_per_hour", exp.hours),
+                                 ("rate_per_1e6_km", None if exp.km is None else exp.km / 1e6)):
+                if amount is None:
+                    continue
+                lam = exp.n_events / amount
+                entry: dict[str, Any] = {
+                    "estimate": _num(lam * p_joint),
+                    "ci": _lognormal_ci(lam * p_joint, cv_joint, zq),
+                    "model_ci": None,
+                    "upper_bound": None if col.hits else _num(
+                        RULE_OF_THREE / (self.alpha * self.runs * pb) * lam)
+                    if self.runs else None}
+                if reps_col is not None and p_joint > 0:
+                    r = reps_col * counts / amount
+                    a = 1.0 - self.confidence
+                    q = np.quantile(r[np.isfinite(r)], [a / 2, 1 - a / 2])
+                    entry["model_ci"] = [_num(q[0]), _num(q[1])]
+                rates[unit] = entry
+        n_sim = self.sut_runs
+        p_c = col.estimate
+        accel = (p_c * (1 - p_c) / (n_sim * col.se ** 2)
+                 if n_sim and col.hits and col.se > 0 else None)
+        self._summary = {
+            "p_collision": p_col,
+            **rates,
+            "p_violation": p_viol,
+            "runs": self.runs,
+            "sut_runs": n_sim,
+            "collisions": col.hits,
+            "ess": _num(col.ess),
+            "acceleration": _num(accel),
+            "stop_reason": self.stop_reason,
+            "sut": self.sut,
+            "constraints": [str(c) for c in self.region.constraints],
+            "region_probability": None if self.p_region is None else {
+                "estimate": _num(self.p_region.estimate),
+                "ci": [_num(self.p_region.ci_low), _num(self.p_region.ci_high)]},
+            "p_bounds": _num(pb),
+            "seed": self.seed,
+            "chunks": len(self.chunks),
+            "confidence": self.confidence,
+            "rhw_target": self.rhw_target,
+            "exposure": None if self.exposure is None else self.exposure.to_dict(),
+        }
+        return self._summary
+
+    def records(self) -> list[dict[str, Any]]:
+        """One dict per run: ``run``, ``chunk``, ``seed``, the parameters by name,
+        ``weight`` (its weight in P: ``w / P(B)``), ``log_p``, ``log_q``, ``part`` (the
+        proposal part it came from), ``simulated`` and the outcome fields."""
+        pb, _ = _p_bounds(self.model, self.region)
+        out: list[dict[str, Any]] = []
+        run = 0
+        for c in self.chunks:
+            names = [str(p.get("part", "")) for p in c.proposal]
+            for i in range(c.n):
+                rec: dict[str, Any] = {"run": run, "chunk": c.index, "seed": int(c.seeds[i])}
+                rec.update({k: float(v) for k, v in zip(PARAM_NAMES, c.params[i].tolist(),
+                                                         strict=True)})
+                rec["weight"] = float(c.weights[i] / pb)
+                rec["log_p"] = float(c.log_p[i])
+                rec["log_q"] = float(c.log_q[i])
+                k = int(c.part[i])
+                rec["part"] = names[k] if 0 <= k < len(names) else k
+                rec["simulated"] = bool(c.simulated[i])
+                for name, arr in c.outcome.items():
+                    v = arr[i]
+                    rec[name] = (bool(v) if arr.dtype == np.bool_ else str(v)
+                                 if arr.dtype.kind in "US" else _num(v))
+                out.append(rec)
+                run += 1
+        return out
+
+
+# --------------------------------------------------------------------------- evaluate
+
+def _region(model: CutInGMM, constraints: Any, physical_bounds: bool) -> Region:
+    lane = float(getattr(model, "lane_width_", None) or 3.75)
+    if constraints is None:
+        region = Region.from_constraints((), lane_width=lane, physical_bounds=physical_bounds)
+    elif isinstance(constraints, Region):
+        region = constraints
+    else:
+        region = Region.from_constraints(list(constraints), lane_width=lane,
+                                         physical_bounds=physical_bounds)
+    return region.bind(model)
+
+
+def _hits(chunks: Sequence[ChunkResult]) -> tuple[FloatArray, FloatArray] | None:
+    zs = [c.z[c.collided] for c in chunks]
+    ws = [c.weights[c.collided] for c in chunks]
+    if not zs:
+        return None
+    z = np.concatenate(zs)
+    return (z, np.concatenate(ws)) if z.shape[0] else None
+
+
+def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runner,
+               seed: int, previous: Sequence[ChunkResult], envelopes: Sequence[str],
+               alpha: float, executor: Executor | None, part_size: int,
+               min_fit_hits: int) -> ChunkResult:
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
+    hits = _hits(previous)
+    if hits is not None and hits[0].shape[0] < min_fit_hits:
+        hits = None
+    proposal: Proposal = build_proposal(model, region=region, lane_width=region.lane_width,
+                                        envelopes=envelopes, hits=hits, rng=rng, alpha=alpha)
+    z, part = proposal.draw(size, rng)
+    seeds = rng.integers(0, np.iinfo(np.uint64).max, size=size, dtype=np.uint64,
+                         endpoint=True)
+    log_p = model.log_density_z(z)
+    log_q = proposal.log_q(z)
+    weights = np.exp(log_p - log_q)
+    params = model.params_matrix(model.from_z(z))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        inside = np.asarray(region.contains(params), dtype=bool)
+    rows = np.flatnonzero(inside)
+    outcome: dict[str, NDArray[Any]]
+    if rows.size:
+        got = _run(runner, params[rows], seeds[rows], executor, part_size)
+        outcome = {name: _fill(v, rows, size, name) for name, v in got.items()}
+    else:
+        outcome = {"collided": np.zeros(size, dtype=bool), "impact_speed": np.zeros(size)}
+    return ChunkResult(index=k, params=params, z=z, seeds=seeds, part=part, log_p=log_p,
+                       log_q=log_q, weights=weights, simulated=inside, outcome=outcome,
+                       proposal=proposal.describe())
+
+
+def _exposure(model: CutInGMM, exposure: Exposure | Mapping[str, Any] | None
+              ) -> Exposure | None:
+    if exposure is None:
+        raw = getattr(model, "exposure_", None)
+        return Exposure.from_dict(raw) if raw else None
+    if isinstance(exposure, Exposure):
+        return exposure
+    return Exposure.from_dict(exposure)
+
+
+def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Region | None
+             = None, n: int | None = None, rhw: float = 0.3, max_runs: int = 1_000_000,
+             seed: int = 0, exposure: Exposure | Mapping[str, Any] | None = None,
+             batch_size: int = 2000, progress: ProgressFn | None = None,
+             on_chunk: Callable[[ChunkResult], None] | None = None,
+             stored: Iterable[ChunkResult | Mapping[str, Any]] = (),
+             executor: Executor | None = None, bootstrap: bool = True,
+             sut: str | None = None, envelopes: Sequence[str] = DEFAULT_ENVELOPES,
+             physical_bounds: bool = True, alpha: float = 0.15, confidence: float = 0.95,
+             min_collisions: int = MIN_COLLISIONS, part_size: int = 1024,
+             min_fit_hits: int = 2) -> CampaignResult:
+    """Run a campaign: importance-sampled cut-ins driven by ``runner`` until the stop rule.
+
+    Parameters
+    ----------
+    model : fitted CutInGMM (its bootstrap replicates give the model interval, its
+        ``exposure_`` the rates unless ``exposure`` is given)
+    runner : ``runner(params (n, 8), seeds (n,) uint64)`` -> outcomes
+        (``sampler.campaign.Runner``; ``sut_runner`` for a system under test)
+    constraints : constraints or a Region, optional
+        Restrict the target to a region A: ``p_collision`` is then per cut-in of A
+        (``P(C and A | B) / P(A | B)``, P(A | B) from ``estimate_p_region``), the rates
+        count the collisions inside A.
+    n : int, optional
+        Exactly this many draws (no stop rule); default: stop when the relative half-width
+        of the interval is at most ``rhw`` with at least ``min_collisions`` collisions, or
+        at ``max_runs`` draws.
+    seed : int
+        Chunk k draws from ``SeedSequence([seed, k])``; its proposal depends on the chunks
+        before it only, so the campaign is deterministic.
+    stored : chunks of an earlier run of the same campaign (``ChunkResult`` or its dict):
+        replayed in order instead of drawn and simulated (resume after a crash).
+    on_chunk : called with each new ``ChunkResult`` (the job stores it)
+    executor : concurrent.futures Executor, optional: runs parts of ``part_size`` rows
+    progress : ``progress("runs", done, planned)`` after each chunk
+    """
+    model.check_fitted()
+    if n is not None and (isinstance(n, bool) or int(n) < 1):
+        raise SamplerError(f"n: must be a positive number of runs, got {n!r}", field="n")
+    if not (isinstance(rhw, int | float) and 0 < rhw < 10):
+        raise SamplerError(f"rhw: must be a relative half-width in (0, 10), got {rhw!r}",
+                           field="rhw")
+    if int(max_runs) < 1:
+        raise SamplerError(f"max_runs: must be >= 1, got {max_runs!r}", field="max_runs")
+    if int(batch_size) < 1:
+        raise SamplerError(f"batch_size: must be >= 1, got {batch_size!r}",
+                           field="batch_size")
+    if isinstance(seed, bool) or int(seed) < 0:
+        raise SamplerError(f"seed: must be an integer >= 0, got {seed!r}", field="seed")
+    seed = int(seed)
+    region = _region(model, constraints, physical_bounds)
+    exp = _exposure(model, exposure)
+    replay = [c if isinstance(c, ChunkResult) else ChunkResult.from_dict(c) for c in stored]
+    p_region = None
+    if region.constraints:
+        p_region = estimate_p_region(model, region, seed=seed)
+    planned = int(n) if n is not None else int(max_runs)
+    zq = float(norm.ppf(0.5 + confidence / 2))
+    pb, cv_b = _p_bounds(model, region)
+    chunks: list[ChunkResult] = []
+    done = 0
+    stop = "max_runs"
+    while done < planned:
+        k = len(chunks)
+        size = min(int(batch_size), planned - done)
+        if k < len(replay):
+            chunk = replay[k]
+            if chunk.index != k or chunk.n != size:
+                raise SamplerError(f"stored: chunk {k} does not belong to this campaign "
+                                   f"(index {chunk.index}, {chunk.n} runs; expected {size})",
+                                   field="stored")
+        else:
+            chunk = _new_chunk(k, size, model, region, runner, seed, chunks, envelopes,
+                               alpha, executor, part_size, min_fit_hits)
+            if on_chunk is not None:
+                on_chunk(chunk)
+        chunks.append(chunk)
+        done += chunk.n
+        if progress is not None:
+            progress("runs", done, planned)
+        if n is None:
+            est = _estimate(chunks, "collided", pb, cv_b)
+            if est.hits >= min_collisions and est.estimate > 0:
+                cv = est.se / est.estimate
+                if p_region is not None:
+                    lo, hi = float(p_region.ci_low), float(p_region.ci_high)
+                    cv = math.sqrt(cv ** 2 + ((math.log(hi) - math.log(lo)) / (2 * zq)) ** 2)
+                if zq * cv <= rhw:
+                    stop = "rhw"
+                    break
+    else:
+        stop = "n" if n is not None else "max_runs"
+    return CampaignResult(chunks=chunks, stop_reason=stop, model=model, region=region,
+                          seed=seed, sut=sut or getattr(runner, "name", None), exposure=exp,
+                          bootstrap=bootstrap, confidence=confidence,
+                          rhw_target=None if n is not None else float(rhw), alpha=alpha,
+                          p_region=p_region)
