@@ -1,0 +1,249 @@
+"""riskcore.sut: hand-computed closed-loop runs, the protocol, determinism, the limits."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from riskcore.sut import (
+    BUILTIN_SUTS,
+    CutInBatch,
+    Observation,
+    Observations,
+    RunBatch,
+    SimSettings,
+    SutError,
+    compare_careful,
+    make_sut,
+    per_run,
+    simulate,
+)
+
+EL, EW = 4.5, 1.8
+
+
+def leader_batch(gaps: list[float], v_lead: list[float], v_ego: list[float], *,
+                 duration: float = 60.0, y: float = 0.0, h: float = 0.1,
+                 t_p: float = 0.0) -> CutInBatch:
+    """A leader at constant speed straight ahead (bumper-to-bumper gap at t = 0)."""
+    t = np.round(np.arange(round(duration / h) + 1) * h, 12)
+    n = len(gaps)
+    cx = np.array([[g + EL] for g in gaps]) + np.outer(v_lead, t)
+    return CutInBatch(t=t, lane_width=3.75, ego_v0=np.array(v_ego, dtype=float),
+                      ego_length=EL, ego_width=EW, cx=cx, cy=np.full((n, t.size), y),
+                      cpsi=np.zeros((n, t.size)), cv=np.outer(v_lead, np.ones(t.size)),
+                      ca=np.zeros((n, t.size)), c_length=np.full(n, EL),
+                      c_width=np.full(n, EW), t_p=np.full(n, t_p), t_cross=np.zeros(n))
+
+
+def test_none_hits_a_slower_leader_at_the_hand_computed_time_and_speed() -> None:
+    # gap 25.5 m closing at 5 m/s: contact at 5.1 s with 5 m/s
+    b = leader_batch([25.5], [20.0], [25.0])
+    r = simulate(make_sut("none"), b, seeds=0)
+    assert r.collided[0]
+    assert r.t_contact[0] == pytest.approx(5.1, abs=1e-9)
+    assert r.impact_speed[0] == pytest.approx(5.0, abs=1e-9)
+    assert r.min_gap[0] == 0.0 and r.end[0] == "contact"
+    assert r.max_decel[0] == 0.0 and math.isnan(r.t_brake_rel_tp[0])
+
+
+def test_none_beside_never_collides_and_ends_without_conflict() -> None:
+    b = leader_batch([5.0], [20.0], [25.0], y=3.75, duration=2.0)
+    r = simulate(make_sut("none"), b, seeds=0)
+    assert not r.collided[0] and r.end[0] == "no_conflict"
+    assert r.min_gap[0] == math.inf
+
+
+def test_idm_settles_at_its_equilibrium_gap() -> None:
+    # Treiber's equilibrium: s_e = (s0 + v T) / sqrt(1 - (v / v0)^4) at v = 20, v0 = 30
+    s_e = (2.0 + 20.0 * 1.6) / math.sqrt(1.0 - (20.0 / 30.0) ** 4)
+    b = leader_batch([s_e + 6.0], [20.0], [20.0], duration=200.0)
+    r = simulate(make_sut("idm", v0=30.0), b, seeds=0, profiles=True,
+                 settings=SimSettings(t_max=150.0))
+    assert r.profiles is not None
+    k = np.flatnonzero(~np.isnan(r.profiles["x"][0]))[-1]
+    x, v = r.profiles["x"][0, k], r.profiles["v"][0, k]
+    gap = (s_e + 6.0 + EL) + 20.0 * r.profiles["t"][k] - x - EL
+    assert gap == pytest.approx(s_e, abs=0.05)
+    assert v == pytest.approx(20.0, abs=0.01)
+
+
+def test_idm_in_equilibrium_stays_there() -> None:
+    s_e = (2.0 + 20.0 * 1.6) / math.sqrt(1.0 - (20.0 / 30.0) ** 4)
+    b = leader_batch([s_e], [20.0], [20.0], duration=10.0)
+    r = simulate(make_sut("idm", v0=30.0), b, seeds=0, settings=SimSettings(t_max=10.0))
+    assert r.min_gap[0] == pytest.approx(s_e, abs=1e-9)
+    assert r.max_decel[0] < 1e-9 and r.max_jerk[0] < 1e-9
+
+
+def test_acc_settles_at_its_time_gap() -> None:
+    # k1 (gap - s0 - 1.1 v) + k2 (v_l - v) = 0 at v = v_l = 20: gap = 2 + 22 = 24 m
+    b = leader_batch([30.0], [20.0], [20.0], duration=200.0)
+    r = simulate(make_sut("acc", v_set=30.0), b, seeds=0, profiles=True,
+                 settings=SimSettings(t_max=150.0))
+    assert r.profiles is not None
+    k = np.flatnonzero(~np.isnan(r.profiles["x"][0]))[-1]
+    gap = 30.0 + EL + 20.0 * r.profiles["t"][k] - r.profiles["x"][0, k] - EL
+    assert gap == pytest.approx(24.0, abs=0.05)
+    assert not r.collided[0]
+
+
+def test_aeb_fires_at_the_hand_computed_time_and_stops_short() -> None:
+    # ACC switched off (gains 0): TTC = (60 - 20 t) / 20 < 1.5 first at the step t = 1.51
+    b = leader_batch([60.0], [10.0], [30.0], duration=10.0)
+    sut = make_sut("acc_aeb", k0=0.0, k1=0.0, k2=0.0)
+    r = simulate(sut, b, seeds=0)
+    assert r.t_brake_rel_tp[0] == pytest.approx(1.51, abs=1e-9)
+    # from 1.51 s: gap 60 - 20 * 1.51, jerk 12.65 up to 9 m/s², until v_rel = 0
+    j, a, vr = 12.65, 9.0, 20.0
+    t1 = a / j
+    gap0 = 60.0 - 20.0 * 1.51
+    used = vr * t1 - j * t1 ** 3 / 6 + (vr - j * t1 ** 2 / 2) ** 2 / (2 * a)
+    assert not r.collided[0]
+    assert r.min_gap[0] == pytest.approx(gap0 - used, abs=2e-3)
+    assert r.max_decel[0] == pytest.approx(9.0, abs=1e-12)
+    assert r.max_jerk[0] == pytest.approx(12.65, abs=1e-9)
+
+
+def test_braking_to_standstill_never_reverses() -> None:
+    class Brake:
+        name = "brake"
+
+        def reset(self, n: int, seeds: np.ndarray) -> None:
+            pass
+
+        def act(self, obs: Observations) -> np.ndarray:
+            return np.full(obs.t.shape[0], -20.0)
+
+    b = leader_batch([500.0], [20.0], [10.0], duration=5.0)
+    r = simulate(Brake(), b, seeds=0, profiles=True, settings=SimSettings(t_max=5.0))
+    assert r.profiles is not None
+    v = r.profiles["v"][0]
+    v = v[~np.isnan(v)]
+    assert v.min() == 0.0 and np.all(np.diff(v) <= 0.0)
+    # clipped to 9 m/s² with the 12.65 m/s³ ramp: stops after 9/12.65 + (10 - 9²/(2*12.65))/9
+    t_stop = 9 / 12.65 + (10 - 81 / (2 * 12.65)) / 9
+    k_stop = int(np.argmax(v == 0.0))
+    assert r.profiles["t"][k_stop] == pytest.approx(t_stop, abs=0.011)
+    assert r.max_decel[0] == 9.0
+
+
+class PlainIDM:
+    """IDM for one run, written plainly (the reference of the batched one)."""
+
+    def reset(self, seed: int) -> None:
+        self.v0: float | None = None
+
+    def act(self, obs: Observation) -> float:
+        if self.v0 is None:
+            self.v0 = max(obs.ego_v, 0.1)
+        v = obs.ego_v
+        free = 1.0 - (v / self.v0) ** 4.0
+        if obs.present[0] and obs.lane[0] == 0 and obs.dx[0] > 0:
+            s = max(float(obs.gap[0]), 0.01)
+            s_star = 2.0 + max(0.0, v * 1.6 + v * (v - obs.vx[0]) /
+                               (2.0 * math.sqrt(0.73 * 1.67)))
+            return 0.73 * (free - (s_star / s) ** 2)
+        return 0.73 * free
+
+
+def test_per_run_adapter_equals_the_batched_sut() -> None:
+    b = leader_batch([15.0, 40.0, 80.0], [20.0, 15.0, 25.0], [25.0, 30.0, 20.0],
+                     duration=20.0)
+    fast = simulate(make_sut("idm"), b, seeds=[1, 2, 3])
+    slow = simulate(per_run(PlainIDM, "plain_idm"), b, seeds=[1, 2, 3])
+    for name in RunBatch.FIELDS:
+        np.testing.assert_allclose(getattr(fast, name).astype(float) if getattr(
+            fast, name).dtype.kind != "U" else 0, getattr(slow, name).astype(float) if
+            getattr(slow, name).dtype.kind != "U" else 0, rtol=1e-9, atol=1e-9)
+    assert list(fast.end) == list(slow.end)
+
+
+class Jitter:
+    """A random SUT: commands drawn per run from the run's seed."""
+
+    name = "jitter"
+
+    def reset(self, n: int, seeds: np.ndarray) -> None:
+        self.rngs = [np.random.default_rng(int(s)) for s in seeds]
+
+    def act(self, obs: Observations) -> np.ndarray:
+        return np.array([r.uniform(-15.0, 5.0) for r in self.rngs])
+
+
+def _bytes(r: RunBatch) -> bytes:
+    return b"".join(np.ascontiguousarray(getattr(r, k)).tobytes() for k in RunBatch.FIELDS)
+
+
+def test_same_seeds_same_bytes_and_other_seeds_differ() -> None:
+    b = leader_batch([20.0, 30.0], [20.0, 18.0], [25.0, 26.0], duration=15.0)
+    one = simulate(Jitter(), b, seeds=[7, 8])
+    two = simulate(Jitter(), b, seeds=[7, 8])
+    other = simulate(Jitter(), b, seeds=[9, 8])
+    assert _bytes(one) == _bytes(two)
+    assert _bytes(one) != _bytes(other)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), a_max=st.floats(2.0, 10.0),
+       jerk=st.floats(2.0, 40.0), period=st.sampled_from([0.01, 0.05, 0.1]))
+def test_the_ego_never_exceeds_its_limits(seed: int, a_max: float, jerk: float,
+                                          period: float) -> None:
+    b = leader_batch([20.0, 40.0], [10.0, 25.0], [25.0, 20.0], duration=8.0)
+    s = SimSettings(a_brake_max=a_max, jerk_max=jerk, update_period=period, t_max=8.0)
+    r = simulate(Jitter(), b, seeds=seed, settings=s, profiles=True)
+    assert np.all(r.max_decel <= a_max + 1e-12)
+    assert np.all(r.max_jerk <= jerk + 1e-9)
+    assert r.profiles is not None
+    v = r.profiles["v"]
+    assert np.all(v[~np.isnan(v)] >= 0.0)
+
+
+def test_a_braking_sut_hits_no_faster_than_none() -> None:
+    b = leader_batch([5.0, 10.0, 25.0], [10.0, 15.0, 5.0], [30.0, 30.0, 30.0])
+    none = simulate(make_sut("none"), b, seeds=0)
+    for name in ("idm", "acc", "acc_aeb"):
+        r = simulate(make_sut(name), b, seeds=0)
+        assert np.all(r.impact_speed <= none.impact_speed + 1e-9), name
+
+
+def test_compare_careful_by_hand() -> None:
+    def rb(coll: list[bool], speed: list[float]) -> RunBatch:
+        n = len(coll)
+        z = np.zeros(n)
+        return RunBatch(np.array(coll), np.array(speed), z, z, z, z, z, z, z, z, z, z,
+                        np.zeros(n, bool), np.zeros(n, bool), z, z, z,
+                        np.array(["x"] * n))
+    sut = rb([True, False, True, True, False], [3.0, 0.0, 2.0, 4.0, 0.0])
+    careful = rb([False, True, True, True, False], [0.0, 2.0, 3.0, 4.0, 0.0])
+    assert list(compare_careful(sut, careful)) == ["worse", "better", "better", "same",
+                                                   "same"]
+
+
+def test_bad_inputs_name_the_field() -> None:
+    b = leader_batch([20.0], [20.0], [25.0], duration=2.0)
+    with pytest.raises(SutError, match="seeds"):
+        simulate(make_sut("none"), b, seeds=[1, 2])
+    with pytest.raises(SutError, match="dt"):
+        SimSettings(dt=0.0)
+    with pytest.raises(SutError, match="update_period"):
+        SimSettings(update_period=0.015)
+    with pytest.raises(SutError, match="unknown built-in"):
+        make_sut("nope")
+    with pytest.raises(SutError, match="idm: unknown parameter"):
+        make_sut("idm", gain=1.0)
+    with pytest.raises(SutError, match="ego_v0"):
+        leader_batch([20.0], [20.0], [-1.0])
+    assert SimSettings.from_dict(SimSettings(dt=0.02).to_dict()) == SimSettings(dt=0.02)
+
+
+def test_every_builtin_has_a_source_and_runs() -> None:
+    b = leader_batch([10.0], [15.0], [25.0], duration=10.0)
+    for name, spec in BUILTIN_SUTS.items():
+        assert spec.source and spec.summary
+        r = simulate(spec.factory(), b, seeds=0)
+        assert r.sut == name and len(r) == 1
