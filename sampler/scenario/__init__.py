@@ -2,12 +2,15 @@
 
 - :mod:`~sampler.scenario.builder` — vector -> :class:`~riskcore.scenario.ConcreteScenario`
   (and the builder's constants: lead-in, time step, vehicle size);
+- :mod:`~sampler.scenario.batch` — many vectors -> the scripted world of a closed-loop
+  batch (``riskcore.sut.CutInBatch``), the builder's tracks without building scenarios;
 - :mod:`~sampler.scenario.record` — vector -> scenario -> scored
   :class:`ScenarioRecord`: the one join of sampler and riskcore;
 - :mod:`~sampler.scenario.scoring` — many vectors, in parts, on an executor the caller
   gives (sampler starts no processes).
 """
 
+from sampler.scenario.batch import CutInTracks, cutin_tracks
 from sampler.scenario.builder import (
     DEFAULT_DT,
     DEFAULT_HORIZON,
@@ -32,9 +35,11 @@ __all__ = [
     "DEFAULT_VEHICLE_SIZE",
     "SCORE_FIELDS",
     "SUPPORT_FIELDS",
+    "CutInTracks",
     "OutsideParameter",
     "ScenarioRecord",
     "build_scenario",
+    "cutin_tracks",
     "score_part",
     "score_rows",
     "score_samples",

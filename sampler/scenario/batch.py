@@ -1,0 +1,345 @@
+"""Many parameter vectors -> the scripted world of a closed-loop batch, without building
+one concrete scenario per vector.
+
+``cutin_tracks(params, ...)`` gives, for N vectors on one time grid, the cutter's track
+(centre, heading, speed, acceleration), the ego's start speed, the perception and
+crossing moments and the end of the cutter's script: the same numbers
+:func:`sampler.scenario.builder.build_scenario` puts into each scenario (equal to about
+1e-12 m; tested to 1e-9 m). ``cutin_batch`` wraps them in ``riskcore.sut.CutInBatch``,
+the closed-loop simulator's input.
+
+How: one compiled loop over the vectors doing what the builder does per vector
+(``datasets.cutin_model.CutInTrajectory``): the lateral motion integrated by the composite
+trapezoid on the same 1 ms grid with the pulse edges inserted, linear interpolation
+inside it, the exact integral of the piecewise-linear speed outside it, the crossing moment
+by the same rule, the cutter placed so that the gap at the crossing is ``gap``. After its
+script ends (``t_end``: the lane change and the acceleration pulse are over) the cutter
+drives straight at constant speed, exactly as the builder's formulas continue.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from datasets import DEFAULT_LANE_WIDTH
+from riskcore import jit
+from sampler.errors import BuilderError
+from sampler.scenario.builder import (
+    DEFAULT_DT,
+    DEFAULT_HORIZON,
+    DEFAULT_LEAD_IN,
+    DEFAULT_VEHICLE_SIZE,
+    MAX_DURATION,
+)
+
+jit.register(__file__)  # before the first @njit: one cache per version of the kernels
+
+__all__ = ["CutInTracks", "cutin_tracks", "reasons"]
+
+FloatArray = NDArray[np.float64]
+
+#: the builder's integration step of the lateral motion, s (``CutInTrajectory``)
+SUBSTEP = 1e-3
+#: UN R157's wandering zone: t_p is when the cutter's centre has moved this far, m
+WANDERING_ZONE = 0.375
+
+#: kernel status codes
+_OK, _NOT_FINITE, _BAD_PT, _BAD_A3, _NO_YAW, _TOO_LONG, _NO_CROSS, _EGO_SPEED, _NEG_SPEED = \
+    range(9)
+_REASONS = {
+    _NOT_FINITE: "a parameter is not finite",
+    _BAD_PT: "p_t must be > 0 s",
+    _BAD_A3: "p_a3 must be >= 0 s",
+    _NO_YAW: "p_y1 is 0, the cutter would not change lanes",
+    _TOO_LONG: f"the lane change and pulse last longer than {MAX_DURATION:.0f} s",
+    _NO_CROSS: "the lateral motion never reaches the lane marking",
+    _EGO_SPEED: "the ego speed v_cutter(t_cross) + dv is not positive",
+    _NEG_SPEED: "the cutter's speed becomes negative within the grid",
+}
+
+
+class CutInTracks(NamedTuple):
+    """The scripted world of N cut-ins on one grid (shapes (T,), (N,) or (N, T))."""
+
+    t: FloatArray
+    ego_v0: FloatArray
+    cx: FloatArray
+    cy: FloatArray
+    cpsi: FloatArray
+    cv: FloatArray
+    ca: FloatArray
+    t_p: FloatArray
+    t_cross: FloatArray
+    t_end: FloatArray
+    ok: NDArray[np.bool_]
+    status: NDArray[np.int64]
+
+
+@numba.njit(cache=True)
+def _speed(t: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float
+           ) -> float:  # pragma: no cover - jit
+    c = min(max(t - p_a2, 0.0), p_a3)
+    c0 = min(max(-p_a2, 0.0), p_a3)
+    return p_v0 + p_a1 * (c - c0)
+
+
+@numba.njit(cache=True)
+def _pulse_integral(t: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float
+                    ) -> float:  # pragma: no cover - jit
+    u = min(max(t - p_a2, 0.0), p_a3)
+    ht = 0.5 * u * u + p_a3 * max(t - p_a2 - p_a3, 0.0)
+    u0 = min(max(0.0 - p_a2, 0.0), p_a3)
+    h0 = 0.5 * u0 * u0 + p_a3 * max(0.0 - p_a2 - p_a3, 0.0)
+    c0 = min(max(-p_a2, 0.0), p_a3)
+    return p_v0 * t + p_a1 * (ht - h0 - c0 * t)
+
+
+@numba.njit(cache=True)
+def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no cover - jit
+    """numpy.interp for one x inside [xp[0], xp[-1]] (the same arithmetic)."""
+    n = xp.shape[0]
+    if x >= xp[n - 1]:
+        return fp[n - 1]
+    if x <= xp[0]:
+        return fp[0]
+    j = np.searchsorted(xp, x, side="right") - 1
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if r != r:
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+    return r
+
+
+@numba.njit(cache=True)
+def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
+         ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
+         cpsi: FloatArray, cv: FloatArray, ca: FloatArray
+         ) -> tuple[int, float, float, float, float]:  # pragma: no cover - jit
+    """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end)."""
+    nan = math.nan
+    for j in range(8):
+        if not math.isfinite(row[j]):
+            return _NOT_FINITE, nan, nan, nan, nan
+    p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap = (row[0], row[1], row[2], row[3], row[4],
+                                                  row[5], row[6], row[7])
+    if p_t <= 0.0:
+        return _BAD_PT, nan, nan, nan, nan
+    if p_a3 < 0.0:
+        return _BAD_A3, nan, nan, nan, nan
+    if p_y1 == 0.0:
+        return _NO_YAW, nan, nan, nan, nan
+    pulse_end = p_a2 + p_a3 if p_a3 > 0 else 0.0
+    t_settle = lead_in + max(2.0 * p_t, pulse_end, 0.0)
+    if t_settle > MAX_DURATION:
+        return _TOO_LONG, nan, nan, nan, nan
+    # the builder's integration grid: linspace(0, end, n_sub + 1) plus the pulse edges
+    end = 2.0 * p_t
+    n_sub = max(math.ceil(end / SUBSTEP), 1)
+    step = end / n_sub
+    base = np.empty(n_sub + 1)
+    for i in range(n_sub + 1):
+        base[i] = i * step + 0.0
+    base[n_sub] = end
+    e1 = p_a2
+    e2 = p_a2 + p_a3
+    lo_e = min(e1, e2)
+    hi_e = max(e1, e2)
+    extra = np.empty(2)
+    m = 0
+    for e in (lo_e, hi_e):
+        if not (0.0 < e < end):
+            continue
+        if m > 0 and extra[m - 1] == e:
+            continue
+        k = np.searchsorted(base, e)
+        if k < base.shape[0] and base[k] == e:
+            continue
+        extra[m] = e
+        m += 1
+    grid = np.empty(n_sub + 1 + m)
+    gi = 0
+    ei = 0
+    for i in range(n_sub + 1):
+        while ei < m and extra[ei] < base[i]:
+            grid[gi] = extra[ei]
+            gi += 1
+            ei += 1
+        grid[gi] = base[i]
+        gi += 1
+    while ei < m:
+        grid[gi] = extra[ei]
+        gi += 1
+        ei += 1
+    ng = grid.shape[0]
+    xs = np.empty(ng)
+    ys = np.empty(ng)
+    xs[0] = 0.0
+    ys[0] = 0.0
+    amp = p_y1 * p_t / math.pi
+    v_prev = _speed(grid[0], p_a1, p_a2, p_a3, p_v0)
+    psi_prev = amp * (1.0 - math.cos(math.pi * grid[0] / p_t))
+    vc_prev = v_prev * math.cos(psi_prev)
+    vs_prev = v_prev * math.sin(psi_prev)
+    ax = 0.0
+    ay = 0.0
+    for i in range(1, ng):
+        v = _speed(grid[i], p_a1, p_a2, p_a3, p_v0)
+        psi = amp * (1.0 - math.cos(math.pi * grid[i] / p_t))
+        vc = v * math.cos(psi)
+        vs = v * math.sin(psi)
+        h = grid[i] - grid[i - 1]
+        ax += 0.5 * (vc + vc_prev) * h
+        ay += 0.5 * (vs + vs_prev) * h
+        xs[i] = ax
+        ys[i] = ay
+        vc_prev = vc
+        vs_prev = vs
+    s_end = _pulse_integral(end, p_a1, p_a2, p_a3, p_v0)
+    # the crossing: first |y| >= lane_width / 2, linear between grid points
+    offset = lane_width / 2.0
+    tau_c = nan
+    for i in range(ng):
+        if abs(ys[i]) >= offset:
+            if i == 0:
+                tau_c = 0.0
+            else:
+                y0 = abs(ys[i - 1])
+                y1 = abs(ys[i])
+                frac = (offset - y0) / (y1 - y0)
+                tau_c = grid[i - 1] + frac * (grid[i] - grid[i - 1])
+            break
+    if tau_c != tau_c:
+        return _NO_CROSS, nan, nan, nan, nan
+    v_ego = _speed(tau_c, p_a1, p_a2, p_a3, p_v0) + dv
+    if not v_ego > 0:
+        return _EGO_SPEED, nan, nan, nan, nan
+    x_rel_c = _interp(tau_c, grid, xs)
+    t_c = lead_in + tau_c
+    x_cut0 = gap + 0.5 * (cut_len + ego_len) + v_ego * t_c - x_rel_c
+    y_start = -lane_width if p_y1 > 0 else lane_width
+    nt = t.shape[0]
+    for k in range(nt):
+        tau = t[k] - lead_in
+        if tau < 0.0:
+            xr = _pulse_integral(tau, p_a1, p_a2, p_a3, p_v0)
+            yr = ys[0]
+        elif tau > end:
+            xr = xs[ng - 1] + (_pulse_integral(tau, p_a1, p_a2, p_a3, p_v0) - s_end)
+            yr = ys[ng - 1]
+        else:
+            xr = _interp(tau, grid, xs)
+            yr = _interp(tau, grid, ys)
+        v = _speed(tau, p_a1, p_a2, p_a3, p_v0)
+        if v < 0.0:
+            return _NEG_SPEED, nan, nan, nan, nan
+        cx[k] = x_cut0 + xr
+        cy[k] = y_start + yr
+        if 0.0 <= tau <= end:
+            cpsi[k] = amp * (1.0 - math.cos(math.pi * tau / p_t))
+        else:
+            cpsi[k] = 0.0
+        cv[k] = v
+        ca[k] = p_a1 if (p_a2 <= tau < p_a2 + p_a3) else 0.0
+    # t_p: the centre has moved wz towards the ego (riskcore.criticality's rule, on the
+    # samples, linear between them)
+    toward = 1.0 if (0.0 - cy[0]) >= 0.0 else -1.0
+    t_p = nan
+    prev = 0.0
+    for k in range(nt):
+        mv = (cy[k] - cy[0]) * toward
+        if mv >= wz:
+            if k == 0:
+                t_p = t[0]
+            else:
+                f = (wz - prev) / (mv - prev)
+                t_p = t[k - 1] + f * (t[k] - t[k - 1])
+            break
+        prev = mv
+    return _OK, v_ego, t_c, t_p, t_settle
+
+
+@numba.njit(cache=True)
+def _all(params: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
+         ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
+         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, status: NDArray[np.int64],
+         out: FloatArray) -> None:  # pragma: no cover - jit
+    for i in range(params.shape[0]):
+        s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width, ego_len,
+                                         cut_len, wz, cx[i], cy[i], cpsi[i], cv[i], ca[i])
+        status[i] = s
+        out[i, 0] = v_ego
+        out[i, 1] = t_c
+        out[i, 2] = t_p
+        out[i, 3] = t_end
+
+
+def _time_grid(n_steps: int, dt: float) -> FloatArray:
+    return np.round(np.arange(n_steps + 1, dtype=np.float64) * dt, 12)
+
+
+def _positive(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating
+                                                  | np.integer):
+        raise BuilderError(f"{name}: expected a number, got {value!r}", field=name)
+    x = float(value)
+    if not (math.isfinite(x) and x > 0):
+        raise BuilderError(f"{name}: must be a positive finite number, got {value!r}",
+                           field=name)
+    return x
+
+
+def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
+                 ego_length: float = DEFAULT_VEHICLE_SIZE[0],
+                 cutter_length: float = DEFAULT_VEHICLE_SIZE[0], dt: float = DEFAULT_DT,
+                 lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
+                 wandering_zone: float = WANDERING_ZONE) -> CutInTracks:
+    """The builder's tracks of N vectors (N, 8) in ``PARAM_NAMES`` order on one grid.
+
+    ``duration`` (s): the grid's end; default the latest end of a valid row's script plus
+    the risk horizon (3 s), in whole steps. Rows the builder would refuse get ``ok``
+    False, their ``status`` code (``reasons``) and NaN or zero tracks; nothing raises.
+    """
+    x = np.ascontiguousarray(np.atleast_2d(np.asarray(params, dtype=np.float64)))
+    if x.ndim != 2 or x.shape[1] != 8:
+        raise BuilderError(f"params: expected shape (N, 8), got {x.shape}", field="params")
+    dt = _positive(dt, "dt")
+    lane_width = _positive(lane_width, "lane_width")
+    ego_length = _positive(ego_length, "ego_length")
+    cutter_length = _positive(cutter_length, "cutter_length")
+    if isinstance(lead_in, bool) or not (float(lead_in) >= 0 and math.isfinite(lead_in)):
+        raise BuilderError(f"lead_in: must be a finite number >= 0 s, got {lead_in!r}",
+                           field="lead_in")
+    n = x.shape[0]
+    if duration is None:
+        with np.errstate(invalid="ignore"):
+            pulse_end = np.where(x[:, 4] > 0, x[:, 3] + x[:, 4], 0.0)
+            settle = lead_in + np.maximum(np.maximum(2.0 * x[:, 1], pulse_end), 0.0)
+        good = np.isfinite(settle) & (settle <= MAX_DURATION)
+        longest = float(settle[good].max()) if good.any() else lead_in
+        duration = longest + DEFAULT_HORIZON
+    duration = _positive(duration, "duration")
+    n_steps = max(math.ceil(duration / dt - 1e-9), 1)
+    if n_steps > 100_000:
+        raise BuilderError(f"duration: {duration} s is more than 100000 steps of {dt} s",
+                           field="duration")
+    t = _time_grid(n_steps, dt)
+    shape = (n, t.shape[0])
+    cx, cy, cpsi, cv, ca = (np.zeros(shape) for _ in range(5))
+    status = np.zeros(n, dtype=np.int64)
+    out = np.full((n, 4), np.nan)
+    _all(x, t, float(lead_in), lane_width, ego_length, cutter_length, float(wandering_zone),
+         cx, cy, cpsi, cv, ca, status, out)
+    ok = status == _OK
+    return CutInTracks(t=t, ego_v0=out[:, 0], cx=cx, cy=cy, cpsi=cpsi, cv=cv, ca=ca,
+                       t_p=out[:, 2], t_cross=out[:, 1], t_end=out[:, 3], ok=ok,
+                       status=status)
+
+
+def reasons(status: NDArray[np.int64]) -> list[str | None]:
+    """Why each row is not a buildable cut-in (None: it is)."""
+    return [_REASONS.get(int(s)) for s in status]

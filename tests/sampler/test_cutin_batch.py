@@ -1,0 +1,95 @@
+"""sampler.scenario.batch: many vectors' tracks at once equal the builder's, one by one.
+
+The reference is :func:`sampler.scenario.build_scenario` (one concrete scenario per
+vector) and riskcore's perception rule on its samples; the batch must match them to 1e-9 m
+on the builder's own grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from datasets import PARAM_NAMES
+from riskcore.criticality import perception_time
+from sampler.errors import BuilderError
+from sampler.scenario import build_scenario
+from sampler.scenario.batch import cutin_tracks, reasons
+from tests.sampler.factories import synthetic_parameter_table
+
+
+def _check_rows(x: np.ndarray, lane_width: float = 3.75) -> int:
+    tr = cutin_tracks(x, lane_width=lane_width)
+    checked = 0
+    for i, row in enumerate(x):
+        try:
+            sc = build_scenario(dict(zip(PARAM_NAMES, row.tolist(), strict=True)),
+                                lane_width=lane_width)
+        except BuilderError:
+            assert not tr.ok[i], f"row {i}: the builder refuses it, the batch does not"
+            continue
+        assert tr.ok[i], f"row {i}: {reasons(tr.status[i:i + 1])[0]}"
+        c = sc.objects[0]
+        m = min(sc.t.shape[0], tr.t.shape[0])
+        assert np.array_equal(sc.t[:m], tr.t[:m])
+        for mine, ref in ((tr.cx, c.x), (tr.cy, c.y), (tr.cpsi, c.psi), (tr.cv, c.v),
+                          (tr.ca, c.a)):
+            assert ref is not None
+            assert np.max(np.abs(mine[i, :m] - ref[:m])) <= 1e-9
+        assert sc.ego.v is not None
+        assert tr.ego_v0[i] == pytest.approx(sc.ego.v[0], abs=1e-12)
+        assert tr.t_cross[i] == pytest.approx(sc.provenance["t_cross"], abs=1e-12)
+        tp = perception_time(sc, c)
+        assert tp is not None and tr.t_p[i] == pytest.approx(tp, abs=1e-9)
+        checked += 1
+    return checked
+
+
+def test_equal_to_the_builder_on_many_vectors() -> None:
+    table = synthetic_parameter_table(120, seed=5)
+    x = table[list(PARAM_NAMES)].to_numpy(dtype=np.float64).copy()
+    # pulses starting before, during and after the lane change; a pulse edge on the grid
+    x[:10, 3] = np.linspace(-2.0, 6.0, 10)
+    x[10, 3], x[10, 4] = 1.0, 0.5
+    assert _check_rows(x) >= 110
+
+
+@settings(max_examples=40, deadline=None)
+@given(p_y1=st.floats(0.02, 0.12), side=st.sampled_from([-1.0, 1.0]),
+       p_t=st.floats(1.0, 5.0), p_a1=st.floats(-3.0, 3.0), p_a2=st.floats(-3.0, 6.0),
+       p_a3=st.floats(0.0, 4.0), p_v0=st.floats(10.0, 35.0), dv=st.floats(-5.0, 8.0),
+       gap=st.floats(0.5, 60.0), lane_width=st.floats(3.0, 4.0))
+def test_equal_to_the_builder_property(p_y1: float, side: float, p_t: float, p_a1: float,
+                                       p_a2: float, p_a3: float, p_v0: float, dv: float,
+                                       gap: float, lane_width: float) -> None:
+    x = np.array([[side * p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap]])
+    _check_rows(x, lane_width)
+
+
+def test_refused_rows_are_reported_not_raised() -> None:
+    x = np.array([[0.05, 2.5, 0.0, 0.0, 0.0, 25.0, 2.0, 12.0],
+                  [0.0, 2.5, 0.0, 0.0, 0.0, 25.0, 2.0, 12.0],      # no yaw
+                  [0.001, 2.5, 0.0, 0.0, 0.0, 25.0, 2.0, 12.0],    # never crosses
+                  [0.05, 2.5, 0.0, 0.0, 0.0, 25.0, -40.0, 12.0],   # ego speed < 0
+                  [0.05, 2.5, -5.0, 0.0, 8.0, 25.0, 2.0, 12.0]])   # cutter reverses
+    tr = cutin_tracks(x)
+    assert tr.ok.tolist() == [True, False, False, False, False]
+    why = reasons(tr.status)
+    assert why[0] is None and "p_y1" in str(why[1]) and "marking" in str(why[2])
+    assert "ego speed" in str(why[3]) and "negative" in str(why[4])
+
+
+def test_the_grid_holds_every_script_and_the_cutter_goes_on_straight() -> None:
+    x = np.array([[0.05, 2.5, 1.0, 1.0, 2.0, 25.0, 2.0, 12.0],
+                  [0.05, 4.0, 0.0, 0.0, 0.0, 25.0, 2.0, 12.0]])
+    tr = cutin_tracks(x)
+    # the longest script ends at 2.5 + 8 s; plus the 3 s horizon
+    assert tr.t[-1] == pytest.approx(13.5)
+    assert tr.t_end.tolist() == pytest.approx([2.5 + 5.0, 2.5 + 8.0])
+    after = tr.t > tr.t_end[0] + 1e-9
+    v = tr.cv[0, after]
+    assert np.all(v == v[0]) and np.all(tr.cpsi[0, after] == 0.0)
+    dx = np.diff(tr.cx[0, after])
+    assert np.allclose(dx, v[0] * 0.1, rtol=0, atol=1e-9)
