@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -37,6 +39,9 @@ class ServiceContext:
     default_model_id: str | None = None
     startup_error: str | None = None
     _executor: ChunkExecutor | None = None
+    #: what makes a campaign's runner from (SUT factory, simulator settings); None: the
+    #: real one (``sampler.campaign.sut_runner``); tests put a stand-in here
+    campaign_runner: Callable[[Any, dict[str, Any] | None], Any] | None = None
     _models: dict[str, CutInGMM] = field(default_factory=dict)
     #: named caches of this context's users (dashboard views, status statistics)
     _caches: dict[str, ViewCache] = field(default_factory=dict)

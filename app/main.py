@@ -18,10 +18,18 @@ from app import __version__
 from app.docs_offline import install_offline_docs
 from app.errors import install_error_handlers
 from app.guards import RequestGuards
-from app.jobs.manager import JobManager
+from app.jobs.manager import JobKind, JobManager
 from app.openapi_extras import install_openapi_extras
-from app.routes import catalogues, dashboard, datasets, health, models, risk, scenarios
-from app.services import store
+from app.routes import (
+    catalogues,
+    dashboard,
+    datasets,
+    health,
+    models,
+    risk,
+    scenarios,
+)
+from app.services import evaluations, store
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("scengen.app")
@@ -53,7 +61,8 @@ def _settings_of(app: FastAPI) -> Settings:
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings = _settings_of(app)
     ctx = store.open_context(settings)
-    jobs = JobManager(ctx.runner())
+    jobs = JobManager(ctx.runner(), kinds={"eval": JobKind(
+        run=evaluations.job(ctx), pending=lambda: evaluations.active_ids(ctx))})
     jobs.start(resume=settings.resume_jobs)
     if settings.warm_start:
         ctx.warm_start()  # in the background: the first request need not wait

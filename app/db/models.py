@@ -164,3 +164,74 @@ class ScenarioRow(Base):
     r_ind_cross_r157: Mapped[float | None] = mapped_column(Float, nullable=True)
     alarm_time: Mapped[float | None] = mapped_column(Float, nullable=True)
     risk_peak: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class EvaluationRow(Base):
+    """A campaign job (issue 24): a system under test driven through importance-sampled
+    cut-ins (``sampler.campaign.evaluate``); ``summary`` once it is done."""
+
+    __tablename__ = "evaluations"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    model_id: Mapped[str] = mapped_column(ForeignKey("models.id", ondelete="RESTRICT"))
+    sut: Mapped[str] = mapped_column(String(200))
+    status: Mapped[str] = mapped_column(String(16))  # queued|running|done|failed|cancelled
+    seed: Mapped[int] = mapped_column(BigInteger)
+    #: the campaign's spec: constraints, n, rhw, max_runs, batch_size, sut_params, settings
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    runs_planned: Mapped[int] = mapped_column(Integer)
+    runs_done: Mapped[int] = mapped_column(Integer, default=0)
+    #: ``CampaignResult.summary()`` (JSON-safe) once done
+    summary: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+
+class EvaluationChunkRow(Base):
+    """One finished chunk of a campaign: ``sampler.campaign.ChunkResult.to_dict()`` as
+    zlib-compressed JSON, replayed through ``evaluate(..., stored=...)`` on resume."""
+
+    __tablename__ = "evaluation_chunks"
+    __table_args__ = (UniqueConstraint("evaluation_id", "chunk_index",
+                                       name="uq_evaluation_chunk"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    evaluation_id: Mapped[str] = mapped_column(
+        ForeignKey("evaluations.id", ondelete="CASCADE"), index=True)
+    chunk_index: Mapped[int] = mapped_column(Integer)
+    n_runs: Mapped[int] = mapped_column(Integer)
+    collisions: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class EvaluationRunRow(Base):
+    """One simulated run of a campaign (draws outside the region or the physical bounds
+    are not run and have no row). ``weight_raw`` = p/q in the model's z-space; the run's
+    weight in P is ``weight_raw / P(B)`` (the summary's ``p_bounds``)."""
+
+    __tablename__ = "evaluation_runs"
+    __table_args__ = (
+        UniqueConstraint("evaluation_id", "run", name="uq_evaluation_run"),
+        Index("ix_evaluation_run_impact", "evaluation_id", "impact_speed"),
+        Index("ix_evaluation_run_rdep", "evaluation_id", "r_dep_peak"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    evaluation_id: Mapped[str] = mapped_column(
+        ForeignKey("evaluations.id", ondelete="CASCADE"))
+    run: Mapped[int] = mapped_column(Integer)  # index over all draws of the campaign
+    chunk_index: Mapped[int] = mapped_column(Integer)
+    weight_raw: Mapped[float] = mapped_column(Float)
+    collided: Mapped[bool] = mapped_column(Boolean)
+    impact_speed: Mapped[float | None] = mapped_column(Float, nullable=True)
+    r_dep_peak: Mapped[float | None] = mapped_column(Float, nullable=True)
+    min_gap: Mapped[float | None] = mapped_column(Float, nullable=True)
+    min_ttc: Mapped[float | None] = mapped_column(Float, nullable=True)
+    vs_careful: Mapped[str | None] = mapped_column(String(16), nullable=True)
+    must_avoid: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    violation: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    #: the run's record: seed (as a string: uint64), parameters by name, every outcome
+    record: Mapped[dict[str, Any]] = mapped_column(JSON)

@@ -43,6 +43,8 @@ class ChunkExecutor(Protocol):
 
     def warm(self) -> Any: ...
 
+    def futures_executor(self) -> Executor | None: ...
+
     def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]: ...
 
     def close(self) -> None: ...
@@ -70,6 +72,10 @@ class InlineExecutor:
     def map_later(self, fn: Callable[..., T], *args: Sequence[Any]) -> Callable[[], list[T]]:
         """``map`` run when the returned function is called (nothing runs in between)."""
         return lambda: self.map(fn, *args)
+
+    def futures_executor(self) -> None:
+        """None: whoever asks runs its work in the calling thread."""
+        return None
 
     def warm(self) -> None:
         """Nothing to start: chunks run in the calling thread."""
@@ -152,6 +158,12 @@ class FuturesExecutor:
         executor = self._get()
         futures = [executor.submit(fn, *a) for a in zip(*args, strict=True)]
         return lambda: [f.result() for f in futures]
+
+    def futures_executor(self) -> Executor:
+        """The underlying ``concurrent.futures`` executor (the local pool, or Dask's
+        through ``Client.get_executor()``), for work that submits its own tasks, such as a
+        campaign's parts (``sampler.campaign.evaluate(executor=...)``)."""
+        return self._get()
 
     def warm(self) -> threading.Thread:
         """Start the workers and have each import the chunk machinery and load its compiled

@@ -1,11 +1,15 @@
-"""The service's job queue: one background thread runs catalogue jobs one at a time
-(each job already uses every worker of the executor)."""
+"""The service's job queue: one background thread runs jobs one at a time (each job
+already uses every worker of the executor): catalogues (``CatalogueRunner``) and the other
+kinds given as ``kinds`` (id prefix -> ``JobKind``: how to run one, which to resume), e.g.
+the evaluations of ``app.services.evaluations``."""
 
 from __future__ import annotations
 
 import logging
 import queue
 import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 from app.db import repository as repo
 from app.db.database import Database
@@ -15,9 +19,20 @@ from app.jobs.runner import CatalogueRunner
 log = logging.getLogger("scengen.jobs")
 
 
+@dataclass(frozen=True)
+class JobKind:
+    """A kind of job besides catalogues: ``run(id, cancel, stop)`` -> final status, and
+    ``pending()`` -> the ids to resume at start."""
+
+    run: Callable[[str, threading.Event, threading.Event], str]
+    pending: Callable[[], list[str]]
+
+
 class JobManager:
-    def __init__(self, runner: CatalogueRunner) -> None:
+    def __init__(self, runner: CatalogueRunner,
+                 kinds: Mapping[str, JobKind] | None = None) -> None:
         self.runner = runner
+        self.kinds = dict(kinds or {})
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._cancel: dict[str, threading.Event] = {}
         self._lock = threading.Lock()
@@ -37,6 +52,10 @@ class JobManager:
             for cid in ids:
                 log.info("resuming unfinished catalogue %s", cid)
                 self.submit(cid)
+            for prefix, kind in self.kinds.items():
+                for jid in kind.pending():
+                    log.info("resuming unfinished %s job %s", prefix, jid)
+                    self.submit(jid)
 
     def submit(self, catalogue_id: str) -> None:
         with self._lock:
@@ -57,6 +76,10 @@ class JobManager:
             self._thread.join(timeout=60)
         # the executor belongs to the ServiceContext, which closes it
 
+    def _kind_of(self, job_id: str) -> JobKind | None:
+        prefix = job_id.partition("-")[0]
+        return self.kinds.get(prefix)
+
     def _loop(self) -> None:
         while True:
             cid = self._queue.get()
@@ -66,6 +89,10 @@ class JobManager:
                 event = self._cancel.get(cid, threading.Event())
             try:
                 if event.is_set():
+                    continue
+                kind = self._kind_of(cid)
+                if kind is not None:
+                    kind.run(cid, event, self._stop)
                     continue
                 with self.db.session() as s:
                     if s.get(CatalogueRow, cid) is None:

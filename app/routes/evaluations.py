@@ -1,0 +1,241 @@
+"""Evaluations (issue 24): a system under test driven through importance-sampled cut-ins,
+run as a stored, resumable job; its status and figures, its runs, the failing runs'
+export; and the registered systems under test (``GET /suts``)."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, BackgroundTasks, Query, Request
+from fastapi.responses import FileResponse, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from app import jsonconv
+from app.deps import ContextDep, JobsDep
+from app.limits import INDEX_MAX
+from app.schemas import SEED_MAX, ApiModel
+from app.services import evaluations as service
+from app.services import suts
+
+router = APIRouter(tags=["evaluations"])
+
+MEDIA_TYPES = {"json": "application/json", "xosc": "application/zip",
+               "commonroad": "application/zip"}
+SUFFIXES = {"json": "json", "xosc": "zip", "commonroad": "commonroad.zip"}
+
+
+class EvaluationRequest(BaseModel):
+    """A campaign: which SUT, over which cut-ins, how many runs or to what precision."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    sut: str = Field(max_length=200, description="a registered system under test "
+                     "(GET /suts): a built-in or an installed package's entry point in the "
+                     "group 'scengen.suts'; never a module path")
+    sut_params: dict[str, Any] = Field(default_factory=dict, description="keyword "
+                                       "parameters of the SUT (its 'parameters' in GET /suts)")
+    model: str = Field(default="default", description="model id ('default': the embedded "
+                       "data's model)")
+    constraints: list[str] = Field(default_factory=list, description="restrict the cut-ins "
+                                   "to a region (e.g. 'v_ego>25'); default: the model's "
+                                   "whole distribution")
+    n: int | None = Field(default=None, ge=1, description="exactly this many draws (no "
+                          "stop rule)")
+    rhw: float = Field(default=0.3, gt=0, lt=10, description="stop when the relative "
+                       "half-width of the 95 % interval of P(collision) is at most this "
+                       "(and at least 10 collisions); ignored with n")
+    max_runs: int | None = Field(default=None, ge=1, description="most draws with the stop "
+                                 "rule (default 200,000)")
+    seed: int = Field(default=0, ge=0, le=SEED_MAX)
+    batch_size: int | None = Field(default=None, ge=1, le=100_000, description="draws per "
+                                   "stored chunk (default 2000)")
+    settings: dict[str, Any] | None = Field(default=None, description="simulator settings "
+                                            "(riskcore.sut.SimSettings fields: dt, "
+                                            "a_brake_max, perception_delay, ...)")
+
+
+class EvaluationCreated(ApiModel):
+    id: str
+    status: str = Field(description="queued | running | done | failed | cancelled")
+    href: str = Field(description="where to poll its status")
+
+
+class EvaluationStatus(ApiModel):
+    model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
+
+    id: str
+    status: str = Field(description="queued | running | done | failed | cancelled")
+    sut: str
+    model: str
+    seed: int
+    constraints: list[str]
+    spec: dict[str, Any]
+    runs_planned: int = Field(description="n, or max_runs with the stop rule")
+    runs_done: int = Field(description="draws stored so far (simulated or not)")
+    progress: float = Field(description="runs_done / runs_planned (1 when done; the stop "
+                            "rule usually ends a campaign before max_runs)")
+    chunks_done: int
+    collisions_so_far: int
+    runs_simulated: int = Field(description="stored runs the SUT drove (draws inside the "
+                                "region and the physical bounds)")
+    summary: dict[str, Any] | None = Field(description="once done: p_collision and "
+                                           "rate_per_hour (estimate, ci, model_ci), runs, "
+                                           "collisions, ess, acceleration, ... "
+                                           "(docs/evaluation.md)")
+    error: str | None
+    href_runs: str
+    created_at: str
+    updated_at: str
+    finished_at: str | None
+
+
+class EvaluationItem(ApiModel):
+    id: str
+    status: str
+    sut: str
+    model: str
+    seed: int
+    constraints: list[str]
+    created_at: str
+
+
+class EvaluationList(ApiModel):
+    evaluations: list[EvaluationItem]
+
+
+class RunPage(ApiModel):
+    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="strings")
+
+    evaluation: str
+    total: int = Field(description="runs matching the filter")
+    offset: int
+    limit: int
+    runs: list[dict[str, Any]] = Field(description="run, chunk, seed (a string: uint64), "
+                                       "the parameters, weight (w/P(B); null until done), "
+                                       "weight_raw, log_p, log_q, part, and the outcome "
+                                       "fields (collided, impact_speed, r_dep_peak, "
+                                       "vs_careful, ...)")
+
+
+class SutInfo(ApiModel):
+    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="strings")
+
+    name: str
+    origin: str = Field(description="builtin | entry point (<distribution>)")
+    summary: str
+    parameters: dict[str, Any]
+    source: str
+
+
+class SutList(ApiModel):
+    suts: list[SutInfo]
+    conflicts: list[str] = Field(description="entry points left out: their name is taken")
+
+
+@router.get("/suts", response_model=SutList, tags=["evaluations"],
+            summary="The registered systems under test")
+def list_suts() -> SutList:
+    reg = suts.registry()
+    return SutList(suts=[SutInfo.model_validate(jsonconv.encode(e.to_dict()))
+                         for e in reg.entries.values()], conflicts=list(reg.conflicts))
+
+
+@router.post("/evaluations", status_code=202, response_model=EvaluationCreated,
+             summary="Start an evaluation of a system under test; answers with its id")
+def create_evaluation(body: EvaluationRequest, ctx: ContextDep,
+                      jobs: JobsDep) -> EvaluationCreated:
+    row = service.create(ctx, sut=body.sut, sut_params=body.sut_params, model=body.model,
+                         constraints=body.constraints, n=body.n, rhw=body.rhw,
+                         max_runs=body.max_runs, seed=body.seed, batch_size=body.batch_size,
+                         settings=body.settings)
+    jobs.submit(row.id)
+    return EvaluationCreated(id=row.id, status=row.status, href=f"/evaluations/{row.id}")
+
+
+@router.get("/evaluations", response_model=EvaluationList, summary="List evaluations")
+def list_evaluations(ctx: ContextDep) -> EvaluationList:
+    return EvaluationList(evaluations=[
+        EvaluationItem(id=r.id, status=r.status, sut=r.sut, model=r.model_id, seed=r.seed,
+                       constraints=list((r.spec or {}).get("constraints", [])),
+                       created_at=r.created_at.isoformat())
+        for r in service.list_all(ctx)])
+
+
+@router.get("/evaluations/{evaluation_id}", response_model=EvaluationStatus,
+            summary="Status, progress and (once done) the collision rate with its intervals")
+def show_evaluation(evaluation_id: str, ctx: ContextDep) -> EvaluationStatus:
+    return EvaluationStatus.model_validate(
+        jsonconv.encode(service.describe(ctx, evaluation_id)))
+
+
+_PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc", "vs_careful"})
+
+
+@router.get("/evaluations/{evaluation_id}/runs", response_model=RunPage,
+            summary="Page through the runs the SUT drove, ranked and filtered")
+def list_runs(
+    evaluation_id: str,
+    ctx: ContextDep,
+    request: Request,
+    offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    order_by: Annotated[str, Query(description="run, impact_speed (default), r_dep_peak, "
+                                   "min_gap, min_ttc or weight")] = "impact_speed",
+    desc: Annotated[bool | None, Query(description="descending (default: true, except for "
+                                       "run)")] = None,
+    vs_careful: Annotated[list[Literal["worse", "same", "better"]] | None, Query(
+        description="keep runs the SUT did worse / the same / better than the R157 "
+                    "careful driver (repeatable)")] = None,
+) -> RunPage:
+    """Runs sorted by ``order_by`` (nulls last, ties by run) and filtered by
+    ``<field>_min``/``<field>_max`` (impact_speed, r_dep_peak, min_gap, min_ttc),
+    ``collided|must_avoid|violation=true|false`` and ``vs_careful``."""
+    service.get(ctx, evaluation_id)  # 404 before the filters' 422
+    items = [(k, v) for k, v in request.query_params.multi_items() if k not in _PAGE_PARAMS]
+    flt = service.run_filter(items, vs_careful or (), where="query")
+    descending = service.check_order(order_by, desc, where="query")
+    total, runs = service.page_runs(ctx, evaluation_id, flt, offset, limit,
+                                    order_by=order_by, desc=descending)
+    return RunPage(evaluation=evaluation_id, total=total, offset=offset, limit=limit,
+                   runs=jsonconv.encode(runs))
+
+
+@router.get("/evaluations/{evaluation_id}/export", response_class=FileResponse,
+            response_model=None, summary="Export the failing runs of a finished evaluation")
+def export_evaluation(
+    evaluation_id: str,
+    ctx: ContextDep,
+    background: BackgroundTasks,
+    format: Annotated[Literal["json", "xosc", "commonroad"], Query()] = "json",
+) -> Response:
+    """The collided runs, each rebuilt from its parameter vector: ``json`` (the summary and
+    each run's record with its concrete scenario), ``xosc`` (OpenSCENARIO 1.2 in test mode:
+    the ego is the system under test) or ``commonroad`` (zip)."""
+    tmp_root = ctx.data_dir / "tmp"
+    tmp_root.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix="export-", dir=tmp_root))
+    out = tmp / f"{evaluation_id}-failures.{SUFFIXES[format]}"
+    try:
+        service.export(ctx, evaluation_id, format, out)
+    except BaseException:
+        _rmtree(tmp)
+        raise
+    background.add_task(_rmtree, tmp)
+    return FileResponse(out, media_type=MEDIA_TYPES[format], filename=out.name)
+
+
+@router.delete("/evaluations/{evaluation_id}", status_code=204, response_model=None,
+               summary="Delete an evaluation (stops its job) and its runs")
+def delete_evaluation(evaluation_id: str, ctx: ContextDep, jobs: JobsDep) -> Response:
+    service.get(ctx, evaluation_id)
+    jobs.cancel(evaluation_id)
+    service.delete(ctx, evaluation_id)
+    return Response(status_code=204)
+
+
+def _rmtree(path: Path) -> None:
+    import shutil
+
+    shutil.rmtree(path, ignore_errors=True)
