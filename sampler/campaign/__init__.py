@@ -3,6 +3,8 @@ collision probability per cut-in and rate per hour with both intervals (docs/eva
 
 - :mod:`~sampler.campaign.runners` — the ``Runner`` protocol and stand-in runners with a
   known answer;
+- :mod:`~sampler.campaign.sut` — ``sut_runner``: a system under test in riskcore's
+  closed-loop simulator (and the careful driver beside it);
 - :mod:`~sampler.campaign.proposal` — the defensive mixture the runs are drawn from;
 - :mod:`~sampler.campaign.evaluate` — ``evaluate()``, its chunks and its figures.
 """
@@ -17,6 +19,7 @@ from sampler.campaign.runners import (
     halfspace_runner,
     late_brake_runner,
 )
+from sampler.campaign.sut import SutRunner, SutRuns, sut_runner
 
 __all__ = [
     "DEFAULT_ENVELOPES",
@@ -26,9 +29,12 @@ __all__ = [
     "Proposal",
     "Runner",
     "StandInRuns",
+    "SutRunner",
+    "SutRuns",
     "build_proposal",
     "evaluate",
     "halfspace_probability",
     "halfspace_runner",
     "late_brake_runner",
+    "sut_runner",
 ]

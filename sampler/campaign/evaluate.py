@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -161,7 +161,10 @@ class ChunkResult:
 
 def _outcome_arrays(batch: Any, m: int) -> dict[str, NDArray[Any]]:
     """The (m,) array attributes of a runner's result (``profiles`` and scalars left out)."""
-    if is_dataclass(batch):
+    arrays = getattr(batch, "arrays", None)
+    if isinstance(arrays, Mapping):
+        names = list(arrays)
+    elif is_dataclass(batch):
         names = [f.name for f in fields(batch)]
     else:
         names = [k for k in vars(batch) if not k.startswith("_")]
@@ -566,6 +569,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         raise SamplerError(f"seed: must be an integer >= 0, got {seed!r}", field="seed")
     seed = int(seed)
     region = _region(model, constraints, physical_bounds)
+    if is_dataclass(runner) and hasattr(runner, "lane_width") and runner.lane_width is None:
+        runner = replace(runner, lane_width=region.lane_width)  # the campaign's lane width
     exp = _exposure(model, exposure)
     replay = [c if isinstance(c, ChunkResult) else ChunkResult.from_dict(c) for c in stored]
     p_region = None

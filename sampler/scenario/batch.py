@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from datasets import DEFAULT_LANE_WIDTH
 from riskcore import jit
+from riskcore.sut import CutInBatch
 from sampler.errors import BuilderError
 from sampler.scenario.builder import (
     DEFAULT_DT,
@@ -39,7 +40,7 @@ from sampler.scenario.builder import (
 
 jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
-__all__ = ["CutInTracks", "cutin_tracks", "reasons"]
+__all__ = ["CutInTracks", "cutin_batch", "cutin_tracks", "reasons"]
 
 FloatArray = NDArray[np.float64]
 
@@ -343,3 +344,27 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
 def reasons(status: NDArray[np.int64]) -> list[str | None]:
     """Why each row is not a buildable cut-in (None: it is)."""
     return [_REASONS.get(int(s)) for s in status]
+def cutin_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
+                ego_length: float = DEFAULT_VEHICLE_SIZE[0],
+                ego_width: float = DEFAULT_VEHICLE_SIZE[1],
+                cutter_length: float = DEFAULT_VEHICLE_SIZE[0],
+                cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
+                lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
+                wandering_zone: float = WANDERING_ZONE) -> CutInBatch:
+    """``riskcore.sut.CutInBatch`` of N vectors (N, 8): the builder's tracks (module
+    docstring). A row the builder would refuse is an error naming the row and why
+    (``cutin_tracks`` reports them instead)."""
+    tr = cutin_tracks(params, lane_width=lane_width, ego_length=ego_length,
+                      cutter_length=cutter_length, dt=dt, lead_in=lead_in, duration=duration,
+                      wandering_zone=wandering_zone)
+    bad = np.flatnonzero(~tr.ok)
+    if bad.size:
+        i = int(bad[0])
+        raise BuilderError(f"params[{i}]: {reasons(tr.status[i:i + 1])[0]} "
+                           f"({bad.size} row(s) refused)", field=f"params[{i}]")
+    return CutInBatch(t=tr.t, lane_width=float(lane_width), ego_v0=tr.ego_v0,
+                      ego_length=float(ego_length), ego_width=float(ego_width), cx=tr.cx,
+                      cy=tr.cy, cpsi=tr.cpsi, cv=tr.cv, ca=tr.ca,
+                      c_length=np.full(tr.ego_v0.shape[0], float(cutter_length)),
+                      c_width=np.full(tr.ego_v0.shape[0], float(cutter_width)),
+                      t_p=tr.t_p, t_cross=tr.t_cross, t_end=tr.t_end)

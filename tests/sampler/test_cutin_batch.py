@@ -93,3 +93,22 @@ def test_the_grid_holds_every_script_and_the_cutter_goes_on_straight() -> None:
     assert np.all(v == v[0]) and np.all(tr.cpsi[0, after] == 0.0)
     dx = np.diff(tr.cx[0, after])
     assert np.allclose(dx, v[0] * 0.1, rtol=0, atol=1e-9)
+
+
+def test_cutin_batch_equals_the_batch_of_built_scenarios() -> None:
+    from riskcore.sut import CutInBatch
+    from sampler.scenario import cutin_batch
+
+    table = synthetic_parameter_table(40, seed=9)
+    x = table[list(PARAM_NAMES)].to_numpy(dtype=np.float64)
+    x = x[cutin_tracks(x).ok]
+    mine = cutin_batch(x)
+    ref = CutInBatch.from_scenarios(
+        [build_scenario(dict(zip(PARAM_NAMES, r.tolist(), strict=True))) for r in x])
+    m = min(mine.t.shape[0], ref.t.shape[0])
+    for name in ("cx", "cy", "cpsi", "cv", "ca"):
+        assert np.max(np.abs(getattr(mine, name)[:, :m] - getattr(ref, name)[:, :m])) <= 1e-9
+    for name in ("ego_v0", "t_p", "t_cross", "c_length", "c_width"):
+        assert np.allclose(getattr(mine, name), getattr(ref, name), rtol=0, atol=1e-9), name
+    with pytest.raises(BuilderError, match=r"params\[1\]"):
+        cutin_batch(np.array([x[0], [0.0, 2.5, 0, 0, 0, 25.0, 2.0, 12.0]]))

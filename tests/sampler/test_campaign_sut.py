@@ -1,0 +1,66 @@
+"""sampler.campaign.sut_runner: a system under test in riskcore's simulator.
+
+Reference: the criticality quantities computed straight from the vectors
+(``sampler.region.criticality_quantities``, its own compiled kernels): the scripted ego
+(riskcore's ``none`` SUT keeps its speed) collides exactly where ``none_collision`` says.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from datasets import PARAM_NAMES
+from riskcore.sut import SimSettings, make_sut
+from sampler import CutInGMM
+from sampler.campaign import evaluate, sut_runner
+from sampler.region import criticality_quantities
+from tests.sampler.factories import synthetic_parameter_table
+
+
+def _critical_rows(n: int, seed: int) -> np.ndarray:
+    x = synthetic_parameter_table(n, seed=seed)[list(PARAM_NAMES)].to_numpy(
+        dtype=np.float64).copy()
+    closing = np.arange(n) % 2 == 0
+    x[:, 6] = np.where(closing, np.abs(x[:, 6]) + 2.0, -np.abs(x[:, 6]) - 2.0)
+    x[:, 2] = np.where(closing, x[:, 2], np.abs(x[:, 2]))  # the opening ones never brake
+    x[:, 7] = np.linspace(0.5, 25.0, n)  # from hopeless to harmless gaps
+    return x
+
+
+def test_none_collides_where_the_scripted_ego_does() -> None:
+    x = _critical_rows(40, 2)
+    runner = sut_runner(lambda: make_sut("none"), careful=True, lane_width=3.75)
+    out = runner(x, np.arange(40, dtype=np.uint64))
+    ref = criticality_quantities(x, 3.75, with_ttr=False)["none_collision"]
+    ok = np.isfinite(ref)
+    assert ok.sum() >= 35
+    assert out.collided[ok].tolist() == (ref[ok] == 1).tolist()
+    assert 5 < out.collided.sum() < 35  # both outcomes occur
+    # the careful driver never does worse than doing nothing here
+    assert set(out.vs_careful[ok].tolist()) <= {"worse", "same"}
+    # worse: collides where the careful driver does not, or hits harder (0.01 m/s)
+    harder = out.impact_speed > out.careful_impact_speed + 0.01
+    assert (out.vs_careful[ok] == "worse").tolist() == (
+        out.collided[ok] & (~out.careful_collided[ok] | harder[ok])).tolist()
+
+
+def test_refused_rows_are_not_run_and_do_not_collide() -> None:
+    x = _critical_rows(3, 4)
+    x[1, 0] = 0.0  # no lane change
+    out = sut_runner(make_sut("none"), careful=False, lane_width=3.75)(
+        x, np.arange(3, dtype=np.uint64))
+    assert out.buildable.tolist() == [True, False, True]
+    assert not out.collided[1] and out.end[1] == "not_buildable"
+
+
+def test_a_campaign_with_a_sut_is_deterministic() -> None:
+    model = CutInGMM(k_range=(2, 2), n_init=1, n_report_samples=500).fit(
+        synthetic_parameter_table(300, seed=3))
+    runner = sut_runner(lambda: make_sut("acc", a_min=-3.0), careful=False,
+                        settings=SimSettings(t_max=30.0))
+    one = evaluate(model, runner, n=200, seed=1, batch_size=100, bootstrap=False)
+    two = evaluate(model, runner, n=200, seed=1, batch_size=100, bootstrap=False)
+    assert one.summary() == two.summary()
+    assert one.summary()["sut_runs"] > 30
+    rec = one.records()[0]
+    assert {"collided", "min_ttc", "must_avoid", "violation", "vs_careful", "weight"} <= set(rec)
