@@ -9,11 +9,13 @@ Exception hierarchy::
     ├── Conflict                  409  the resource is not in a state that allows it
     └── ServiceUnavailable        503  the service cannot answer yet (no default model)
 
-The domain packages' own errors reach the client through the same body: a
-``sampler.SamplerError`` (``ConstraintError``, ``EmptyRegionError``, ``ModelError``, ...),
-a ``riskcore.errors.RiskcoreError`` or a ``datasets.errors.DatasetError`` that a route
-does not catch maps to the status in ``DOMAIN_STATUS`` (422 unless listed), and its
-structured ``field`` attribute (not its message) names the field, under ``body.``.
+The domain packages' own errors reach the client through the same body: any
+``riskcore.FieldError`` -- the one tree drawn in riskcore/errors.py: ``sampler.SamplerError``
+(``ConstraintError``, ``EmptyRegionError``, ``ModelError``, ...), ``RiskcoreError``,
+``datasets.DatasetError``, ``app.exports.ExportError`` -- that a route does not catch maps
+to the status in ``DOMAIN_STATUS`` (422 unless listed), and its structured ``field``
+attribute (not its message) names the field, under ``body.``. Every other exception,
+a ``ValueError`` from numpy, scipy or scikit-learn included, is our bug: 500, trace logged.
 
 Every error body is ``{"error": {"status": <int>, "message": <str>, "field": <str|null>}}``;
 ``field`` is a dotted path such as ``body.n`` or ``query.format`` when one field is to blame.
@@ -31,9 +33,8 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from datasets import DatasetError
-from riskcore import RiskcoreError
-from sampler import NotFittedError, SamplerError
+from riskcore import FieldError
+from sampler import NotFittedError
 
 log = logging.getLogger("scengen.app")
 
@@ -106,7 +107,9 @@ async def _service_error(request: Request, exc: Exception) -> JSONResponse:
 #: HTTP status of a domain error class (the first match in the class's MRO; else 422)
 DOMAIN_STATUS: dict[type[Exception], int] = {NotFittedError: 409}
 
-DOMAIN_ERRORS: tuple[type[Exception], ...] = (SamplerError, RiskcoreError, DatasetError)
+#: the domain's errors: the one tree under ``riskcore.FieldError`` (riskcore/errors.py draws it);
+#: any other exception, a library's ``ValueError`` included, is a 500 with a logged trace
+DOMAIN_ERRORS: tuple[type[Exception], ...] = (FieldError,)
 
 
 def domain_status(exc: Exception) -> int:

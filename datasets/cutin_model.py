@@ -37,6 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from datasets.errors import DatasetError
+
 FloatArray = NDArray[np.float64]
 
 #: The parameter vector, in DESIGN.md's order, with units.
@@ -66,7 +68,7 @@ PARAM_DOCS: dict[str, str] = {
 DEFAULT_LANE_WIDTH = 3.75
 
 
-class CutInParamError(ValueError):
+class CutInParamError(DatasetError):
     """A parameter vector is incomplete or outside what the kinematic model can represent."""
 
 

@@ -1,17 +1,30 @@
-"""The exceptions of riskcore, drawn once here.
+"""The one exception tree of scengen, drawn here at its root (riskcore is the floor every
+package may import).
 
 ::
 
     ValueError
-     └── FieldError               a bad value: field, problem, value (also sampler's base)
-          └── RiskcoreError       any bad input to riskcore; the message names the field
-               ├── ScenarioError  a malformed concrete scenario (riskcore.scenario)
-               ├── SettingsError  a RiskSettings field out of range
-               ├── SurfaceError   a malformed input-surfaces file or object
-               └── SceneError     a malformed scene (ego future, object state)
+     └── FieldError                    the neutral base: a bad input, with field, problem, value
+          ├── RiskcoreError             bad input to riskcore; the message names the field
+          │    ├── ScenarioError        a malformed concrete scenario (riskcore.scenario)
+          │    ├── CriticalityError     a scenario the criticality record cannot rate
+          │    ├── SettingsError        a RiskSettings field out of range
+          │    ├── SurfaceError         a malformed input-surfaces file or object
+          │    └── SceneError           a malformed scene (ego future, object state)
+          ├── DatasetError              datasets: FormatError, ExtractionError, CutInParamError
+          ├── SamplerError              sampler: ConstraintError, ModelError (NotFittedError),
+          │                             BuilderError, EmptyRegionError, LevelsNotConvergedError
+          └── ExportError               app.exports: a catalogue that cannot be written so
 
-They subclass ``ValueError`` so callers (the CLI, the API) can treat every one of them as
-a user error: one line, no traceback.
+The app's own errors (``app.errors.ServiceError``: NotFound, InvalidInput, Conflict, ...)
+carry an HTTP status and sit beside this tree, not in it.
+
+A ``FieldError`` is the user's fault: the service answers it with a 4xx naming ``field`` and
+the CLI with one line and exit code 2. Any other exception -- a ``ValueError`` raised inside
+numpy, scipy or scikit-learn included -- is our bug: the service answers 500 and logs the
+trace, the CLI prints one line that says so (exit code 70) and the trace with
+``SCENGEN_DEBUG=1``. So code that checks a user's input raises a ``FieldError`` subclass,
+never a bare ``ValueError``.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.options import add_out, add_quiet
+from app.cli.options import CliError, add_out, add_quiet
 
 
 def _convert_tno(args: argparse.Namespace) -> int:
@@ -20,7 +20,7 @@ def _convert_tno(args: argparse.Namespace) -> int:
 
     out = Path(args.output)
     if out.resolve() == DEFAULT_EVENTS_PATH.resolve() and not args.replace_embedded:
-        raise ValueError(f"{out} is the packaged embedded data; add --replace-embedded to "
+        raise CliError(f"{out} is the packaged embedded data; add --replace-embedded to "
                          "overwrite it")
     conv = write_tno_package(Path(args.input), out, rate=args.rate)
     for event_id, reason in conv.rejected:

@@ -2,9 +2,11 @@
 
 Each command group lives in its own module with a ``register(subparsers)`` function that
 adds its sub-commands; a sub-command stores its handler as ``func`` and the handler returns
-the exit code. Errors a user can cause (bad files, bad values) are ``ValueError`` or
-``OSError`` subclasses (or the service's ``ServiceError``): they end as one line on stderr
-and exit code 2, never a traceback. Output cut short by the reader (``scengen risk f.json |
+the exit code. Errors a user can cause (bad files, bad values) are ``riskcore.FieldError``
+(the project's one error tree, drawn in riskcore/errors.py), ``CliError``, ``OSError`` or the
+service's ``ServiceError``: they end as one line on stderr and exit code 2, never a
+traceback. Anything else is our bug: one line that says so and exit code 70, the trace
+with ``SCENGEN_DEBUG=1``. Output cut short by the reader (``scengen risk f.json |
 head``) ends quietly. The options every sub-command shares are in ``app.cli.options``.
 
 A command is a thin wrapper over ``app.services`` (or a domain package's function): it
@@ -19,12 +21,16 @@ import argparse
 import importlib
 import os
 import sys
+import traceback
 from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
 from app import __version__
 from app.cli.options import CliError, add_data_dir
+
+#: exit code of an internal error (BSD's EX_SOFTWARE)
+EXIT_INTERNAL = 70
 
 #: modules that contribute sub-commands, in the order they appear in ``--help``
 COMMAND_MODULES: tuple[str, ...] = (
@@ -77,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     from app.errors import ServiceError
+    from riskcore import FieldError
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -95,9 +102,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         _quiet_broken_pipe()
         return 0
-    except (CliError, ServiceError, ValueError, OSError, LookupError) as exc:
+    except (CliError, ServiceError, FieldError, OSError, LookupError) as exc:
         print(f"scengen: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a bug of ours (or a library's), never the user's input
+        if os.environ.get("SCENGEN_DEBUG"):
+            traceback.print_exc()
+        print(f"scengen: internal error (please report it; SCENGEN_DEBUG=1 shows the trace): "
+              f"{type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
+        return EXIT_INTERNAL
 
 
 def one_line(exc: BaseException) -> str:

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 from app.cli.data import exposure_path
 from app.cli.options import (
+    CliError,
     add_constraints,
     add_data_dir,
     add_n,
@@ -118,13 +119,13 @@ def _read_table(path: str | None) -> tuple[Any, str]:
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in _SUFFIXES:
-        raise ValueError(f"{path}: expected a parameter table .csv or .parquet")
+        raise CliError(f"{path}: expected a parameter table .csv or .parquet")
     if not p.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     try:
         table = pd.read_csv(p) if suffix == ".csv" else pd.read_parquet(p)
     except (ValueError, OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read the table ({str(exc).splitlines()[0]})") from None
+        raise CliError(f"{path}: cannot read the table ({str(exc).splitlines()[0]})") from None
     return table, str(p)
 
 
@@ -134,7 +135,7 @@ def _fit(args: argparse.Namespace) -> int:
 
     table, source = _read_table(args.dataset)
     if args.bootstrap < 0 or args.bootstrap == 1:
-        raise ValueError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
+        raise CliError(f"--bootstrap: expected 0 or at least 2 refits, got {args.bootstrap}")
     options: dict[str, Any] = {"k_range": (args.k_min, args.k_max), "n_init": args.n_init,
                                "random_state": args.seed, "n_bootstrap": args.bootstrap}
     if args.features:
@@ -237,9 +238,9 @@ def _sample(args: argparse.Namespace) -> int:
     from sampler.rates import region_report, report_text
 
     if args.workers < 1:
-        raise ValueError(f"--workers: must be >= 1, got {args.workers}")
+        raise CliError(f"--workers: must be >= 1, got {args.workers}")
     if args.model is not None and args.model_option is not None:
-        raise ValueError("give the model once: as MODEL or as --model")
+        raise CliError("give the model once: as MODEL or as --model")
     model = _load_model(args.model if args.model is not None else args.model_option)
     progress = StageBars(args.quiet)
     try:

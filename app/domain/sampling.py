@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from app import jsonconv
 from app.errors import InvalidInput, domain_field
+from riskcore import FieldError
 from sampler import (
     Constraint,
     CutInGMM,
@@ -64,7 +65,7 @@ def region_dict(pr: PRegion) -> dict[str, Any]:
     return encoded
 
 
-def _sampling_error(exc: ValueError) -> InvalidInput:
+def _sampling_error(exc: FieldError) -> InvalidInput:
     field = domain_field(exc) or "body"  # the error's structured field, under "body."
     if isinstance(exc, EmptyRegionError):
         return InvalidInput(f"the region is (practically) empty: {exc}", field=field)
@@ -115,7 +116,7 @@ def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int
         ss = sampler_sample(model, list(constraints), n, seed, method, estimator=estimator,
                             lane_width=lane_width, use_envelope=use_envelope,
                             progress=progress)
-    except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
+    except FieldError as exc:  # the user's input; a library's ValueError is our bug (500)
         raise _sampling_error(exc) from None
     diagnostics = jsonconv.encode(dict(ss.diagnostics))
     diagnostics["method"] = ss.method
@@ -149,7 +150,7 @@ def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
     try:
         return region_dict(estimate_p_region(model, list(constraints), seed,
                                              progress=progress))
-    except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
+    except FieldError as exc:  # the user's input; a library's ValueError is our bug (500)
         raise _sampling_error(exc) from None
 
 
@@ -182,6 +183,6 @@ def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
     try:
         report = uncertainty_report(model, region_of(p_region), region, n_samples=n_samples,
                                     per_replicate=per_replicate)
-    except ValueError as exc:  # SamplerError, or a numerical ValueError of a library
+    except FieldError as exc:  # the user's input; a library's ValueError is our bug (500)
         raise _sampling_error(exc) from None
     return {**p_region, **_uncertainty_fields(report)}

@@ -32,7 +32,7 @@ Formats (``EXPORT_FORMATS``), details in docs/exports.md:
 Public API
 ----------
 - ``EXPORT_FORMATS``
-- ``ExportError`` (a ``ValueError``): bad input; the message names what is wrong.
+- ``ExportError`` (a ``riskcore.FieldError``): bad input; the message names what is wrong.
 - ``scenario_row(scenario, summary) -> dict``
 - ``export_catalogue(fmt, items, manifest, out, *, mode=None) -> Path``
 - ``build_manifest(*, seed, model_hash, sampler_settings, constraints, p_region, extra=None)``

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from riskcore import FieldError
+
 #: One flat row: column name -> float | int | bool | str | None.
 Row = dict[str, Any]
 
@@ -20,8 +22,9 @@ NONFINITE_TOKENS: dict[str, float] = {
 }
 
 
-class ExportError(ValueError):
-    """An export cannot be written from this input. The message names what is wrong."""
+class ExportError(FieldError):
+    """An export cannot be written from this input. The message names what is wrong (a
+    ``riskcore.FieldError``: the user's input, not our bug)."""
 
 
 def check_flat_value(value: Any, where: str) -> Any:

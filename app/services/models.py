@@ -31,6 +31,7 @@ from app.db.models import ModelRow
 from app.errors import InvalidInput
 from app.limits import check_model_options
 from datasets import EMBEDDED_SOURCE
+from riskcore import FieldError
 from sampler import CutInGMM, SamplerError
 from sampler.model import bootstrap_fit
 from sampler.rates import Exposure, tno_exposure
@@ -84,7 +85,7 @@ def fit_model(table: pd.DataFrame, options: Mapping[str, Any], *, source: str | 
         if n_boot:
             bootstrap_fit(model, table, n_boot, seed=int(model.random_state),
                           n_jobs=bootstrap_jobs)
-    except ValueError as exc:
+    except FieldError as exc:  # the table or options; a library's ValueError is a 500
         raise InvalidInput(f"fitting the model failed: {exc}", field="body.options") from None
     if exp is not None:
         model.exposure_ = exp.to_dict()

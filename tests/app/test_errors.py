@@ -15,6 +15,8 @@ from app.errors import (
     ServiceUnavailable,
     install_error_handlers,
 )
+from app.exports import ExportError
+from datasets import CutInParamError
 from datasets.errors import FormatError
 from riskcore.errors import SceneError
 from sampler import ConstraintError, EmptyRegionError, NotFittedError
@@ -41,6 +43,10 @@ def _app() -> FastAPI:
         "notfitted": NotFittedError("fit first: body.zzz"),
         "scene": SceneError("bad", field="ego.v[3]"),
         "format": FormatError("bad file"),
+        "cutin": CutInParamError("p_t: must be > 0 s, got -1"),
+        "export": ExportError("row 3: expected a number"),
+        # a library's ValueError (numpy, scipy, scikit-learn) is our bug, not the user's
+        "library": ValueError("array must not contain infs or NaNs"),
     }
 
     @app.get("/raise/{kind}")
@@ -67,6 +73,8 @@ def _app() -> FastAPI:
     ("notfitted", 409, None),
     ("scene", 422, "body.ego.v[3]"),
     ("format", 422, None),
+    ("cutin", 422, None),
+    ("export", 422, None),
 ])
 def test_service_errors_have_the_common_shape(kind: str, status: int, field: str | None) -> None:
     with TestClient(_app()) as client:
@@ -95,10 +103,31 @@ def test_unknown_route_and_unexpected_errors_keep_the_shape() -> None:
         r404 = client.get("/nowhere")
         r500 = client.get("/raise/crash")
         r405 = client.delete("/body")
+        library = client.get("/raise/library")
     assert r404.status_code == 404 and r404.json()["error"]["status"] == 404
     assert r405.status_code == 405 and r405.json()["error"]["status"] == 405
     assert r500.status_code == 500
     assert r500.json()["error"]["message"] == "internal error: ZeroDivisionError"
+    # a bare ValueError is not a FieldError: not the user's fault, so not a 4xx
+    assert library.status_code == 500
+    assert library.json()["error"]["message"] == "internal error: ValueError"
+
+
+def test_one_error_tree_under_a_neutral_base() -> None:
+    """Every package's user-input error is a FieldError (riskcore/errors.py draws the tree);
+    the app's ServiceError family stays beside it."""
+    from app.errors import DOMAIN_ERRORS, ServiceError
+    from datasets import DatasetError
+    from riskcore import FieldError, RiskcoreError
+    from sampler import SamplerError
+
+    for cls in (DatasetError, FormatError, CutInParamError, ExportError, SamplerError,
+                ConstraintError, RiskcoreError, SceneError):
+        assert issubclass(cls, FieldError), cls
+    assert (FieldError,) == DOMAIN_ERRORS
+    assert not issubclass(ServiceError, FieldError)
+    err = CutInParamError("p_t: must be > 0 s", field="p_t", problem="out of range", value=-1.0)
+    assert (err.field, err.problem, err.value) == ("p_t", "out of range", -1.0)
 
 
 @pytest.mark.parametrize(("text", "field", "problem", "value"), [
