@@ -11,7 +11,7 @@ PIP_ENV := PYTHONWARNINGS="ignore:Editable installation"
 # exact versions of everything installed (see constraints.txt; `make lock` rewrites it)
 LOCK   := constraints.txt
 
-.PHONY: install install-run run test lint types pytest services bench clean qc-env lock
+.PHONY: install install-run run test test-fast lint types pytest pytest-fast services bench clean qc-env lock
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -57,7 +57,18 @@ types: install
 pytest: install services
 	$(BIN)/pytest -n 2 --dist loadfile $(PYTEST_ARGS)
 
-test: lint types qc-env pytest
+# The fast loop: every test not marked slow, browser, postgres or esmini (the markers are in
+# pyproject.toml; docs/architecture.md says what each means). Needs no system services.
+FAST_MARKERS := not slow and not browser and not postgres and not esmini
+pytest-fast: install
+	$(BIN)/pytest -n 2 --dist loadfile -m "$(FAST_MARKERS)" $(PYTEST_ARGS)
+
+# Both print their wall-clock time at the end (scripts/timed.sh).
+test: install
+	@bash scripts/timed.sh "make test" $(MAKE) --no-print-directory lint types qc-env pytest
+
+test-fast: install
+	@bash scripts/timed.sh "make test-fast" $(MAKE) --no-print-directory lint types pytest-fast
 
 # The ASAM Quality Checker (tests/app/test_exports_qc.py) in its own environment: its
 # numpy < 2 pin must not touch .venv.

@@ -10,6 +10,7 @@ import pytest
 from app.cli import main
 
 
+@pytest.mark.slow
 def test_create_status_list_export(store: Path, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["catalogue", "create", "--n", "4", "--seed", "3", "--chunk-size", "2",
@@ -41,6 +42,7 @@ def test_user_errors_are_one_line_and_exit_2(store: Path,
     assert "n must be between 1" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_scenarios_ranked_and_filtered(store: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["catalogue", "create", "--n", "5", "--seed", "4", "--chunk-size", "5",
                  "--constraint", "ttc<3", "--no-progress"]) == 0

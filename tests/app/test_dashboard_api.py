@@ -84,6 +84,7 @@ def _nonzero(hist: dict[str, Any]) -> dict[float, int]:
 
 
 # --------------------------------------------------------------------------- page + static
+@pytest.mark.slow
 def test_page_and_plotly_are_served_by_the_app(client: TestClient) -> None:
     r = client.get("/dashboard")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
@@ -154,6 +155,7 @@ def test_model_fit_view_bins_the_whole_dataset(client: TestClient) -> None:
     assert len(corner["model"]["values"]["gap"]) <= 400
 
 
+@pytest.mark.slow
 def test_shift_preview_draws_inside_the_constraint(client: TestClient) -> None:
     view = client.get("/dashboard/api/models/default/shift",
                       params={"constraints": "gap<15; dv>0", "n": 200, "seed": 3}).json()
@@ -259,6 +261,7 @@ def test_catalogue_shift_view_uses_the_catalogue_samples(client: TestClient) -> 
     assert gap["mean_constrained"] == pytest.approx(40.0)  # 10, 20, ..., 70
 
 
+@pytest.mark.slow
 def test_ten_thousand_scenarios_give_a_bounded_payload(client: TestClient) -> None:
     ctx = _ctx(client)
     cid = store_synthetic_catalogue(ctx.db, ctx.data_dir, ctx.default_model_id, 10_000,
@@ -285,6 +288,7 @@ def test_ten_thousand_scenarios_give_a_bounded_payload(client: TestClient) -> No
 
 
 # --------------------------------------------------------------------------- view 4
+@pytest.mark.slow
 def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     r = client.post("/catalogues", json={"n": 3, "seed": 11, "constraints": ["ttc<3"]})
     assert r.status_code == 202, r.text

@@ -36,6 +36,7 @@ def _build(data_dir: Path, tmp_path: Path, name: str, **settings: Any) -> tuple[
         ctx.close()
 
 
+@pytest.mark.slow
 def test_local_pool_and_dask_give_the_same_catalogue(cluster: Any, tmp_path: Path,
                                                      model_cache_dir: Path) -> None:
     data_dir = tmp_path / "data"
@@ -48,6 +49,7 @@ def test_local_pool_and_dask_give_the_same_catalogue(cluster: Any, tmp_path: Pat
     assert local.read_bytes().count(b'"kind":"scenario"') == 10
 
 
+@pytest.mark.slow
 def test_executors_are_what_the_settings_say(cluster: Any) -> None:
     from app.jobs import make_executor
 

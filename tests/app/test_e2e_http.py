@@ -20,6 +20,7 @@ def server(tmp_path: Path, model_cache_dir: Path) -> Iterator[str]:
         yield base
 
 
+@pytest.mark.slow
 def test_sample_catalogue_export_over_http(server: str) -> None:
     with httpx.Client(base_url=server, timeout=300) as http:
         r = http.post("/scenarios", json={"n": 3, "seed": 1, "constraints": ["ttc<3"]})

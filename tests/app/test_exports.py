@@ -835,6 +835,7 @@ def test_different_input_gives_different_files(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- streaming and errors
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", EXPORT_FORMATS)
 def test_items_are_consumed_lazily_from_a_generator(tmp_path: Path, fmt: str) -> None:
     # Every item is a fresh scenario object. When item i is asked for, item i - 2 must be
@@ -970,6 +971,7 @@ def test_thinned_vertices_are_spaced_for_esmini_and_keep_both_ends(steps: list[f
         assert keep.tolist() == list(range(x.shape[0]))  # nothing to thin: all kept
 
 
+@pytest.mark.slow
 def test_row_step_and_duration_carry_no_float_noise() -> None:
     # differences of grid times are noisy in floating point (10.6 - 10.5 is
     # 0.09999999999999964): the exported dt and duration read as the decimals they are

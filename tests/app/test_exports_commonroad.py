@@ -133,6 +133,7 @@ with zipfile.ZipFile(_export(Path(sys.argv[1]), [crossing()])) as zf:
 """
 
 
+@pytest.mark.slow
 def test_the_same_bytes_under_any_hash_seed(tmp_path: Path) -> None:
     """The scenario tags were written in a set's order, which follows the string hash seed:
     two processes wrote different bytes for the same scenario (found by the refactoring's

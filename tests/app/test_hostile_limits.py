@@ -34,6 +34,7 @@ def _is_422(r: Any, field_part: str) -> None:
 
 
 # --------------------------------------------------------------------------- item 10
+@pytest.mark.slow
 @pytest.mark.parametrize("offset", [str(2**63), str(INDEX_MAX + 1), "-1"])
 def test_huge_offsets_are_422(client: Any, catalogue_id: str, offset: str) -> None:
     _is_422(client.get(f"/catalogues/{catalogue_id}/scenarios", params={"offset": offset}),

@@ -122,6 +122,7 @@ def test_catalogue_create_takes_the_short_options(store: Path,
     assert "it/s" not in err and "scenario/s" not in err  # -q: no bar
 
 
+@pytest.mark.slow
 def test_sample_uses_the_default_model_when_none_is_given(
         store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "s.jsonl"
@@ -166,6 +167,7 @@ def test_an_export_failure_inside_the_service_is_one_line(
     assert capsys.readouterr().err == "scengen: error: export of catalogue x failed: disk full\n"
 
 
+@pytest.mark.slow
 def test_risk_into_a_closed_pipe_is_quiet() -> None:
     # `scengen risk f.json | head -c 100`: the reader goes away after 100 bytes
     with subprocess.Popen([sys.executable, "-m", "app.cli", "risk", str(EXAMPLE)],

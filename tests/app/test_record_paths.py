@@ -27,6 +27,7 @@ def _ctx(client: Any) -> Any:
     return client.app.state.ctx
 
 
+@pytest.mark.slow
 def test_route_job_and_cli_give_the_same_record(client: Any, tmp_path: Path,
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     # the route
@@ -108,6 +109,7 @@ def test_record_row_and_migration_carry_every_criticality_field() -> None:
     assert [n for n, _ in migration.COLUMNS] == names
 
 
+@pytest.mark.slow
 def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
     # POST /scenarios splits its vectors over the executor (LocalPoolExecutor.map)
     import pandas as pd
@@ -140,6 +142,7 @@ def loaded_kernels(_: object) -> int:
     return len(_criticality_kernels.scene_risks.signatures)
 
 
+@pytest.mark.slow
 def test_warm_loads_the_kernels_in_the_pool_workers_and_inline_does_nothing() -> None:
     from app.jobs.executors import InlineExecutor, LocalPoolExecutor
 
@@ -159,6 +162,7 @@ def test_warm_loads_the_kernels_in_the_pool_workers_and_inline_does_nothing() ->
         pool.close()
 
 
+@pytest.mark.slow
 def test_warm_start_estimates_the_default_regions_model_figures(model_cache_dir: Path,
                                                                 tmp_path: Path) -> None:
     from app.services.store import open_context

@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from sqlalchemy import func, select
 
 from app.db import repository as repo
@@ -36,6 +37,7 @@ def _chunks(db: Database) -> int:
         return int(s.scalar(select(func.count()).select_from(ChunkRow)) or 0)
 
 
+@pytest.mark.slow
 def test_killed_job_resumes_to_the_uninterrupted_result(database_url: str, tmp_path: Path,
                                                         model_cache_dir: Path) -> None:
     data_dir = tmp_path / "data"

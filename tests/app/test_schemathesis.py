@@ -45,6 +45,7 @@ def server(tmp_path: Path, model_cache_dir: Path) -> Iterator[str]:
         yield base
 
 
+@pytest.mark.slow
 def test_schemathesis_finds_nothing(server: str, tmp_path: Path) -> None:
     with httpx.Client(base_url=server, timeout=120) as http:
         r = http.post("/catalogues", json={"n": 4, "seed": 1, "score": False})

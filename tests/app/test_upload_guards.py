@@ -84,6 +84,7 @@ def _scaled(columns: list[str], factor: float) -> bytes:
     return events.to_csv(index=False).encode()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("columns", "factor", "words"), [
     (["ego_v", "target_v"], 3.6, ("v_ego", "km/h")),
     (["target_dx", "target_dy", "ego_length", "ego_width", "target_length", "target_width",

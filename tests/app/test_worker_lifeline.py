@@ -63,6 +63,7 @@ def _reap(parent: subprocess.Popen[bytes], children: list[psutil.Process]) -> No
             child.kill()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux process tree")
 def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) -> None:
     env = {**os.environ, "LIFELINE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT)}
@@ -80,6 +81,7 @@ def test_pool_workers_and_tracker_die_with_a_sigkilled_parent(tmp_path: Path) ->
         _reap(parent, children)
 
 
+@pytest.mark.slow
 def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
     from app.jobs import lifeline
 
@@ -92,6 +94,7 @@ def test_initializer_ends_a_worker_whose_parent_is_gone() -> None:
     assert lifeline.PR_SET_PDEATHSIG == 1
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux process tree")
 def test_cli_scoring_workers_die_with_a_sigkilled_cli(store: Path, tmp_path: Path) -> None:
     """Issue 14 item 15: ``scengen sample --score --workers 2`` SIGKILLed mid-run leaves no

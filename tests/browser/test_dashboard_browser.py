@@ -164,6 +164,7 @@ def check_view3(page: Page, base: str, cid: str) -> dict[str, object]:
 
 
 # --------------------------------------------------------------------------- tests
+@pytest.mark.slow
 def test_page_loads_without_errors_and_every_plot_has_data(server: Server, page: Page) -> None:
     console = Console(page)
     response = page.goto(f"{server.base}/dashboard")

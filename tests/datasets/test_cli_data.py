@@ -70,6 +70,7 @@ def test_fit_reads_the_exposure_beside_the_table(tmp_path: Path,
     assert exp == {"n_events": 120, "hours": 2.5, "km": 250.0, "source": "highD test"}
 
 
+@pytest.mark.slow
 def test_convert_tno_and_fit_surfaces(tmp_path: Path,
                                       capsys: pytest.CaptureFixture[str]) -> None:
     src = tmp_path / "src"

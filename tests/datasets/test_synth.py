@@ -28,6 +28,7 @@ def synthetic(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, pd.DataFr
     return d, truth, extract_cutins(d, "highd")
 
 
+@pytest.mark.slow
 def test_labelled_synthetic_everywhere(synthetic: tuple[Path, pd.DataFrame,
                                                         ExtractionResult]) -> None:
     d, truth, res = synthetic

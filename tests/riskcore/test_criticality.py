@@ -70,6 +70,7 @@ def r157_by_hand(gap_b: float, dv: float) -> tuple[bool, float, float]:
     return False, 0.0, left - stop
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gap_tp", [15.0, 19.0, 12.0, 17.5])
 def test_r157_driver_by_hand(gap_tp: float) -> None:
     scen, t_p = lead_appears(gap_tp)

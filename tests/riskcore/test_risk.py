@@ -93,6 +93,7 @@ def test_object_risk_of_all_ones_is_exactly_one() -> None:
     assert math.isclose(object_risk([1.0, 3.0], [1.0, 0.2]), 0.4, rel_tol=1e-15)
 
 
+@pytest.mark.slow
 def test_r_dep_and_r_ind_by_hand() -> None:
     g = np.array([[0.8, 0.2], [0.6, 0.0]])
     p = np.full((2, 2), 0.5)

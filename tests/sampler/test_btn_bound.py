@@ -61,6 +61,7 @@ def test_by_hand() -> None:
     assert a == pytest.approx(a_true, rel=0.1)
 
 
+@pytest.mark.slow
 def test_never_below_btn_on_model_draws(tno: CutInGMM) -> None:
     """20,000 model draws and 20,000 draws of its ttc<3 envelope (where btn > 0.15 is
     common): the bound is never below btn, and it passes at most 1.5x the rows that
@@ -121,6 +122,7 @@ def test_regions_keep_their_rows_and_simulate_fewer(
     assert sum(rows) == x.shape[0]  # an upper limit implies nothing: every row simulated
 
 
+@pytest.mark.slow
 def test_auto_after_a_plain_pilot_keeps_its_estimate_and_avoids_mcmc(tno: CutInGMM) -> None:
     """A criticality region whose extended pilot was a plain run: more samples than its
     hits come from rejection (cheap behind ``btn_bound``) while n / p_hat draws stay

@@ -23,6 +23,7 @@ def model_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_fit_prints_bic_curve_and_report(model_path: Path,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     table = model_path.parent / "table.csv"
@@ -35,6 +36,7 @@ def test_fit_prints_bic_curve_and_report(model_path: Path,
     assert model.n_components_ in (1, 2)
 
 
+@pytest.mark.slow
 def test_sample_writes_jsonl_and_summary(model_path: Path, tmp_path: Path,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "s.jsonl"
@@ -59,6 +61,7 @@ def test_sample_writes_jsonl_and_summary(model_path: Path, tmp_path: Path,
     assert out2.read_text() == out.read_text()
 
 
+@pytest.mark.slow
 def test_sample_with_score(model_path: Path, tmp_path: Path) -> None:
     out = tmp_path / "scored.jsonl"
     assert main(["sample", str(model_path), "-c", "ttc<4", "-n", "3", "--seed", "2",

@@ -82,6 +82,7 @@ def test_region_json_round_trip() -> None:
 # ---------------------------------------------------------------- derived quantities
 
 
+@pytest.mark.slow
 def test_derived_by_hand() -> None:
     # no pulse: v = 25 m/s always; dv = 2 -> v_ego = 27; gap 12 -> ttc 6, thw 12/27
     d = derive(_row())

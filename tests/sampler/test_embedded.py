@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from datasets.cutin_model import PARAM_NAMES
 from datasets.embedded import default_parameter_table
 from sampler import CutInGMM, sample
 
 
+@pytest.mark.slow
 def test_fit_and_sample_on_the_embedded_table() -> None:
     table = default_parameter_table()
     assert len(table) > 50 and set(PARAM_NAMES) <= set(table.columns)

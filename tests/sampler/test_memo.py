@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from sampler.model import memo
 from sampler.model.bootstrap import bootstrap_fit
@@ -37,6 +38,7 @@ def test_memoised_computes_once_per_key_and_clear_forgets() -> None:
     assert len(model.__dict__["_scengen_memo"]) == memo.MAX_ENTRIES
 
 
+@pytest.mark.slow
 def test_p_bounds_is_a_model_figure_and_samples_do_not_change() -> None:
     model, _ = _model()
     fresh = CutInGMM.from_json(model.to_json())
@@ -55,6 +57,7 @@ def test_p_bounds_is_a_model_figure_and_samples_do_not_change() -> None:
     assert again.p_region == a.p_region
 
 
+@pytest.mark.slow
 def test_model_interval_is_memoised_per_region_and_replicate_set() -> None:
     model, table = _model()
     bootstrap_fit(model, table, 10, seed=0)

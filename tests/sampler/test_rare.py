@@ -78,6 +78,7 @@ def _check_repetitions(model: CutInGMM, a: np.ndarray, b: float, p_true: float) 
         assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("p_true", [1e-4, 1e-5, 1e-6, 1e-7])
 def test_halfspace_under_one_component_matches_closed_form(p_true: float) -> None:
     model = _two_component()
@@ -88,6 +89,7 @@ def test_halfspace_under_one_component_matches_closed_form(p_true: float) -> Non
     _check_repetitions(model, a, b, p_true)
 
 
+@pytest.mark.slow
 def test_halfspace_under_the_mixture_matches_closed_form() -> None:
     """A direction where both components hold a share of P(A): the exact value is the
     weighted sum of the components' normal tail probabilities."""
@@ -104,6 +106,7 @@ def test_halfspace_under_the_mixture_matches_closed_form() -> None:
     _check_repetitions(model, a, b, p_true)
 
 
+@pytest.mark.slow
 def test_real_model_against_brute_force(tno: CutInGMM) -> None:
     """ttc < 3 and btn > 0.3 (the simulated criticality) on the TNO model, P(A and B) ~
     5e-5: the reference is naive Monte Carlo restricted to the exact half-space envelope
@@ -132,6 +135,7 @@ def test_real_model_against_brute_force(tno: CutInGMM) -> None:
     assert abs(e.mean() - p_ref) <= 3.0 * e.std(ddof=1) / math.sqrt(len(e)) + 3 * rel_ref * p_ref
 
 
+@pytest.mark.slow
 def test_independence_chains_sample_the_restricted_law() -> None:
     """Half-space z0 >= b: the chains' states follow the model restricted to it; its
     CDF is the normalised weighted sum of the components' truncated normal CDFs."""
@@ -222,6 +226,7 @@ def test_kernel_mixture_by_hand_and_normalised() -> None:
     assert w.mean() == pytest.approx(1.0, abs=0.02)
 
 
+@pytest.mark.slow
 def test_level_share_keeps_the_levels_kernel_density() -> None:
     """level_share > 0 (default 0.3): the final proposal is the adapted kernel density and
     the one on the subset levels' final points in those shares (0: the adapted one alone);
@@ -264,6 +269,7 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
         subset_importance(model, g, 0, level_share=-0.1)
 
 
+@pytest.mark.slow
 def test_sample_with_subset_is_deterministic_and_inside(tno: CutInGMM) -> None:
     a = sample(tno, ["ttc<1.5"], 300, seed=4, method="subset-is")
     b = sample(tno, ["ttc<1.5"], 300, seed=4, method="subset-is")
@@ -295,6 +301,7 @@ def test_sample_with_subset_is_deterministic_and_inside(tno: CutInGMM) -> None:
     assert isinstance(make_sampler("subset-is"), SubsetISSampler)
 
 
+@pytest.mark.slow
 def test_time_bound_and_bad_settings() -> None:
     model = _two_component()
 
@@ -359,6 +366,7 @@ def test_strata_partition_the_model() -> None:
     assert [s.label for s in make_strata(_two_component())] == ["component 0", "component 1"]
 
 
+@pytest.mark.slow
 def test_two_mode_union_needs_the_strata() -> None:
     """A = {z0 >= b1} or {z0 <= -b2}: two separated modes (both sides of p_y1 = 0, the
     upper one mostly under the second component), disjoint, P(A) in closed form, 1e-5
@@ -523,6 +531,7 @@ def test_auto_stratifies_mixtures(tno: CutInGMM) -> None:
         Problem(tno, region, use_envelope=False))
 
 
+@pytest.mark.slow
 def test_stratified_ttc_region_reaches_every_mode(tno: CutInGMM) -> None:
     """``ttc<2`` on the TNO model has mass in several strata, where ``ttc`` is +inf on most
     draws (non-closing cut-ins). With the continuous margin every such stratum reaches
@@ -579,6 +588,7 @@ def test_halfspace_strata_hold_the_envelope() -> None:
         assert np.isneginf(s.log_density_z(outside)).all()
 
 
+@pytest.mark.slow
 def test_envelope_strata_estimate_a_region_inside_the_envelope() -> None:
     """A = {a.z >= t2} inside S = {a.z >= t1}: P(A) = 1e-6 in closed form, P(S) = 1e-3,
     so each stratum's levels only go down to P(A | S) ~ 1e-3. Inside 2 reported CoV of
@@ -611,6 +621,7 @@ def test_envelope_strata_estimate_a_region_inside_the_envelope() -> None:
         assert np.exp(r.log_w).sum() / r.n_is == pytest.approx(r.probability, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_sampler_stratifies_inside_the_envelope(tno: CutInGMM) -> None:
     """``ttc<3`` has a half-space envelope: the sampler's strata are component x S (their
     masses sum to P(S)); ``strat_envelope=False`` (or a region without envelope) keeps
@@ -675,6 +686,7 @@ def thin_band_ref(tno: CutInGMM) -> tuple[float, int, int]:
     return p_ref, hits, 2_000_000
 
 
+@pytest.mark.slow
 def test_thin_band_is_not_dropped(tno: CutInGMM, thin_band_ref: tuple[float, int, int]
                                   ) -> None:
     """``2.9 < ttc < 3 & btn > 0.4``: a thin band, where the levels' chains barely move.
@@ -692,6 +704,7 @@ def test_thin_band_is_not_dropped(tno: CutInGMM, thin_band_ref: tuple[float, int
         assert 0.25 * p_ref < r.probability < 2.0 * p_ref
 
 
+@pytest.mark.slow
 def test_thin_band_auto_is_plain_and_exact(tno: CutInGMM,
                                            thin_band_ref: tuple[float, int, int]) -> None:
     """In the band, P(btn > 0.4 | band) is ~1e-3: the pilot of ``auto`` goes on (about 10^5
@@ -731,6 +744,7 @@ def test_thin_band_auto_is_plain_and_exact(tno: CutInGMM,
     assert ss.p_region.n_draws == pilot["n_draws"] and ss.p_region.n_hits == pilot["n_hits"]
 
 
+@pytest.mark.slow
 def test_pilot_is_not_extended_beyond_its_budget(tno: CutInGMM) -> None:
     """The extended pilot's two budgets. Draws: ``ttc<3 & btn>=1`` holds ~7e-6 of its
     envelope; after the pilot's 8,192 draws without a hit, the one-sided 90 % upper bound
@@ -755,6 +769,7 @@ def test_pilot_is_not_extended_beyond_its_budget(tno: CutInGMM) -> None:
     assert 0 < tp["n_simulated"] < 0.01 * (tp["n_draws"] + tp["probe_draws"])
 
 
+@pytest.mark.slow
 def test_deep_thin_band_auto_is_plain_and_exact(tno: CutInGMM) -> None:
     """``2.9 < ttc < 3 & btn > 0.5``: P(btn > 0.5 | band) ~ 7e-5, beyond ``exact_sims``
     but the band is thin, so ``auto`` spends up to ``exact_sims_thin`` (2e6) simulations
@@ -916,6 +931,7 @@ def test_combine_sums_disjoint_parts_by_hand() -> None:
     assert (out.n_draws, out.n_hits) == (20, 6)
 
 
+@pytest.mark.slow
 def test_standalone_criticality_region_is_split_at_the_envelope(tno: CutInGMM) -> None:
     """``btn > 0.15`` has no kinematic constraint and the pilot finds too few hits: ``auto``
     estimates its part inside ``ttc<3`` (plain Monte Carlo in the envelope) and the rest

@@ -79,6 +79,7 @@ def _same_distribution(a_set: SampleSet, b_set: SampleSet) -> None:
         assert abs(a.mean() - b.mean()) < 4 * se, name
 
 
+@pytest.mark.slow
 def test_mcmc_and_rejection_give_the_same_distribution(model: CutInGMM,
                                                        rejection_set: SampleSet) -> None:
     mc = sample(model, MODERATE, 1200, seed=2, method="mcmc")
@@ -87,6 +88,7 @@ def test_mcmc_and_rejection_give_the_same_distribution(model: CutInGMM,
     _same_distribution(rejection_set, mc)
 
 
+@pytest.mark.slow
 def test_mcmc_without_envelope_on_a_smooth_model() -> None:
     """DE moves + the defensive fitted proposal, no envelope (a kinematic constraint).
 
@@ -126,6 +128,7 @@ def test_rejection_samples_are_the_truncated_model(model: CutInGMM) -> None:
 # ---------------------------------------------------------------- P(A)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("region", ["ttc<8", "gap<10"])
 @pytest.mark.parametrize("use_envelope", [True, False])
 def test_p_region_against_brute_force(model: CutInGMM, brute: dict[str, tuple[int, int]],
@@ -140,6 +143,7 @@ def test_p_region_against_brute_force(model: CutInGMM, brute: dict[str, tuple[in
     assert ss.exposure_weights.sum() == pytest.approx(pr.estimate, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_importance_sampling_against_brute_force(model: CutInGMM,
                                                  brute: dict[str, tuple[int, int]]) -> None:
     est = PRegionEstimator(mc_min_hits=10**9)  # force the defensive-mixture estimator
@@ -191,6 +195,7 @@ def test_ttc_envelope_contains_the_region(model: CutInGMM) -> None:
 # ---------------------------------------------------------------- diagnostics, auto
 
 
+@pytest.mark.slow
 def test_mcmc_diagnostics(model: CutInGMM) -> None:
     ss = sample(model, MODERATE, 300, seed=9, method="mcmc")
     d = ss.diagnostics
@@ -241,6 +246,7 @@ def test_auto_picks_rejection_on_moderate_region(model: CutInGMM) -> None:
 # ---------------------------------------------------------------- determinism, JSON
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["rejection", "mcmc", "auto"])
 def test_same_seed_same_samples(model: CutInGMM, method: str) -> None:
     a = sample(model, MODERATE, 150, seed=11, method=method)

@@ -63,6 +63,7 @@ def test_normal_map_gives_the_mixture() -> None:
     assert np.mean(z[:, 0] >= 2.0) == pytest.approx(_halfspace_exact(model, a, 2.0), abs=3e-3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("p_true", [1e-4, 1e-5, 1e-6, 1e-7])
 def test_halfspace_under_one_component_matches_closed_form(p_true: float) -> None:
     """z_0 >= b under the second component only (the first has weight ~0 there):
@@ -95,6 +96,7 @@ def test_halfspace_under_one_component_matches_closed_form(p_true: float) -> Non
         assert (r.z[:, 0] >= b).all()  # the final level's samples lie inside A
 
 
+@pytest.mark.slow
 def test_real_model_against_brute_force(tno: CutInGMM) -> None:
     """ttc < 3 with the physical bounds on the TNO model: brute force over 2M draws."""
     region = Region.from_constraints(["ttc<3"], lane_width=tno.lane_width_)
@@ -175,6 +177,7 @@ def test_auto_picks_subset_when_the_pilot_finds_too_few_hits(tno: CutInGMM) -> N
     assert isinstance(make_sampler("subset"), SubsetSampler)
 
 
+@pytest.mark.slow
 def test_estimate_p_region_uses_subset_for_rare_regions(tno: CutInGMM) -> None:
     """thw < 0.1 (no half-space envelope, P ~ 4e-6): the 1M-draw pilot finds too few."""
     p = estimate_p_region(tno, ["thw<0.1"], seed=2)

@@ -115,6 +115,7 @@ def _slow_support(model: CutInGMM, x: np.ndarray) -> tuple[list[float], list[flo
     return dist, largest, codes
 
 
+@pytest.mark.slow
 def test_vectorised_equals_slow_reference(synth_model: CutInGMM) -> None:
     rng = np.random.default_rng(3)
     z = synth_model.sample_z(300, rng, scale=1.6)  # wide draws: all three classes

@@ -227,6 +227,7 @@ def test_region_report_weights_sum_to_the_rate() -> None:
     assert region_report(model, ss) == rep  # deterministic
 
 
+@pytest.mark.slow
 def test_cli_fit_stores_bootstrap_and_tno_exposure(tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "tno.json"
@@ -283,6 +284,7 @@ def test_bootstrap_ci_methods_hand_computed() -> None:
         bootstrap_ci(r, 40.0, "bca")
 
 
+@pytest.mark.slow
 def test_per_replicate_rare_estimates_match_the_closed_form(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """``per_replicate``: each replicate's P(gap < 3 m) by its own subset-is run equals its

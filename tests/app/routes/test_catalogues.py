@@ -38,6 +38,7 @@ def catalogue(client: Any) -> dict[str, Any]:
     return _finished(client, body["id"])
 
 
+@pytest.mark.slow
 def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> None:
     assert catalogue["status"] == "done", catalogue["error"]
     assert catalogue["n"] == N and catalogue["scenarios_stored"] == N
@@ -183,6 +184,7 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     assert sum(name.endswith(".xml") for name in names) == N
 
 
+@pytest.mark.slow
 def test_list_and_delete(client: Any) -> None:
     r = client.post("/catalogues", json={"n": 3, "seed": 1, "score": False})
     cid = r.json()["id"]

@@ -39,6 +39,7 @@ def test_region_rates_view(client: Any) -> None:
         "query.constraints")
 
 
+@pytest.mark.slow
 def test_compare_two_models(client: Any, other_model: str) -> None:
     r = client.get("/models/compare", params={"a": "default", "b": other_model,
                                               "constraints": "ttc<3", "n": 100})

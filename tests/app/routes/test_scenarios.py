@@ -9,6 +9,7 @@ import pytest
 from riskcore.scenario import ConcreteScenario
 
 
+@pytest.mark.slow
 def test_ten_cutins_with_ttc_below_3(client: Any) -> None:
     r = client.post("/scenarios", json={"n": 10, "seed": 1, "constraints": ["ttc<3"],
                                         "score": True})
@@ -70,6 +71,7 @@ def test_bad_requests_are_422_naming_the_field(client: Any, body: dict[str, Any]
     assert err["message"].count("constraint '") <= 1  # the constraint is quoted once
 
 
+@pytest.mark.slow
 def test_mcmc_sampler_through_the_api(client: Any) -> None:
     r = client.post("/scenarios", json={"n": 8, "seed": 2, "constraints": ["ttc<3"],
                                         "sampler": "mcmc", "score": False})

@@ -19,6 +19,7 @@ from tests.sampler.factories import synthetic_parameter_table
 QUICK = {"k_range": (1, 2), "n_init": 1, "cv_folds": 2, "n_report_samples": 500}
 
 
+@pytest.mark.slow
 def test_the_cli_writes_the_model_the_service_fits(tmp_path: Path) -> None:
     table_path = tmp_path / "table.csv"
     synthetic_parameter_table(120, seed=3).to_csv(table_path, index=False)
