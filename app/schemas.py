@@ -48,6 +48,9 @@ class SamplingRequest(BaseModel):
     seed: int = Field(default=0, ge=0, le=SEED_MAX, description="random seed of the sampler")
     sampler: SamplerName = Field(default="auto", description="rejection, mcmc, or auto "
                                  "(rejection unless the region is rare)")
+    wagner_scan: bool = Field(default=False, description="with score: also Wagner's "
+                              "scan: alarm_time, risk_peak and the risks at the crossing "
+                              "(about two thirds of the scoring cost; null otherwise)")
 
 
 class PRegion(ApiModel):

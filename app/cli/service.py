@@ -65,6 +65,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                         choices=["auto", "rejection", "mcmc", "subset", "subset-is"],
                         help="sampling method (auto)")
     create.add_argument("--no-score", action="store_true", help="skip the TTR risk")
+    create.add_argument("--wagner-scan", action="store_true",
+                        help="also alarm_time, risk_peak and Wagner's risk at the crossing "
+                             "(about 2/3 of the scoring time; null otherwise)")
     create.add_argument("--chunk-size", type=int, default=None,
                         help="scenarios per stored chunk (default: SCENGEN_CHUNK_SIZE)")
     add_quiet(create)
@@ -202,7 +205,7 @@ def _create(args: argparse.Namespace) -> int:
         row = catalogues.create(ctx, n=args.n, seed=args.seed,
                                 constraints=args.constraints or ["ttc<3"], model=args.model,
                                 method=args.sampler, score=not args.no_score,
-                                chunk_size=args.chunk_size)
+                                chunk_size=args.chunk_size, wagner_scan=args.wagner_scan)
         print(f"catalogue {row.id}: {row.n} scenarios in {row.n_chunks} chunks",
               file=sys.stderr)
         return _run(ctx, row.id, not args.quiet)

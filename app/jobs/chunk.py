@@ -51,7 +51,7 @@ def warm_worker() -> int:
     fresh worker). Returns the worker's pid."""
     from sampler.region import crossing_kinematics
 
-    score_vector(_WARM_VECTOR)
+    score_vector(_WARM_VECTOR, wagner_scan=True)  # every kernel: the scan's too
     crossing_kinematics(np.array([[_WARM_VECTOR[k] for k in ("p_y1", "p_t", "p_a1", "p_a2",
                                                              "p_a3", "p_v0")]]), 1.875)
     return os.getpid()
@@ -78,6 +78,8 @@ class CatalogueSpec:
     constraints: tuple[str, ...]
     method: str = "auto"
     score: bool = True
+    #: also Wagner's scan (alarm_time, risk_peak, the risks at the crossing)
+    wagner_scan: bool = False
     store_trajectories: bool = True
     #: the catalogue's P(A) estimate: each scenario's exposure weight is p_region / n
     p_region: float | None = None
@@ -166,7 +168,8 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     for record, _ in score_rows(
             drawn.params, start=start, exposure_weights=weights, lane_width=drawn.lane_width,
             seed=spec.seed, provenance=lambda idx: scenario_provenance(spec, idx),
-            score=spec.score, include_scenario=spec.store_trajectories):
+            score=spec.score, include_scenario=spec.store_trajectories,
+            wagner_scan=spec.wagner_scan):
         rows.append(scenario_row(record, index))
         scenarios.append(record.scenario)  # None: the builder refused the vector
         if spec.progress_dir is not None and time.monotonic() - reported >= PROGRESS_EVERY:

@@ -54,6 +54,7 @@ def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
         n=row.n, seed=row.seed, chunk_size=row.chunk_size, model_json=model_json,
         constraints=tuple(spec.get("constraints", ())), method=spec.get("method", "auto"),
         score=bool(spec.get("score", True)),
+        wagner_scan=bool(spec.get("wagner_scan", False)),
         store_trajectories=bool(spec.get("store_trajectories", True)),
         p_region=None if estimate is None else float(estimate),
         region=row.p_region,

@@ -89,6 +89,8 @@ class CatalogueStatus(ApiModel):
     constraints: list[str]
     sampler: str
     score: bool
+    wagner_scan: bool = Field(default=False, description="whether the scores include "
+                              "Wagner's scan (alarm_time, risk_peak, risks at the crossing)")
     chunk_size: int
     chunks: ChunkProgress
     scenarios_stored: int
@@ -116,7 +118,7 @@ class CatalogueStatus(ApiModel):
 def create_catalogue(body: CatalogueRequest, ctx: ContextDep, jobs: JobsDep) -> CatalogueCreated:
     row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
                          model=body.model, method=body.sampler, score=body.score,
-                         chunk_size=body.chunk_size)
+                         chunk_size=body.chunk_size, wagner_scan=body.wagner_scan)
     jobs.submit(row.id)
     return CatalogueCreated(id=row.id, status=row.status, href=f"/catalogues/{row.id}")
 

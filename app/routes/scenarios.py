@@ -39,7 +39,7 @@ class ScenariosResponse(ApiModel):
 def create_scenarios(body: ScenarioRequest, ctx: ContextDep) -> ScenariosResponse:
     done = sampling.sample_scenarios(ctx, model=body.model, constraints=body.constraints,
                                      n=body.n, seed=body.seed, method=body.sampler,
-                                     score=body.score,
+                                     score=body.score, wagner_scan=body.wagner_scan,
                                      include_scenario=body.include_trajectories)
     return ScenariosResponse(
         model=done.model_id, n=len(done.records), seed=body.seed, sampler=body.sampler,

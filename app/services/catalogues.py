@@ -31,7 +31,7 @@ SAMPLER_METHODS = ("auto", "rejection", "mcmc", "subset", "subset-is")
 
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
            model: str | None = None, method: str = "auto", score: bool = True,
-           chunk_size: int | None = None) -> CatalogueRow:
+           chunk_size: int | None = None, wagner_scan: bool = False) -> CatalogueRow:
     """Validate and store a new catalogue job (status ``queued``); the caller runs it."""
     limit = ctx.settings.catalogue_n_limit
     if not 1 <= n <= limit:
@@ -49,6 +49,7 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     # 422 for an empty region now rather than a job that fails (a P(A) estimate: < 1 s)
     domain.estimate_region(fitted, parsed, seed)
     spec = {"constraints": list(constraints), "method": method, "score": bool(score),
+            "wagner_scan": bool(score and wagner_scan),
             "store_trajectories": bool(ctx.settings.store_trajectories)}
     with ctx.db.session() as s:
         row = CatalogueRow(id=repo.new_id("cat"), model_id=model_id, status="queued", n=n,
@@ -162,6 +163,7 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "constraints": row.spec.get("constraints", []),
         "sampler": row.spec.get("method", "auto"),
         "score": row.spec.get("score", True),
+        "wagner_scan": bool(row.spec.get("wagner_scan", False)),
         "chunk_size": row.chunk_size,
         "chunks": {"total": row.n_chunks, "done": n_done},
         "scenarios_stored": stored,

@@ -17,6 +17,7 @@ import itertools
 import multiprocessing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import pandas as pd
 
@@ -61,27 +62,34 @@ def split_constraints(text: str) -> list[str]:
 
 
 def score_later(executor: ChunkExecutor, drawn: domain.SampleResult, *, seed: int,
-                score: bool, include_scenario: bool) -> Callable[[], list[ScenarioRecord]]:
+                score: bool, include_scenario: bool,
+                wagner_scan: bool = False) -> Callable[[], list[ScenarioRecord]]:
     """Start scoring the drawn vectors (``score_vector`` each) on ``executor``, split in
     one part per worker slot; the returned function waits for the records. A few
     vectors, or nothing to score, are done in this process when the function is called."""
     kwargs = {"lane_width": drawn.lane_width, "seed": seed, "score": score,
-              "include_scenario": include_scenario}
+              "include_scenario": include_scenario, "wagner_scan": wagner_scan}
     table, weights = drawn.params, [float(w) for w in drawn.weights]
+    # each vector's data support (sampler.model.support), copied to its record
+    sset = drawn.sample_set
+    support: list[dict[str, Any] | None] | None = (
+        None if sset is None or sset.support is None else list(sset.support))
     n = len(table)
     if not score or n < POOL_MIN_N:
-        return lambda: score_part(table, 0, weights, kwargs)
+        return lambda: score_part(table, 0, weights, kwargs, support)
     parts = min(n, 4)
     starts = [n * k // parts for k in range(parts + 1)]
+    pairs = list(itertools.pairwise(starts))
     results = executor.map_later(
-        score_part, [table.iloc[a:b].reset_index(drop=True) for a, b in itertools.pairwise(starts)],
-        starts[:-1], [weights[a:b] for a, b in itertools.pairwise(starts)], [kwargs] * parts)
+        score_part, [table.iloc[a:b].reset_index(drop=True) for a, b in pairs],
+        starts[:-1], [weights[a:b] for a, b in pairs], [kwargs] * parts,
+        [None if support is None else support[a:b] for a, b in pairs])
     return lambda: [record for part in results() for record in part]
 
 
 def sample_scenarios(ctx: ServiceContext, *, model: str | None, constraints: Sequence[str],
                      n: int, seed: int, method: str = "auto", score: bool = True,
-                     include_scenario: bool = False) -> ScoredSample:
+                     include_scenario: bool = False, wagner_scan: bool = False) -> ScoredSample:
     """``n`` cut-ins of the model in the region, built and (with ``score``) scored, with
     P(A), its model interval and the rates; ``n`` at most the synchronous limit."""
     limit = ctx.settings.sync_n_limit
@@ -94,7 +102,8 @@ def sample_scenarios(ctx: ServiceContext, *, model: str | None, constraints: Seq
     parsed = domain.parse_constraints(constraints)
     drawn = domain.sample(fitted, parsed, n, seed, method=method, report=False)
     later = score_later(ctx.executor, drawn, seed=seed, score=score,
-                        include_scenario=include_scenario)  # the workers score while ...
+                        include_scenario=include_scenario,
+                        wagner_scan=wagner_scan)  # the workers score while ...
     domain.add_region_report(fitted, drawn)  # ... this thread adds the model interval, rates
     return ScoredSample(model_id=model_id, drawn=drawn, records=later())
 

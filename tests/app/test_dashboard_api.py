@@ -290,7 +290,9 @@ def test_ten_thousand_scenarios_give_a_bounded_payload(client: TestClient) -> No
 # --------------------------------------------------------------------------- view 4
 @pytest.mark.slow
 def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
-    r = client.post("/catalogues", json={"n": 3, "seed": 11, "constraints": ["ttc<3"]})
+    # Wagner's scan asked for, so the stored risk_peak can be checked against the view's
+    r = client.post("/catalogues", json={"n": 3, "seed": 11, "constraints": ["ttc<3"],
+                                         "wagner_scan": True})
     assert r.status_code == 202, r.text
     cid = r.json()["id"]
     info: dict[str, Any] = {}

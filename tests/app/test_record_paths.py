@@ -32,7 +32,8 @@ def test_route_job_and_cli_give_the_same_record(client: Any, tmp_path: Path,
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     # the route
     r = client.post("/scenarios", json={"n": N, "seed": SEED, "constraints": CONSTRAINTS,
-                                        "sampler": "rejection", "score": True})
+                                        "sampler": "rejection", "score": True,
+                                        "wagner_scan": True})
     assert r.status_code == 200, r.text
     route = [ScenarioRecord.model_validate(item) for item in r.json()["scenarios"]]
     assert [rec.index for rec in route] == list(range(N))
@@ -44,7 +45,7 @@ def test_route_job_and_cli_give_the_same_record(client: Any, tmp_path: Path,
     monkeypatch.setattr(chunk_module, "chunk_seed", lambda seed, index: SEED)
     spec = CatalogueSpec(n=N, seed=123, chunk_size=N, model_json=model_json,
                          constraints=tuple(CONSTRAINTS), method="rejection",
-                         store_trajectories=False)
+                         store_trajectories=False, wagner_scan=True)
     result = compute_chunk(spec, 0)
     job = [record_of(ScenarioRow(**row)) for row in result.rows]
 
@@ -53,17 +54,24 @@ def test_route_job_and_cli_give_the_same_record(client: Any, tmp_path: Path,
     model_path.write_text(model_json)
     out = tmp_path / "scored.jsonl"
     assert main(["sample", str(model_path), "-c", *CONSTRAINTS, "-n", str(N), "--seed",
-                 str(SEED), "--sampler", "rejection", "--score", "-o", str(out), "-q"]) == 0
+                 str(SEED), "--sampler", "rejection", "--score", "--wagner-scan", "-o", str(out),
+                 "-q"]) == 0
     lines = [json.loads(x) for x in out.read_text().splitlines()]
     cli = [ScenarioRecord.model_validate({k: v for k, v in line.items()
                                           if k not in ("derived", "log_density")})
            for line in lines]
 
-    assert job == route
-    assert cli == route
+    assert cli == route  # with each vector's data support
+    assert all(rec.support in ("inside", "near", "extrapolated") for rec in route)
+    # catalogue rows do not store the data support (yet): the rest of the record is equal
+    support = {"support", "support_distance", "support_excess", "support_nearest",
+               "density_pct", "support_outside"}
+    assert [rec.model_dump(exclude=support) for rec in job] == \
+        [rec.model_dump(exclude=support) for rec in route]
     for rec in route:  # and the record is what it claims, by hand
         assert rec.ttc == pytest.approx(rec.params["gap"] / rec.params["dv"], rel=1e-12)
         assert rec.ttc < 3.0 and rec.risk_peak is not None and 0.0 <= rec.risk_peak <= 1.0
+        assert rec.r_dep_cross is not None  # Wagner's scan asked for on all three paths
         assert rec.a_req is not None and rec.btn == pytest.approx(rec.a_req / (0.774 * 9.81))
         assert rec.ttr_true is not None and (math.isinf(rec.ttr_true) or rec.ttr_true >= 0.0)
 

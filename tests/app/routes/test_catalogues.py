@@ -30,8 +30,9 @@ def _finished(client: Any, cid: str) -> dict[str, Any]:
 
 @pytest.fixture(scope="module")
 def catalogue(client: Any) -> dict[str, Any]:
+    """A scored catalogue with Wagner's scan asked for (so every score column is filled)."""
     r = client.post("/catalogues", json={"n": N, "seed": 9, "constraints": ["ttc<3"],
-                                         "chunk_size": 5})
+                                         "chunk_size": 5, "wagner_scan": True})
     assert r.status_code == 202, r.text
     body = r.json()
     assert body["status"] == "queued" and body["href"] == f"/catalogues/{body['id']}"
@@ -41,6 +42,7 @@ def catalogue(client: Any) -> dict[str, Any]:
 @pytest.mark.slow
 def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> None:
     assert catalogue["status"] == "done", catalogue["error"]
+    assert catalogue["wagner_scan"] is True
     assert catalogue["n"] == N and catalogue["scenarios_stored"] == N
     assert catalogue["chunks"] == {"total": 3, "done": 3} and catalogue["progress"] == 1.0
     p = catalogue["p_region"]
@@ -260,3 +262,33 @@ def test_status_of_a_running_catalogue_counts_the_workers_reports(client: Any) -
     with ctx.db.session() as s:
         repo.get_catalogue(s, row.id).status = "cancelled"
     chunkfile.clear_progress(folder, 1)
+
+
+def test_wagner_scan_is_opt_in_and_its_fields_are_null_by_default(
+        client: Any, catalogue: dict[str, Any]) -> None:
+    """Without ``wagner_scan`` a catalogue's rows carry the risks at t_p but null
+    alarm_time, risk_peak and risks at the crossing (docs/api.md); the same seed with the
+    scan asked for fills them, and changes nothing else of the record."""
+    r = client.post("/catalogues", json={"n": 5, "seed": 9, "constraints": ["ttc<3"],
+                                         "chunk_size": 5})
+    assert r.status_code == 202, r.text
+    plain = _finished(client, r.json()["id"])
+    assert plain["status"] == "done", plain["error"]
+    assert plain["wagner_scan"] is False
+    assert plain["summary"].get("risk", {"count": 0})["count"] == 0
+    scan_only = {"alarm_time", "risk_peak", "r_dep_cross", "r_ind_cross", "r_dep_cross_r157",
+                 "r_ind_cross_r157"}
+    rows = client.get(f"/catalogues/{plain['id']}/scenarios",
+                      params={"limit": 10, "order_by": "index"}).json()["scenarios"]
+    assert len(rows) == 5
+    for row in rows:
+        assert all(row[k] is None for k in scan_only), row
+        assert row["r_dep_tp"] is not None and row["btn"] is not None
+    # chunk 0 of both catalogues holds the same vectors (same seed, same chunk size)
+    full = client.get(f"/catalogues/{catalogue['id']}/scenarios",
+                      params={"limit": 5, "order_by": "index"}).json()["scenarios"]
+    for a, b in zip(rows, full, strict=True):
+        assert a["params"] == b["params"]
+        assert all(b[k] is not None for k in ("risk_peak", "r_dep_cross")), b
+        same = set(a) - scan_only - {"id", "exposure_weight", "scenario_id", "catalogue"}
+        assert {k: a[k] for k in same} == {k: b[k] for k in same}

@@ -25,10 +25,30 @@ def test_ten_cutins_with_ttc_below_3(client: Any) -> None:
         assert p["dv"] > 0 and p["gap"] / p["dv"] < 3.0  # TTC by hand
         assert item["ttc"] == pytest.approx(p["gap"] / p["dv"], rel=1e-12)
         assert item["exposure_weight"] > 0
-        # the flat scored record with the criticality record (issues 11, 13)
-        assert 0.0 <= item["risk_peak"] <= 1.0 and item["btn"] >= 0.0
+        # the flat scored record with the criticality record (issues 11, 13); Wagner's
+        # scan was not asked for: its fields are null, the risks at t_p are there
+        assert item["btn"] >= 0.0 and 0.0 <= item["r_dep_tp"] <= 1.0
+        assert item["risk_peak"] is None and item["alarm_time"] is None
+        assert item["r_dep_cross"] is None and item["r_ind_cross_r157"] is None
         assert item["class"] in ("no_conflict", "preventable", "unpreventable", "unavoidable")
         assert item["error"] is None and item["scenario"] is None
+
+
+def test_wagner_scan_on_request_fills_its_fields_and_changes_nothing_else(
+        client: Any) -> None:
+    req = {"n": 3, "seed": 1, "constraints": ["ttc<3"]}
+    plain = client.post("/scenarios", json=req).json()["scenarios"]
+    r = client.post("/scenarios", json={**req, "wagner_scan": True})
+    assert r.status_code == 200, r.text
+    scanned = r.json()["scenarios"]
+    scan_only = {"alarm_time", "risk_peak", "r_dep_cross", "r_ind_cross", "r_dep_cross_r157",
+                 "r_ind_cross_r157"}
+    for a, b in zip(plain, scanned, strict=True):
+        assert 0.0 <= b["risk_peak"] <= 1.0 and 0.0 <= b["r_dep_cross"] <= 1.0
+        assert {k: v for k, v in a.items() if k not in scan_only} == \
+            {k: v for k, v in b.items() if k not in scan_only}
+    bad = client.post("/scenarios", json={**req, "wagner_scan": "yes"})
+    assert bad.status_code == 422 and "wagner_scan" in bad.json()["error"]["field"]
 
 
 def test_same_seed_same_answer_and_a_new_seed_differs(client: Any) -> None:
