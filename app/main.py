@@ -29,6 +29,7 @@ from app.routes import (
     risk,
     scenarios,
 )
+from app.routes import evaluations as evaluation_routes
 from app.services import evaluations, store
 from app.settings import Settings, get_settings
 
@@ -42,6 +43,7 @@ ROUTERS = (
     scenarios.router,
     risk.router,
     catalogues.router,
+    evaluation_routes.router,
     dashboard.router,
 )
 

@@ -38,6 +38,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "app.cli.data",  # scengen data ...
     "app.cli.sampling",  # scengen fit, scengen sample
     "app.cli.service",  # scengen serve, scengen catalogue ...
+    "app.cli.evaluate",  # scengen evaluate
 )
 
 

@@ -74,23 +74,42 @@ def _campaign_face() -> Any:
 
 
 def default_runner(factory: Any, settings: dict[str, Any] | None) -> Any:
-    """``sampler.campaign.sut_runner`` with the careful driver beside the SUT."""
+    """``sampler.campaign.sut_runner`` with the careful driver beside the SUT (for
+    ``vs_careful``); ``settings`` are ``riskcore.sut.SimSettings`` fields."""
     import importlib
 
     sim = None
     if settings:
         rs = importlib.import_module("riskcore.sut")
         try:
-            sim = rs.SimSettings.from_dict(settings)
+            sim = rs.SimSettings.from_dict(dict(settings))
         except (TypeError, ValueError, KeyError) as exc:
             raise InvalidInput(f"settings: {exc}", field="body.settings") from None
-    return _campaign_face().sut_runner(factory, settings=sim, careful=True)
+    face = _campaign_face()
+    if not hasattr(face, "sut_runner"):
+        raise ServiceError("evaluations need sampler.campaign.sut_runner, which this "
+                           "version does not have yet")
+    return face.sut_runner(factory, settings=sim, careful=True, name=factory.name)
 
 
 def runner_for(ctx: ServiceContext | None, factory: Any,
                settings: dict[str, Any] | None) -> Any:
     maker: RunnerMaker | None = getattr(ctx, "campaign_runner", None) if ctx else None
     return (maker or default_runner)(factory, settings)
+
+
+def check_settings(settings: Mapping[str, Any] | None, field: str) -> None:
+    """Simulator settings as ``riskcore.sut.SimSettings`` takes them (``InvalidInput``
+    naming ``field`` otherwise)."""
+    if not settings:
+        return
+    import importlib
+
+    rs = importlib.import_module("riskcore.sut")
+    try:
+        rs.SimSettings.from_dict(dict(settings))
+    except (TypeError, ValueError, KeyError) as exc:
+        raise InvalidInput(f"settings: {exc}", field=field) from None
 
 
 # --------------------------------------------------------------------------- create
@@ -128,19 +147,26 @@ class CampaignSpec:
 
 
 def check_spec(spec: CampaignSpec, limit: int, where: str = "body") -> None:
-    """Range checks of a campaign's numbers (``InvalidInput`` naming the field)."""
+    """Range checks of a campaign's numbers (``InvalidInput`` naming the field: ``body.n``
+    for a request; ``--n`` for the CLI, ``where=""``)."""
+    def f(name: str) -> str:
+        return f"{where}.{name}" if where else "--" + name.replace("_", "-")
+
     if spec.n is not None and not 1 <= spec.n <= limit:
-        raise InvalidInput(f"n must be between 1 and {limit} runs, got {spec.n}",
-                           field=f"{where}.n")
+        raise InvalidInput(f"{f('n')}: must be between 1 and {limit} runs, got {spec.n}",
+                           field=f("n"))
     if not 1 <= spec.max_runs <= limit:
-        raise InvalidInput(f"max_runs must be between 1 and {limit} runs, got "
-                           f"{spec.max_runs}", field=f"{where}.max_runs")
+        raise InvalidInput(f"{f('max_runs')}: must be between 1 and {limit} runs, got "
+                           f"{spec.max_runs}", field=f("max_runs"))
     if not (math.isfinite(spec.rhw) and 0 < spec.rhw < 10):
-        raise InvalidInput(f"rhw: the stop rule's relative half-width must be in (0, 10), "
-                           f"got {spec.rhw}", field=f"{where}.rhw")
+        raise InvalidInput(f"{f('rhw')}: the stop rule's relative half-width must be in "
+                           f"(0, 10), got {spec.rhw}", field=f("rhw"))
     if not 1 <= spec.batch_size <= 100_000:
-        raise InvalidInput(f"batch_size must be between 1 and 100000, got {spec.batch_size}",
-                           field=f"{where}.batch_size")
+        raise InvalidInput(f"{f('batch_size')}: must be between 1 and 100000, got "
+                           f"{spec.batch_size}", field=f("batch_size"))
+    if isinstance(spec.seed, bool) or spec.seed < 0:
+        raise InvalidInput(f"{f('seed')}: must be an integer >= 0, got {spec.seed}",
+                           field=f("seed"))
 
 
 def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | None = None,
@@ -164,8 +190,8 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
         check_constraints(spec.constraints, ctx.settings)
         parsed = domain.parse_constraints(spec.constraints)
         domain.estimate_region(fitted, parsed, spec.seed)  # 422 for an empty region now
-    factory = suts.make_factory(entry, spec.sut_params, field="body.sut_params")
-    runner_for(ctx, factory, spec.settings)  # 422 for bad simulator settings now
+    suts.make_factory(entry, spec.sut_params, field="body.sut_params")
+    check_settings(spec.settings, "body.settings")
     with ctx.db.session() as s:
         row = EvaluationRow(id=repo.new_id("eval"), model_id=model_id, sut=entry.name,
                             status="queued", seed=spec.seed, spec=jsonconv.encode(

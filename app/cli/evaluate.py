@@ -1,0 +1,161 @@
+"""``scengen evaluate``: a system under test driven through importance-sampled cut-ins
+(issue 24; docs/evaluation.md).
+
+``scengen evaluate --sut NAME [-c C]... [-n N | --rhw 0.3] [--seed S] [--runs FILE]`` runs
+a campaign in this process (``sampler.campaign.evaluate``; nothing is stored) and prints
+its summary as JSON on stdout: ``p_collision`` and ``rate_per_hour`` (each ``estimate``,
+``ci`` and the model interval ``model_ci``), ``runs``, ``collisions``, ``ess``,
+``acceleration`` and the rest of ``CampaignResult.summary()``; a progress bar on stderr.
+``--runs FILE`` writes every draw (parameters, weight, outcome; ``simulated`` false for
+draws outside the region or the physical bounds, which were not run) as JSON lines.
+
+NAME is a registered SUT (``--list-suts``: the built-ins and the installed packages'
+entry points in the group ``scengen.suts``) or, on the command line only, a
+``module:Object`` reference (a class of either SUT protocol, a factory, a SutSpec).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from app.cli.options import add_constraints, add_data_dir, add_quiet
+
+#: the summary's keys printed first, in this order (the rest follow as the campaign gives)
+FIRST_KEYS = ("sut", "p_collision", "rate_per_hour", "runs", "collisions", "ess",
+              "acceleration")
+
+
+def register(subparsers: argparse._SubParsersAction[Any]) -> None:
+    """Add ``scengen evaluate``."""
+    p = subparsers.add_parser(
+        "evaluate", help="estimate a system under test's collision rate (importance "
+        "sampling)", description="Drive a system under test through importance-sampled "
+        "cut-ins of the model and print its collision probability per cut-in and rate per "
+        "hour with both intervals, as JSON (docs/evaluation.md).")
+    p.add_argument("--sut", default=None, metavar="NAME",
+                   help="a registered SUT (see --list-suts) or module:Class")
+    p.add_argument("--sut-param", action="append", default=[], metavar="KEY=VALUE",
+                   dest="sut_params",
+                   help="a parameter of the SUT (repeatable; VALUE as JSON, e.g. "
+                   "time_gap=1.5)")
+    p.add_argument("--setting", action="append", default=[], metavar="KEY=VALUE",
+                   dest="settings", help="a simulator setting (riskcore.sut.SimSettings, "
+                   "repeatable; e.g. perception_delay=0.2)")
+    p.add_argument("--list-suts", action="store_true",
+                   help="print the registered SUTs as JSON and exit")
+    add_constraints(p, default_text="none: the model's whole distribution")
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("-n", "--n", dest="n", type=int, default=None, metavar="N",
+                     help="exactly N draws (no stop rule)")
+    how.add_argument("--rhw", type=float, default=None, metavar="R",
+                     help="stop when the relative half-width of the 95 %% interval is at "
+                     "most R, with at least 10 collisions (default 0.3)")
+    p.add_argument("--max-runs", type=int, default=None, metavar="M",
+                   help="most draws with the stop rule (200000)")
+    p.add_argument("--seed", type=int, default=0, help="campaign seed (0)")
+    p.add_argument("--batch-size", type=int, default=None, metavar="B",
+                   help="draws per chunk (2000)")
+    p.add_argument("--model", default=None, metavar="MODEL",
+                   help="model JSON file (scengen fit) or a model id of the store "
+                   "(default: the store's default model)")
+    p.add_argument("--workers", type=int, default=0, metavar="W",
+                   help="processes that run the SUT (0: in this process, the default)")
+    p.add_argument("--runs", default=None, metavar="FILE",
+                   help="write every draw (parameters, weight, outcome) as JSON lines")
+    add_quiet(p)
+    add_data_dir(p)
+    p.set_defaults(func=_evaluate)
+
+
+def _pairs(items: list[str], option: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"{option}: expected KEY=VALUE, got {item!r}")
+        try:
+            value: Any = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw  # a bare word
+        out[key.strip()] = value
+    return out
+
+
+class _Bar:
+    """One tqdm bar of draws on stderr (its total: n, or max_runs with the stop rule)."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar: Any = None
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if self.quiet:
+            return
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc="draws", unit="run", file=sys.stderr,
+                            leave=False)
+        self.bar.n = min(done, total)
+        self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from app import jsonconv
+    from app.cli.sampling import _load_model
+    from app.services import evaluations as service
+    from app.services import suts
+
+    if args.list_suts:
+        print(json.dumps(jsonconv.encode(suts.list_suts()), indent=1))
+        return 0
+    if args.sut is None:
+        raise ValueError("--sut: give the system under test (a registered name, see "
+                         "--list-suts, or module:Class)")
+    if args.workers < 0:
+        raise ValueError(f"--workers: must be >= 0, got {args.workers}")
+    entry = suts.resolve(args.sut, allow_import=True, field="--sut")
+    factory = suts.make_factory(entry, _pairs(args.sut_params, "--sut-param"),
+                                field="--sut-param")
+    spec = service.CampaignSpec(
+        sut=entry.name, sut_params=dict(factory.params), constraints=args.constraints or [],
+        n=args.n, rhw=0.3 if args.rhw is None else float(args.rhw),
+        max_runs=args.max_runs or service.DEFAULT_MAX_RUNS, seed=args.seed,
+        batch_size=args.batch_size or service.DEFAULT_BATCH,
+        settings=_pairs(args.settings, "--setting") or None)
+    service.check_spec(spec, limit=10**9, where="")
+    runner = service.runner_for(None, factory, spec.settings)
+    model = _load_model(args.model)
+    if args.runs is not None and not Path(args.runs).parent.is_dir():
+        raise ValueError(f"--runs: directory {str(Path(args.runs).parent)!r} does not exist")
+    pool = None
+    if args.workers > 0:
+        from app.jobs.executors import LocalPoolExecutor
+
+        pool = LocalPoolExecutor(args.workers)
+    bar = _Bar(args.quiet)
+    try:
+        result = service.campaign(model, factory, spec, runner=runner, progress=bar,
+                                  executor=None if pool is None else pool.futures_executor())
+    finally:
+        bar.close()
+        if pool is not None:
+            pool.close()
+    summary: dict[str, Any] = result.summary()
+    ordered = {k: summary[k] for k in FIRST_KEYS if k in summary}
+    ordered.update({k: v for k, v in summary.items() if k not in ordered})
+    if args.runs is not None:
+        with open(args.runs, "w", encoding="utf-8") as fh:
+            for rec in result.records():
+                fh.write(jsonconv.dumps(rec) + "\n")
+    print(json.dumps(jsonconv.encode(ordered), indent=1))
+    return 0

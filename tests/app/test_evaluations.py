@@ -1,0 +1,348 @@
+"""Evaluations of a system under test (issue 24, items 9 and 10): the SUT registry, the
+stored, resumable campaign job and its routes.
+
+The campaign's runner is injected through the service layer (``ctx.campaign_runner``) so
+that these tests check the app's part (storage, resume, paging, filters, export, errors)
+with a runner whose outcome is known by hand; ``test_evaluations_e2e.py`` runs the real
+simulator end to end."""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app.services import evaluations as service
+from app.services import suts
+from datasets import PARAM_NAMES
+from tests.app.factories import copy_model_cache, make_settings, wait_for
+
+
+class Outcomes:
+    """What the stand-in runner returns: a collision iff the cutter closes faster than
+    ``dv_hit`` m/s; impact speed = dv - dv_hit; vs_careful 'worse' on collisions."""
+
+    def __init__(self, params: np.ndarray, dv_hit: float) -> None:
+        dv = params[:, PARAM_NAMES.index("dv")]
+        self.collided = dv > dv_hit
+        self.impact_speed = np.where(self.collided, dv - dv_hit, 0.0)
+        self.r_dep_peak = np.clip(dv / 10.0, 0.0, 1.0)
+        self.vs_careful = np.where(self.collided, "worse", "same")
+
+    def records(self) -> list[dict[str, Any]]:  # pragma: no cover - the protocol's
+        return []
+
+
+class CountingRunner:
+    """A stand-in ``sampler.campaign.Runner`` that counts the rows it simulated."""
+
+    name = "stand-in"
+
+    def __init__(self, dv_hit: float = 6.0) -> None:
+        self.dv_hit = dv_hit
+        self.rows = 0
+
+    def __call__(self, params: np.ndarray, seeds: np.ndarray) -> Outcomes:
+        self.rows += params.shape[0]
+        return Outcomes(np.asarray(params), self.dv_hit)
+
+
+@pytest.fixture(scope="module")
+def runner() -> CountingRunner:
+    return CountingRunner()
+
+
+@pytest.fixture(scope="module")
+def eval_client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory,
+                runner: CountingRunner) -> Iterator[Any]:
+    from fastapi.testclient import TestClient
+
+    from tests.app.factories import make_app
+
+    data_dir = tmp_path_factory.mktemp("evaluations")
+    copy_model_cache(model_cache_dir, data_dir)
+    app = make_app(make_settings(data_dir))
+    with TestClient(app) as client:
+        client.app.state.ctx.campaign_runner = lambda factory, settings: runner
+        yield client
+
+
+def _done(client: Any, eid: str) -> dict[str, Any]:
+    def finished() -> bool:
+        return client.get(f"/evaluations/{eid}").json()["status"] in ("done", "failed",
+                                                                      "cancelled")
+    wait_for(finished, f"evaluation {eid}")
+    body: dict[str, Any] = client.get(f"/evaluations/{eid}").json()
+    return body
+
+
+# --------------------------------------------------------------------------- registry
+def test_registry_lists_the_builtins_with_their_sources() -> None:
+    reg = suts.registry()
+    for name in ("none", "r157_cc", "rss", "idm", "acc", "acc_aeb"):
+        assert reg.entries[name].origin == "builtin"
+    assert reg.entries["acc"].source  # a citation, not empty
+
+
+def test_a_module_path_is_refused_over_http_naming_the_field(eval_client: Any) -> None:
+    r = eval_client.post("/evaluations", json={"sut": "os.path:join", "n": 10})
+    assert r.status_code == 422
+    err = r.json()["error"]
+    assert err["field"] == "body.sut"
+    assert "module path" in err["message"] and "registered" in err["message"]
+    r = eval_client.post("/evaluations", json={"sut": "no_such_sut", "n": 10})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "body.sut"
+    assert "unknown system under test" in r.json()["error"]["message"]
+
+
+def test_bad_numbers_name_their_field(eval_client: Any) -> None:
+    for body, field in (({"sut": "acc", "n": 0}, "body.n"),
+                        ({"sut": "acc", "rhw": 0}, "body.rhw"),
+                        ({"sut": "acc", "sut_params": {"nope": 1}}, "body.sut_params"),
+                        ({"sut": "acc", "constraints": ["ttc<<3"]}, "body.constraints.0"),
+                        ({"sut": "acc", "wat": 1}, "body.wat")):
+        r = eval_client.post("/evaluations", json=body)
+        assert r.status_code == 422, body
+        assert r.json()["error"]["field"] == field, (body, r.json())
+
+
+def test_suts_route_lists_what_the_registry_holds(eval_client: Any) -> None:
+    body = eval_client.get("/suts").json()
+    names = [s["name"] for s in body["suts"]]
+    assert names[:2] == ["none", "r157_cc"]
+    assert "acc" in names
+
+
+# --------------------------------------------------------------------------- job
+def test_an_evaluation_runs_stores_its_runs_and_pages_them(eval_client: Any) -> None:
+    r = eval_client.post("/evaluations", json={"sut": "acc", "n": 3000, "batch_size": 1000,
+                                               "seed": 3})
+    assert r.status_code == 202
+    eid = r.json()["id"]
+    assert r.json()["href"] == f"/evaluations/{eid}"
+    st = _done(eval_client, eid)
+    assert st["status"] == "done", st["error"]
+    assert st["runs_done"] == 3000 and st["chunks_done"] == 3 and st["progress"] == 1.0
+    summary = st["summary"]
+    assert summary["runs"] == 3000
+    # every collided run is stored and the count matches the summary's
+    page = eval_client.get(f"/evaluations/{eid}/runs",
+                           params={"collided": "true", "limit": 1000}).json()
+    assert page["total"] == summary["collisions"] == st["collisions_so_far"]
+    assert page["total"] > 0
+    runs = page["runs"]
+    # hand rule of the stand-in: collided iff dv > 6, impact speed dv - 6
+    for rec in runs:
+        assert rec["dv"] > 6.0
+        assert rec["impact_speed"] == pytest.approx(rec["dv"] - 6.0, abs=1e-12)
+        assert rec["vs_careful"] == "worse"
+    speeds = [rec["impact_speed"] for rec in runs]
+    assert speeds == sorted(speeds, reverse=True)  # default order: impact speed, desc
+    # the estimate is the mean of the weights of the collided runs: sum(w_i c_i) / N
+    # (weight = w / P(B) once done)
+    if len(runs) == page["total"]:
+        est = sum(rec["weight"] for rec in runs) / summary["runs"]
+        assert est == pytest.approx(summary["p_collision"]["estimate"], rel=1e-9)
+    # filters and order
+    low = eval_client.get(f"/evaluations/{eid}/runs",
+                          params={"impact_speed_max": 0.5, "collided": "true",
+                                  "order_by": "impact_speed", "desc": "false"}).json()
+    assert all(0 <= rec["impact_speed"] <= 0.5 for rec in low["runs"])
+    same = eval_client.get(f"/evaluations/{eid}/runs",
+                           params={"vs_careful": "same", "limit": 5}).json()
+    assert same["total"] == st["runs_simulated"] - summary["collisions"]
+    by_run = eval_client.get(f"/evaluations/{eid}/runs",
+                             params={"order_by": "run", "limit": 50}).json()["runs"]
+    assert [rec["run"] for rec in by_run] == sorted(rec["run"] for rec in by_run)
+
+
+def test_runs_filters_refuse_unknown_names(eval_client: Any) -> None:
+    eid = eval_client.post("/evaluations", json={"sut": "none", "n": 10}).json()["id"]
+    r = eval_client.get(f"/evaluations/{eid}/runs", params={"speed_min": 1})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.speed_min"
+    r = eval_client.get(f"/evaluations/{eid}/runs", params={"order_by": "nope"})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.order_by"
+    r = eval_client.get(f"/evaluations/{eid}/runs", params={"vs_careful": "meh"})
+    assert r.status_code == 422 and r.json()["error"]["field"].startswith("query.vs_careful")
+    assert eval_client.get("/evaluations/eval-nope").status_code == 404
+
+
+def test_export_of_the_failing_runs(eval_client: Any) -> None:
+    eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 1000,
+                                                 "seed": 5}).json()["id"]
+    st = _done(eval_client, eid)
+    r = eval_client.get(f"/evaluations/{eid}/export", params={"format": "json"})
+    assert r.status_code == 200
+    doc = json.loads(r.content)
+    assert doc["format"] == "scengen.evaluation-failures/1"
+    assert 0 < len(doc["runs"]) <= st["summary"]["collisions"]
+    first = doc["runs"][0]
+    assert first["run"]["collided"] is True
+    assert first["scenario"]["schema"] == "scengen.concrete-scenario/1"
+    r = eval_client.get(f"/evaluations/{eid}/export", params={"format": "xosc"})
+    assert r.status_code == 200 and r.content[:2] == b"PK"
+    r = eval_client.get(f"/evaluations/{eid}/export", params={"format": "csv"})
+    assert r.status_code == 422 and r.json()["error"]["field"] == "query.format"
+
+
+def test_delete_cancels_and_removes(eval_client: Any) -> None:
+    eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 500}).json()["id"]
+    assert eval_client.delete(f"/evaluations/{eid}").status_code == 204
+    assert eval_client.get(f"/evaluations/{eid}").status_code == 404
+    assert eval_client.delete(f"/evaluations/{eid}").status_code == 404
+
+
+# --------------------------------------------------------------------------- resume
+def test_an_interrupted_job_resumes_from_its_stored_chunks(
+        model_cache_dir: Path, tmp_path: Path) -> None:
+    """Stop after 2 of 5 chunks, resume: the stored chunks are replayed, not simulated
+    again, and the result equals an uninterrupted run's, bit for bit."""
+    from app.services.store import open_context
+
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    ctx = open_context(make_settings(data_dir))
+    try:
+        runner = CountingRunner()
+        ctx.campaign_runner = lambda factory, settings: runner
+        spec = {"sut": "acc", "n": 2500, "batch_size": 500, "seed": 11}
+        a = service.create(ctx, **spec).id
+        b = service.create(ctx, **spec).id
+        assert service.run_job(ctx, a) == "done"
+        rows_a = runner.rows
+
+        stop = threading.Event()
+
+        def progress(stage: str, done: int, total: int) -> None:
+            if done >= 1000:
+                stop.set()
+
+        runner.rows = 0
+        assert service.run_job(ctx, b, stop=stop, progress=progress) == "interrupted"
+        assert service.describe(ctx, b)["chunks_done"] == 2
+        simulated_before = runner.rows
+        runner.rows = 0
+        assert service.run_job(ctx, b) == "done"
+        # the resumed run simulated only chunks 2..4: together, what run a simulated
+        assert runner.rows + simulated_before == rows_a
+        assert simulated_before > 0 and 0 < runner.rows < rows_a
+        sa, sb = service.describe(ctx, a)["summary"], service.describe(ctx, b)["summary"]
+        assert sa == sb
+        ta, ra = service.page_runs(ctx, a, service.RunFilter(), 0, 1000, order_by="run",
+                                   desc=False)
+        tb, rb = service.page_runs(ctx, b, service.RunFilter(), 0, 1000, order_by="run",
+                                   desc=False)
+        assert ta == tb and ra == rb
+    finally:
+        ctx.close()
+
+
+# --------------------------------------------------------------------------- CLI
+class OneRunBrake:
+    """A per-run SUT for the ``--sut module:Class`` path: brakes at 3 m/s² always."""
+
+    def reset(self, seed: int) -> None:
+        self.seed = seed
+
+    def act(self, obs: Any) -> float:
+        return -3.0
+
+
+@pytest.fixture
+def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
+    runner = CountingRunner()
+    made: list[Any] = []
+
+    def maker(factory: Any, settings: Any) -> CountingRunner:
+        made.append(factory)
+        return runner
+
+    monkeypatch.setattr(service, "default_runner", maker)
+    runner.made = made  # type: ignore[attr-defined]
+    return runner
+
+
+def test_cli_evaluate_prints_the_summary_and_writes_every_run(
+        store: Path, tmp_path: Path, cli_runner: CountingRunner,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    runs = tmp_path / "runs.jsonl"
+    assert main(["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4",
+                 "--batch-size", "500", "--runs", str(runs)]) == 0
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
+    assert list(summary)[:7] == ["sut", "p_collision", "rate_per_hour", "runs",
+                                 "collisions", "ess", "acceleration"]
+    assert summary["sut"] == "acc" and summary["runs"] == 1500
+    for key in ("estimate", "ci", "model_ci"):
+        assert key in summary["p_collision"] and key in summary["rate_per_hour"]
+    lines = [json.loads(x) for x in runs.read_text().splitlines()]
+    assert len(lines) == 1500
+    hits = [x for x in lines if x["collided"]]
+    assert len(hits) == summary["collisions"] > 0
+    for x in hits:  # the stand-in's rule, by hand
+        assert x["dv"] > 6.0 and x["simulated"] is True
+    est = sum(x["weight"] for x in hits) / len(lines)
+    assert est == pytest.approx(summary["p_collision"]["estimate"], rel=1e-9)
+    assert "draws" in out.err  # the progress bar
+
+
+def test_cli_evaluate_is_deterministic(store: Path, cli_runner: CountingRunner,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    argv = ["evaluate", "--sut", "idm", "-n", "800", "--seed", "9", "-q"]
+    assert main(argv) == 0
+    first = capsys.readouterr().out
+    assert main(argv) == 0
+    assert capsys.readouterr().out == first
+
+
+def test_cli_evaluate_takes_a_module_path(store: Path, cli_runner: CountingRunner,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    assert main(["evaluate", "--sut", "tests.app.test_evaluations:OneRunBrake", "-n", "300",
+                 "-q"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["sut"] == "tests.app.test_evaluations:OneRunBrake"
+    sut = cli_runner.made[0]()  # type: ignore[attr-defined]
+    assert sut.name == "tests.app.test_evaluations:OneRunBrake"  # wrapped by per_run
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--sut", "no_such"], "unknown system under test"),
+    (["--sut", "acc", "-n", "0"], "--n"),
+    (["--sut", "acc", "--rhw", "-1"], "--rhw"),
+    (["--sut", "acc", "--sut-param", "nope=1"], "sut_params"),
+    (["--sut", "acc", "--sut-param", "novalue"], "KEY=VALUE"),
+    (["--sut", "nomodule_xyz:Thing"], "cannot import"),
+    (["-n", "5"], "--sut"),
+    (["--sut", "acc", "-n", "5", "--rhw", "0.3"], "not allowed with"),
+    (["--sut", "acc", "-c", "ttc<<3"], "ttc<<3"),
+])
+def test_cli_evaluate_bad_input_is_one_line(store: Path, cli_runner: CountingRunner,
+                                            capsys: pytest.CaptureFixture[str],
+                                            argv: list[str], needle: str) -> None:
+    from app.cli import main
+
+    with pytest.raises(SystemExit) if "--rhw" in argv and "-n" in argv else _nothing():
+        code = main(["evaluate", "-q", *argv])
+        assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert needle in err
+
+
+class _nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: Any) -> bool:
+        return False
