@@ -545,6 +545,15 @@ def page_runs(ctx: ServiceContext, evaluation_id: str, flt: RunFilter, offset: i
         return total, [run_record(r, pb) for r in rows]
 
 
+def run_by_index(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str, Any] | None:
+    """The record of simulated run ``run`` (None when there is no such run)."""
+    row = get(ctx, evaluation_id)
+    with ctx.db.read_session() as s:
+        r = s.scalar(select(EvaluationRunRow).where(
+            EvaluationRunRow.evaluation_id == evaluation_id, EvaluationRunRow.run == run))
+        return None if r is None else run_record(r, _p_bounds(row))
+
+
 def failing_runs(ctx: ServiceContext, evaluation_id: str) -> Iterator[dict[str, Any]]:
     """Every collided run of an evaluation, highest impact speed first."""
     offset = 0

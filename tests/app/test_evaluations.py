@@ -346,3 +346,36 @@ class _nothing:
 
     def __exit__(self, *exc: Any) -> bool:
         return False
+
+
+# --------------------------------------------------------------------------- dashboard
+def test_dashboard_views_of_an_evaluation(eval_client: Any) -> None:
+    eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 600,
+                                                 "seed": 2}).json()["id"]
+    st = _done(eval_client, eid)
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    assert view["evaluation"]["sut"] == "acc"
+    assert view["figures"]["collisions"] == st["summary"]["collisions"]
+    assert view["failures_total"] == st["summary"]["collisions"]
+    speeds = [r["impact_speed"] for r in view["failures"]]
+    assert speeds == sorted(speeds, reverse=True)
+    sc = view["scatter"]
+    n_shown = min(400, st["runs_simulated"])
+    assert len(sc["run"]) == len(sc["btn"]) == len(sc["r_dep_peak"]) == n_shown
+    assert sum(sc["collided"]) == min(n_shown, st["summary"]["collisions"])
+    assert view["careful"] is None  # no r157_cc evaluation on this model and region yet
+    # one run driven again by the SUT and by the careful driver (the real simulator)
+    run = view["failures"][0]["run"]
+    prof = eval_client.get(f"/dashboard/api/evaluations/{eid}/runs/{run}").json()
+    assert prof["run"]["run"] == run
+    for who in ("sut", "careful"):
+        d = prof["drivers"][who]
+        assert len(d["t"]) == len(d["v"]) == len(d["a"]) > 10
+        assert d["t"][0] == 0.0
+    # both start at the scenario's ego speed
+    assert prof["drivers"]["sut"]["v"][0] == pytest.approx(prof["drivers"]["careful"]["v"][0])
+    r = eval_client.get(f"/dashboard/api/evaluations/{eid}/runs/99999999")
+    assert r.status_code == 404 and r.json()["error"]["field"] == "path.run"
+    page = eval_client.get("/dashboard")
+    assert page.status_code == 200 and "view-sut" in page.text
+    assert eval_client.get("/dashboard/static/dashboard_sut.js").status_code == 200

@@ -1,0 +1,142 @@
+"""The dashboard's "system under test" section (issue 24): an evaluation's rate per hour
+with both intervals beside the careful driver's, its failures, the SUT's peak r_dep
+against btn, and one run's speed, acceleration and r_dep beside the careful driver's.
+
+Thin views over ``app.services.evaluations``; plot data use null for gaps
+(``jsonconv.plot_values``), the rest the service's JSON convention."""
+
+from __future__ import annotations
+
+import importlib
+import math
+from typing import Any
+
+import numpy as np
+
+from app import domain, jsonconv
+from app.context import ServiceContext
+from app.errors import NotFound
+from app.services import evaluations as service
+from app.services import suts
+from datasets import PARAM_NAMES
+
+#: the careful driver the SUT is compared with (UN R157, JRC-FSM rule)
+CAREFUL = "r157_cc"
+#: how many runs the scatter shows: every collided run up to this many, then the others
+SCATTER_RUNS = 400
+#: rows of the failures list
+FAILURES = 25
+
+
+def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
+    if not summary:
+        return None
+    keys = ("p_collision", "rate_per_hour", "p_violation", "runs", "sut_runs", "collisions",
+            "ess", "acceleration", "stop_reason")
+    return {k: summary.get(k) for k in keys}
+
+
+def careful_evaluation(ctx: ServiceContext, model_id: str,
+                       constraints: list[str]) -> dict[str, Any] | None:
+    """The latest finished evaluation of the careful driver on the same model and region."""
+    best = None
+    for row in service.list_all(ctx):
+        spec = row.spec or {}
+        if (row.sut == CAREFUL and row.status == "done" and row.model_id == model_id
+                and list(spec.get("constraints", [])) == list(constraints)):
+            best = row
+    if best is None:
+        return None
+    return {"id": best.id, "figures": _figures(jsonconv.decode(best.summary or {}))}
+
+
+def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
+    """Status and figures of one evaluation, the careful driver's beside them, the
+    failures list and the r_dep-against-btn scatter."""
+    st = service.describe(ctx, evaluation_id)
+    failures_total, failures = service.page_runs(
+        ctx, evaluation_id, service.RunFilter(flags=(("collided", True),)), 0, FAILURES,
+        order_by="impact_speed", desc=True)
+    scatter: dict[str, Any] = {"run": [], "btn": [], "r_dep_peak": [], "collided": [],
+                               "vs_careful": [], "note": None}
+    _, hits = service.page_runs(ctx, evaluation_id,
+                                service.RunFilter(flags=(("collided", True),)), 0,
+                                SCATTER_RUNS, order_by="run", desc=False)
+    _, rest = service.page_runs(ctx, evaluation_id,
+                                service.RunFilter(flags=(("collided", False),)), 0,
+                                max(0, SCATTER_RUNS - len(hits)), order_by="run", desc=False)
+    shown = hits + rest
+    if shown:
+        model = ctx.model(st["model"])
+        params = np.array([[float(r[k]) for k in PARAM_NAMES] for r in shown])
+        crit = importlib.import_module("sampler.region").criticality_quantities(
+            params, domain.model_lane_width(model), with_ttr=False)
+        btn = np.asarray(crit["btn"], dtype=float)
+        scatter.update(run=[int(r["run"]) for r in shown], btn=btn.tolist(),
+                       r_dep_peak=[r.get("r_dep_peak") for r in shown],
+                       collided=[bool(r.get("collided")) for r in shown],
+                       vs_careful=[r.get("vs_careful") for r in shown])
+        if all(v is None or (isinstance(v, float) and math.isnan(v))
+               for v in scatter["r_dep_peak"]):
+            scatter["note"] = ("no r_dep: the runner did not compute the risk of the SUT's "
+                               "drive")
+    return {
+        "evaluation": {k: st[k] for k in ("id", "status", "sut", "model", "seed",
+                                          "constraints", "runs_done", "runs_planned",
+                                          "progress", "collisions_so_far", "error")},
+        "figures": _figures(st["summary"]),
+        "careful": careful_evaluation(ctx, st["model"], list(st["constraints"])),
+        "failures_total": failures_total,
+        "failures": jsonconv.encode(failures),
+        "scatter": jsonconv.plot_values(scatter),
+    }
+
+
+def run_profile(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str, Any]:
+    """One run driven again by the SUT and by the careful driver, with profiles: time,
+    the ego's speed and acceleration, r_dep (null where not computed)."""
+    st = service.describe(ctx, evaluation_id)
+    rec = service.run_by_index(ctx, evaluation_id, run)
+    if rec is None:
+        raise NotFound(f"evaluation {evaluation_id} has no simulated run {run}",
+                       field="path.run")
+    model = ctx.model(st["model"])
+    lane = domain.model_lane_width(model)
+    params = {k: float(rec[k]) for k in PARAM_NAMES}
+    scenario = service.rebuild(params, lane, int(st["seed"]), run, evaluation_id)
+    if scenario is None:
+        raise NotFound(f"run {run}: the builder refuses its vector", field="path.run")
+    rs = importlib.import_module("riskcore.sut")
+    batch = rs.CutInBatch.from_scenarios([scenario], lane_width=lane)
+    seeds = np.array([int(rec["seed"])], dtype=np.uint64)
+    spec = st["spec"]
+    sim = rs.SimSettings.from_dict(spec["settings"]) if spec.get("settings") else None
+    entry = suts.resolve(st["sut"], allow_import=False, field="sut")
+    out: dict[str, Any] = {"run": jsonconv.encode(rec), "drivers": {}}
+    for label, factory in (("sut", entry.factory(spec.get("sut_params") or {})),
+                           ("careful", suts.registry().entries[CAREFUL].factory())):
+        runs = _simulate(rs, factory(), batch, seeds, sim)
+        prof = runs.profiles or {}
+        t = np.asarray(prof.get("t", []), dtype=float)
+        r_dep = prof.get("r_dep")
+        out["drivers"][label] = jsonconv.plot_values({
+            "name": str(getattr(factory, "name", label)),
+            "t": t.tolist(),
+            "v": np.asarray(prof.get("v", [[]]))[0].tolist(),
+            "a": np.asarray(prof.get("a", [[]]))[0].tolist(),
+            "t_risk": None if r_dep is None else batch.t.tolist(),
+            "r_dep": None if r_dep is None else np.asarray(r_dep)[0].tolist(),
+            "collided": bool(runs.collided[0]),
+            "impact_speed": float(runs.impact_speed[0]),
+            "min_gap": float(runs.min_gap[0]),
+        })
+    return out
+
+
+def _simulate(rs: Any, sut: Any, batch: Any, seeds: Any, sim: Any) -> Any:
+    try:
+        return rs.simulate(sut, batch, seeds=seeds, settings=sim, profiles=True, risk=True)
+    except (NotImplementedError, rs.SutError):
+        # the risk of the drive is not available (yet): the profiles without it; a
+        # problem of the run itself raises again here
+        return rs.simulate(sut, batch, seeds=seeds, settings=sim, profiles=True)

@@ -1,0 +1,243 @@
+/* scengen dashboard, section 7 (docs/dashboard.md, docs/evaluation.md): a system under
+ * test. Its collision rate per hour with the Monte Carlo and the model interval beside the
+ * R157 careful driver's, the failing runs, the SUT's peak r_dep against btn, and one run's
+ * speed, acceleration and r_dep beside the careful driver's. Reads /evaluations and
+ * /dashboard/api/evaluations/{id}; starts an evaluation with POST /evaluations. Plot <div>s
+ * get data-rendered="1"; the note gets data-state="done" | "empty" | "error".
+ */
+"use strict";
+
+(function () {
+  const S = window.scengen;
+  const $ = (id) => document.getElementById(id);
+  const SUT = "#c62828";
+  const CAREFUL = "#2e7d32";
+  let poll = null;
+
+  function interval(ci) {
+    if (!ci) return "–";
+    return "[" + S.fmt(ci[0], 3) + ", " + S.fmt(ci[1], 3) + "]";
+  }
+
+  function figureRows(label, f) {
+    if (!f) return [[label, "–", "–", "–", "–"]];
+    const r = f.rate_per_hour || {};
+    const p = f.p_collision || {};
+    const rows = [[label + " · collisions per hour", S.fmt(r.estimate, 3), interval(r.ci),
+                   interval(r.model_ci), f.collisions + " in " + f.runs + " runs"]];
+    rows.push([label + " · P(collision) per cut-in", S.fmt(p.estimate, 3), interval(p.ci),
+               interval(p.model_ci), p.upper_bound !== null && p.upper_bound !== undefined
+                 ? "no collision: ≤ " + S.fmt(p.upper_bound, 3) + " (95 %)"
+                 : "ESS " + S.fmt(f.ess, 3) + ", ×" + S.fmt(f.acceleration, 3) + " vs naive MC"]);
+    return rows;
+  }
+
+  function grid(head, rows) {
+    return "<table><tr>" + head.map((h) => "<th>" + S.esc(h) + "</th>").join("") + "</tr>" +
+      rows.map((r) => "<tr>" + r.map((v, i) => (i === 0 ? "<th>" : "<td>") + S.esc(v) +
+                                       (i === 0 ? "</th>" : "</td>")).join("") + "</tr>")
+        .join("") + "</table>";
+  }
+
+  async function loadLists(selectId) {
+    const [{ evaluations }, { suts }] = await Promise.all([S.api("/evaluations"),
+                                                          S.api("/suts")]);
+    const sel = $("eval-select");
+    sel.innerHTML = "";
+    for (const e of evaluations.slice().reverse()) {
+      const o = document.createElement("option");
+      o.value = e.id;
+      o.textContent = e.sut + " · " + e.status + " · " + e.id;
+      sel.appendChild(o);
+    }
+    if (selectId) sel.value = selectId;
+    const sutSel = $("sut-select");
+    if (!sutSel.options.length) {
+      for (const s of suts) {
+        const o = document.createElement("option");
+        o.value = s.name;
+        o.textContent = s.name;
+        o.title = s.summary + (s.source ? " — " + s.source : "");
+        sutSel.appendChild(o);
+      }
+      sutSel.value = suts.some((s) => s.name === "acc") ? "acc" : (suts[0] || {}).name;
+    }
+    return evaluations;
+  }
+
+  async function start(event) {
+    event.preventDefault();
+    const n = parseInt($("eval-n").value, 10);
+    if (!(n >= 1)) {
+      $("eval-n").classList.add("invalid");
+      S.reportError("start an evaluation", new Error("n must be a whole number ≥ 1"));
+      return;
+    }
+    try {
+      const made = await S.api("/evaluations", {
+        method: "POST", headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ sut: $("sut-select").value, n: n,
+                               model: $("model-select").value || "default" }),
+      });
+      await loadLists(made.id);
+      await show(made.id);
+    } catch (e) {
+      S.reportError("start an evaluation (section 7)", e);
+    }
+  }
+
+  async function show(id) {
+    const note = $("sut-note");
+    if (poll) { clearTimeout(poll); poll = null; }
+    if (!id) {
+      note.textContent = "No evaluation yet: pick a system under test and press Evaluate " +
+        "(or run 'scengen evaluate', POST /evaluations).";
+      note.dataset.state = "empty";
+      return;
+    }
+    let view;
+    try {
+      view = await S.api("/dashboard/api/evaluations/" + encodeURIComponent(id));
+    } catch (e) {
+      note.dataset.state = "error";
+      S.reportError("the system under test (section 7)", e);
+      return;
+    }
+    const ev = view.evaluation;
+    if (ev.status === "queued" || ev.status === "running") {
+      note.textContent = "Evaluation " + ev.id + " of " + ev.sut + " is " + ev.status + ": " +
+        ev.runs_done + " of " + ev.runs_planned + " runs, " + ev.collisions_so_far +
+        " collisions so far…";
+      note.dataset.state = "running";
+      poll = setTimeout(() => show(id), 1000);
+      return;
+    }
+    if (ev.status !== "done") {
+      note.textContent = "Evaluation " + ev.id + " is " + ev.status +
+        (ev.error ? ": " + ev.error : "") + ".";
+      note.dataset.state = "error";
+      return;
+    }
+    const region = ev.constraints.length ? ev.constraints.join(" and ") : "all cut-ins of the model";
+    note.textContent = "Evaluation " + ev.id + ": " + ev.sut + " driven through " +
+      view.figures.runs + " importance-sampled cut-ins (" + region + ", seed " + ev.seed +
+      "); rates with the Monte Carlo interval and the model interval (the data's " +
+      "uncertainty, from the bootstrap refits).";
+    const rows = figureRows(ev.sut, view.figures);
+    if (view.careful) rows.push(...figureRows("r157_cc (careful driver)", view.careful.figures));
+    else rows.push(["r157_cc (careful driver)", "–", "–", "–",
+                    "no finished evaluation of r157_cc on this model and region yet"]);
+    $("sut-table").innerHTML = grid(["", "estimate", "95 % interval", "model 95 %", ""], rows);
+    drawFailures(view);
+    await drawScatter(view);
+    note.dataset.state = "done";
+    if (view.failures.length) await openRun(ev.id, view.failures[0].run);
+    else S.clearPlot($("sut-run-plot"), "No failing run to show.");
+  }
+
+  function drawFailures(view) {
+    const box = $("sut-failures");
+    if (!view.failures.length) {
+      box.innerHTML = "<p class=\"note\">No run collided.</p>";
+      return;
+    }
+    const head = ["run", "impact speed [m/s]", "peak r_dep", "vs careful", "cutter v0 [m/s]",
+                  "dv [m/s]", "gap [m]", "weight"];
+    const body = view.failures.map((r) => "<tr data-run=\"" + r.run + "\"><td><a href=\"#\">" +
+      r.run + "</a></td><td>" + S.esc(S.fmt(r.impact_speed)) + "</td><td>" +
+      S.esc(S.fmt(r.r_dep_peak)) + "</td><td>" + S.esc(r.vs_careful || "–") + "</td><td>" +
+      S.esc(S.fmt(r.p_v0)) + "</td><td>" + S.esc(S.fmt(r.dv)) + "</td><td>" +
+      S.esc(S.fmt(r.gap)) + "</td><td>" + S.esc(S.fmt(r.weight)) + "</td></tr>").join("");
+    box.innerHTML = "<p class=\"note\">" + view.failures_total + " failing runs, highest " +
+      "impact speed first (click one to drive it again):</p><table><tr>" +
+      head.map((h) => "<th>" + S.esc(h) + "</th>").join("") + "</tr>" + body + "</table>";
+    box.querySelectorAll("tr[data-run]").forEach((tr) => tr.addEventListener("click", (e) => {
+      e.preventDefault();
+      openRun(view.evaluation.id, parseInt(tr.dataset.run, 10));
+    }));
+  }
+
+  async function drawScatter(view) {
+    const s = view.scatter;
+    const div = $("sut-scatter");
+    if (!s.run.length) {
+      S.clearPlot(div, "No simulated run to plot.");
+      return;
+    }
+    const pick = (hit) => s.run.map((_, i) => i).filter((i) => s.collided[i] === hit);
+    const trace = (idx, name, color) => ({
+      type: "scatter", mode: "markers", name: name,
+      x: idx.map((i) => s.btn[i]), y: idx.map((i) => s.r_dep_peak[i]),
+      customdata: idx.map((i) => s.run[i]),
+      marker: { size: 7, color: color, opacity: 0.75, line: { width: 0.5, color: "#333" } },
+      hovertemplate: "run %{customdata}<br>btn %{x:.3f}<br>peak r_dep %{y:.3f}<extra></extra>",
+    });
+    await S.draw(div, [trace(pick(false), "no collision", "#8a94a3"),
+                       trace(pick(true), "collided", SUT)], {
+      title: { text: "SUT's peak r_dep against btn" + (s.note ? " (" + s.note + ")" : ""),
+               font: { size: 12 } },
+      xaxis: { title: { text: "btn (braking needed ÷ available)" } },
+      yaxis: { title: { text: "peak r_dep of the SUT's drive" } },
+    }, view.evaluation.id);
+    div.on("plotly_click", (ev) => {
+      const p = ev.points && ev.points[0];
+      if (p) openRun(view.evaluation.id, p.customdata);
+    });
+  }
+
+  async function openRun(id, run) {
+    const div = $("sut-run-plot");
+    let view;
+    try {
+      view = await S.api("/dashboard/api/evaluations/" + encodeURIComponent(id) + "/runs/" + run);
+    } catch (e) {
+      S.reportError("run " + run + " (section 7)", e);
+      return;
+    }
+    const d = view.drivers;
+    const line = (drv, key, color, axis, dash, label) => ({
+      type: "scatter", mode: "lines", name: label, x: key === "r_dep" ? drv.t_risk : drv.t,
+      y: drv[key] || [], xaxis: "x", yaxis: axis,
+      line: { color: color, width: 2, dash: dash },
+    });
+    const traces = [];
+    for (const [drv, color, who] of [[d.sut, SUT, d.sut.name], [d.careful, CAREFUL, "careful"]]) {
+      traces.push(line(drv, "v", color, "y", null, who + " speed"));
+      traces.push(line(drv, "a", color, "y2", "dot", who + " accel"));
+      if (drv.r_dep) traces.push(line(drv, "r_dep", color, "y3", "dash", who + " r_dep"));
+    }
+    const outcome = (drv) => drv.collided ? "collides at " + S.fmt(drv.impact_speed) + " m/s"
+      : "no collision (smallest gap " + S.fmt(drv.min_gap) + " m)";
+    $("sut-run-info").textContent = "Run " + run + ": " + d.sut.name + " " + outcome(d.sut) +
+      "; careful driver " + outcome(d.careful) + (d.sut.r_dep ? "" :
+        " (r_dep of the drive not computed by this version of the simulator)") + ".";
+    await S.draw(div, traces, {
+      title: { text: "Run " + run + ": speed, acceleration and r_dep, SUT beside the careful " +
+               "driver", font: { size: 12 } },
+      grid: { rows: 3, columns: 1, pattern: "coupled" },
+      xaxis: { title: { text: "time [s]" } },
+      yaxis: { title: { text: "speed [m/s]" } },
+      yaxis2: { title: { text: "accel [m/s²]" } },
+      yaxis3: { title: { text: "r_dep" }, range: [0, 1.05] },
+      legend: { orientation: "h", y: -0.15, x: 0, font: { size: 10 } },
+      height: 520,
+    }, id + "#" + run);
+  }
+
+  async function init() {
+    $("eval-form").addEventListener("submit", start);
+    $("eval-select").addEventListener("change", (e) => show(e.target.value));
+    try {
+      const evals = await loadLists();
+      const done = evals.filter((e) => e.status === "done" && e.sut !== "r157_cc");
+      const pick = (done[done.length - 1] || evals[evals.length - 1] || {}).id;
+      if (pick) $("eval-select").value = pick;
+      await show(pick);
+    } catch (e) {
+      $("sut-note").dataset.state = "error";
+      S.reportError("the system under test (section 7)", e);
+    }
+  }
+
+  init();
+})();
