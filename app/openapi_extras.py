@@ -9,7 +9,7 @@ guards, and some routes answer CSV, NDJSON, Parquet, zip, HTML or JavaScript.
 
 * the ``Error`` schema, used by every documented error response (422 included);
 * 404 everywhere (an unknown id may be in the path or the body), 400 and 413 on
-  operations with a body, 401 and 403 on mutating operations, 409 on a catalogue's;
+  operations with a body, 401 and 403 on mutating operations, 409 on a catalogue's and an evaluation's export;
 * the media types of the non-JSON responses (``MEDIA_TYPES``).
 """
 
@@ -42,7 +42,8 @@ ERRORS = {
     "401": "the API key is missing or wrong (only when SCENGEN_API_KEY is set)",
     "403": "a cross-site browser request that would change something",
     "404": "an unknown id (in the path or the body) or page",
-    "409": "the catalogue is not in a state that allows it (e.g. export before it is done)",
+    "409": "the catalogue or evaluation is not in a state that allows it (e.g. export "
+           "before it is done)",
     "413": "the body is larger than its limit (SCENGEN_BODY_LIMIT_BYTES, "
            "SCENGEN_UPLOAD_LIMIT_BYTES, SCENGEN_UPLOAD_EXPANDED_LIMIT_BYTES)",
     "422": "a value out of range or not understood; the message names the field and, for "
@@ -60,6 +61,9 @@ MEDIA_TYPES: dict[tuple[str, str], dict[str, dict[str, Any]]] = {
         "application/vnd.apache.parquet": {"schema": _BINARY},
         "application/zip": {"schema": _BINARY},
     },
+    ("/evaluations/{evaluation_id}/export", "get"): {
+        "application/json": {"schema": {"type": "object"}},  # format=json (default)
+        "application/zip": {"schema": _BINARY}},              # xosc, commonroad
     ("/datasets/{dataset_id}/parameters", "get"): {
         "application/json": {"schema": {"type": "object"}},  # format=json (default)
         "text/csv": {"schema": _TEXT}},                       # format=csv
@@ -146,7 +150,7 @@ def enrich(spec: dict[str, Any]) -> dict[str, Any]:
                 codes += ["400", "413"]
             if method != "get":
                 codes += ["401", "403"]
-            if "{catalogue_id}" in path:
+            if "{catalogue_id}" in path or path == "/evaluations/{evaluation_id}/export":
                 codes.append("409")
             ok_types = set(responses.get("200", {}).get("content") or {})
             page = ok_types == {"text/html"}  # an HTML page answers its errors as pages
