@@ -9,7 +9,8 @@ guards, and some routes answer CSV, NDJSON, Parquet, zip, HTML or JavaScript.
 
 * the ``Error`` schema, used by every documented error response (422 included);
 * 404 everywhere (an unknown id may be in the path or the body), 400 and 413 on
-  operations with a body, 401 and 403 on mutating operations, 409 on a catalogue's and an evaluation's export;
+  operations with a body, 401 and 403 on mutating operations, 409 on a catalogue's
+  and on an evaluation's export;
 * the media types of the non-JSON responses (``MEDIA_TYPES``).
 """
 
