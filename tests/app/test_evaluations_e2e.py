@@ -19,6 +19,9 @@ from tests.app.factories import copy_model_cache, make_settings, wait_for
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "sut-package"
 
+#: minutes on a busy 2-core machine (the simulator, numba compilation in subprocesses)
+pytestmark = pytest.mark.slow
+
 
 def test_http_evaluation_with_the_real_simulator(model_cache_dir: Path,
                                                  tmp_path: Path) -> None:
