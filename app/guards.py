@@ -1,5 +1,10 @@
 """Request guards in front of every route (one ASGI middleware).
 
+* **Host** (every request): the ``Host`` header's name (port left out) must be one of
+  ``trusted_hosts`` (default the loopback names, plus ``host`` when the service is bound to
+  a name or a specific address); else 400 naming ``header.host``. This is what defeats DNS
+  rebinding: a page of evil.example whose name is made to resolve to 127.0.0.1 talks to
+  the service same-origin, but its requests carry ``Host: evil.example``.
 * **Body size**: a dataset upload may be ``upload_limit_bytes`` (the route counts the
   files as well), any other body ``body_limit_bytes``; above that 413 naming the limit,
   before the body is read. A body without ``Content-Length`` (chunked) is counted as it
@@ -24,6 +29,9 @@ from urllib.parse import urlsplit
 
 from app.errors import error_body
 from app.settings import Settings
+
+#: bind addresses that mean "every interface": they name no host to trust
+_WILDCARD_BINDS = frozenset({"0.0.0.0", "::", "", "*"})
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -64,6 +72,43 @@ def _same_origin(scope: Scope, origin: str) -> bool:
     return urlsplit(origin).netloc.lower() == host.lower()
 
 
+def host_name(host_header: str) -> str:
+    """The name of a ``Host`` header without its port, lower case (``[::1]:8000`` ->
+    ``::1``)."""
+    value = host_header.strip().lower()
+    if value.startswith("["):  # an IPv6 literal
+        end = value.find("]")
+        return value[1:end] if end > 0 else value
+    if value.count(":") == 1:
+        value = value.split(":", 1)[0]
+    return value.rstrip(".")
+
+
+def trusted_host_names(settings: Settings) -> list[str]:
+    """The host names the service answers to (``trusted_hosts`` and the bind address)."""
+    names = [h.strip().lower().strip("[]") for h in settings.trusted_hosts if h.strip()]
+    bind = settings.host.strip().lower().strip("[]")
+    if bind not in _WILDCARD_BINDS and bind not in names:
+        names.append(bind)
+    return names
+
+
+def host_allowed(host_header: str | None, trusted: list[str]) -> bool:
+    """Whether a request with this ``Host`` header may be answered."""
+    if "*" in trusted:
+        return True
+    if not host_header:
+        return False
+    name = host_name(host_header)
+    for pattern in trusted:
+        if pattern.startswith("*."):
+            if name.endswith(pattern[1:]) and len(name) > len(pattern) - 1:
+                return True
+        elif name == pattern:
+            return True
+    return False
+
+
 class RequestGuards:
     """The ASGI middleware; ``settings()`` gives the current settings."""
 
@@ -72,10 +117,18 @@ class RequestGuards:
         self.settings = settings
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope.get("method", "GET") not in MUTATING:
+        if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         settings = self.settings()
+        host = _header(scope, b"host")
+        if not host_allowed(host, trusted_host_names(settings)):
+            await _send_error(send, 400, f"host {host_name(host or '')!r} is not one this "
+                              "service answers to (SCENGEN_TRUSTED_HOSTS)", "header.host")
+            return
+        if scope.get("method", "GET") not in MUTATING:
+            await self.app(scope, receive, send)
+            return
         # cross-site browser requests
         fetch_site = _header(scope, b"sec-fetch-site")
         origin = _header(scope, b"origin")

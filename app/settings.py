@@ -14,6 +14,9 @@ from typing import Any
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+#: the names and addresses of this machine's loopback interface
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+
 
 def default_data_dir() -> Path:
     """The store when SCENGEN_DATA_DIR is not set: the per-user data directory
@@ -77,6 +80,13 @@ class Settings(BaseSettings):
         default=None,
         description="when set, POST/PUT/PATCH/DELETE need it in the X-API-Key header "
         "(or Authorization: Bearer); reads stay open (SCENGEN_API_KEY)")
+    trusted_hosts: list[str] = Field(
+        default_factory=lambda: list(LOOPBACK_NAMES),
+        description="host names the service answers to (the request's Host header, port "
+        "left out); any other Host gets 400, so a web page cannot reach a service on "
+        "loopback through DNS rebinding. Default the loopback names; SCENGEN_HOST is added "
+        "when it is a name or a specific address. '*.example.org' trusts the subdomains, "
+        "'*' every host. JSON in SCENGEN_TRUSTED_HOSTS, e.g. '[\"scengen.lab.example\"]'")
     # limits on what one request may ask for (app/limits.py): 422/413 naming the setting
     body_limit_bytes: int = Field(
         default=10 * 1024 * 1024, ge=1,

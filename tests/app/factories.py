@@ -36,7 +36,10 @@ def make_settings(data_dir: Path, **overrides: Any) -> Settings:
     """Settings for a private store under ``data_dir`` (SQLite unless database_url given)."""
     values: dict[str, Any] = {"data_dir": data_dir, "local_workers": 0, "chunk_size": 5,
                               "default_model_options": TEST_MODEL_OPTIONS,
-                              "warm_start": False}
+                              "warm_start": False,
+                              # TestClient's requests carry Host: testserver
+                              "trusted_hosts": ["localhost", "127.0.0.1", "::1",
+                                                "testserver"]}
     values.update(overrides)
     return Settings(**values)
 

@@ -28,7 +28,8 @@ MAX_BARS = 60
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     data_dir = prepare_data_dir(tmp_path_factory.mktemp("dashboard"))
-    settings = Settings(data_dir=data_dir, local_workers=0, chunk_size=2, warm_start=False)
+    settings = Settings(data_dir=data_dir, local_workers=0, chunk_size=2, warm_start=False,
+                        trusted_hosts=["testserver"])
     app = create_app(settings)
     with TestClient(app) as c:
         yield c
