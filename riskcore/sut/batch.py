@@ -151,7 +151,8 @@ class CutInBatch:
         straight along +x at constant speed (a generated cut-in does); the road frame is
         shifted so that the ego starts at x = 0, y = 0 and time at 0. The cutter is the
         object ``"cutter"`` (else the first). Shorter scenarios are continued at constant
-        velocity to the longest's grid (``t_end``: each one's own end). ``t_p`` and
+        velocity to the longest's grid; ``t_end`` is the first sample from which the
+        cutter's heading, speed and acceleration no longer change (its script is over). ``t_p`` and
         ``t_cross`` are those of :mod:`riskcore.criticality` (``t_cross`` from the
         provenance of a generated scenario). ``lane_width``: default the first scenario's
         provenance ``lane_width``, else 3.75 m.
@@ -211,7 +212,11 @@ class CutInBatch:
             else:
                 tc = crossing_time(sc, c, lw)
             t_cross[i] = math.nan if tc is None else tc - float(ts[0])
-            t_end[i] = float(ts[-1] - ts[0])
+            # the script is over once heading, speed and acceleration stay constant
+            dev = ((np.abs(psi - psi[-1]) > 1e-9) | (np.abs(c.v - c.v[-1]) > 1e-9)
+                   | (np.abs(acc) > 1e-9))
+            last = int(np.flatnonzero(dev)[-1]) + 1 if dev.any() else 0
+            t_end[i] = float(ts[min(last, m - 1)] - ts[0])
         return cls(t=t, lane_width=lw, ego_v0=v0, ego_length=float(first.ego.length),
                    ego_width=float(first.ego.width), c_length=cl, c_width=cw, t_p=t_p,
                    t_cross=t_cross, t_end=t_end, **arrays)
@@ -233,7 +238,8 @@ class Observations(NamedTuple):
     frame (m/s); ``a`` longitudinal acceleration (m/s²); ``psi`` heading (rad);
     ``length``, ``width`` (m); ``lane`` (int8: 0 ego lane, +1 left, -1 right, by the
     object's centre); ``dy0`` the object's lateral offset at the first step (m; the
-    reference for UN R157's perception of a lateral movement).
+    reference for UN R157's perception of a lateral movement). ``dt``: the command
+    returned now holds for this long, s (the update period).
     """
 
     t: FloatArray
@@ -255,6 +261,7 @@ class Observations(NamedTuple):
     width: FloatArray
     lane: NDArray[np.int8]
     dy0: FloatArray
+    dt: float = 0.0
 
     def run(self, i: int) -> Observation:
         """The observation of run i (scalars and (K,) arrays)."""
@@ -262,7 +269,7 @@ class Observations(NamedTuple):
             float(self.t[i]), float(self.ego_v[i]), float(self.ego_a[i]), self.ego_length,
             self.ego_width, self.lane_width, self.present[i], self.dx[i], self.gap[i],
             self.dy[i], self.v[i], self.vx[i], self.vy[i], self.a[i], self.psi[i],
-            self.length[i], self.width[i], self.lane[i], self.dy0[i])
+            self.length[i], self.width[i], self.lane[i], self.dy0[i], self.dt)
 
 
 class Observation(NamedTuple):
@@ -287,3 +294,4 @@ class Observation(NamedTuple):
     width: FloatArray
     lane: NDArray[np.int8]
     dy0: FloatArray
+    dt: float = 0.0

@@ -90,7 +90,7 @@ def ego_advance(x: float, v: float, a: float, u: float, j: float,
     """The ego's state tau s after (x, v, a) under the command u (module docstring).
     Returns (x, v, a, stopped within tau)."""
     if v <= 0.0 and u <= 0.0 and a <= 0.0:
-        return x, 0.0, 0.0, False
+        return x, 0.0, 0.0, a != 0.0  # at standstill: a snaps to 0
     d = u - a
     t1 = abs(d) / j
     s = 1.0 if d > 0.0 else -1.0
@@ -102,6 +102,20 @@ def ego_advance(x: float, v: float, a: float, u: float, j: float,
     if st:
         return x1, v1, a1, True
     return _piece(x1, v1, u, 0.0, tau - t1)
+
+
+@njit(cache=True)
+def ego_two(x: float, v: float, a: float, u_old: float, u: float, d: float, j: float,
+            tau: float) -> tuple[float, float, float, bool]:  # pragma: no cover - jit
+    """:func:`ego_advance` when the command changes from ``u_old`` to ``u`` ``d`` s into
+    the step (``d = 0``: ``u`` throughout)."""
+    if d <= 0.0:
+        return ego_advance(x, v, a, u, j, tau)
+    if tau <= d:
+        return ego_advance(x, v, a, u_old, j, tau)
+    x1, v1, a1, st1 = ego_advance(x, v, a, u_old, j, d)
+    x2, v2, a2, st2 = ego_advance(x1, v1, a1, u, j, tau - d)
+    return x2, v2, a2, st1 or st2
 
 
 @njit(cache=True)
@@ -145,29 +159,200 @@ def clearance(x: float, y: float, p: float, xe: float, ehl: float, ehw: float, c
 
 
 @njit(cache=True)
-def _overlap_at(tau: float, t0: float, x: float, v: float, a: float, u: float, j: float,
+def _overlap_at(tau: float, t0: float, x: float, v: float, a: float, u_old: float, u: float,
+                d: float, j: float,
                 cx: FloatArray, cy: FloatArray, cpsi: FloatArray, cv: FloatArray,
                 ca: FloatArray, i: int, h: float, ehl: float, ehw: float, chl: float,
                 chw: float) -> bool:  # pragma: no cover - jit
-    xe, _, _, _ = ego_advance(x, v, a, u, j, tau)
+    xe, _, _, _ = ego_two(x, v, a, u_old, u, d, j, tau)
     px, py, pp, _, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t0 + tau)
     near, gap = clearance(px, py, pp, xe, ehl, ehw, chl, chw)
     return near and gap < 0.0
 
 
+# columns of the per-run outcome array ``out`` (N, N_OUT)
+T_CONTACT, IMPACT, MIN_GAP, MIN_TTC, MIN_THW, MAX_DECEL, MAX_JERK, T_BRAKE, END_TIME, \
+    INTR_PREV, INTR_T, INTR_TTC, INTR_VREL = range(13)
+N_OUT = 13
+# entries of the settings array ``prm``
+P_DT, P_H, P_JERK, P_EHL, P_EHW, P_INTRUDE, P_TMAX, P_BRAKE, P_RANGE, P_HALF_LANE = range(10)
+N_PRM = 10
+
+
+def new_outcomes(n: int) -> FloatArray:
+    """The outcome array of n runs before the first step."""
+    out = np.full((n, N_OUT), np.nan)
+    out[:, IMPACT] = 0.0
+    out[:, MIN_GAP] = np.inf
+    out[:, MIN_TTC] = np.inf
+    out[:, MIN_THW] = np.inf
+    out[:, MAX_DECEL] = 0.0
+    out[:, MAX_JERK] = 0.0
+    out[:, INTR_PREV] = np.inf
+    return out
+
+
 @njit(cache=True)
-def observe(k: int, dt: float, delay: int, h: float, hist: FloatArray, x: FloatArray,
-            v: FloatArray, a: FloatArray, active: NDArray[np.bool_], cx: FloatArray,
-            cy: FloatArray, cpsi: FloatArray, cv: FloatArray, ca: FloatArray,
-            c_length: FloatArray, c_width: FloatArray, ehl: float, half_lane: float,
-            sensor_range: float, o_t: FloatArray, o_v: FloatArray, o_a: FloatArray,
-            present: NDArray[np.bool_], dx: FloatArray, gap: FloatArray, dy: FloatArray,
-            ov: FloatArray, vx: FloatArray, vy: FloatArray, oa: FloatArray, psi: FloatArray,
-            length: FloatArray, width: FloatArray, lane: NDArray[np.int8],
+def _clearance_cs(x: float, y: float, c: float, sn: float, xe: float, ehl: float,
+                  ehw: float, chl: float, chw: float) -> tuple[bool, float]:  # pragma: no cover
+    """:func:`clearance` with the heading's cos and sin given."""
+    if _ck.lateral_clear(y, c, sn, chl, chw, ehw):
+        return False, np.nan
+    meets, lo, hi = _ck.band_range(x, y, c, sn, chl, chw, ehw)
+    if not (meets and hi > xe - ehl):
+        return False, np.nan
+    return True, lo - (xe + ehl)
+
+
+@njit(cache=True)
+def _intrusion_ttc(gl: float, clos: float) -> float:  # pragma: no cover - jit
+    if clos > 0.0:
+        return gl / clos if gl > 0.0 else 0.0
+    return np.inf
+
+
+@njit(cache=True)
+def start_one(i: int, x: float, v: float, px: float, py: float, c: float, sn: float,
+              pv: float, chl: float, chw: float, prm: FloatArray, out: FloatArray,
+              code: NDArray[np.int8], collided: NDArray[np.bool_]) -> bool:  # pragma: no cover
+    """Run i at time 0 (cutter at px, py, heading cos c / sin sn, speed pv): the
+    regulation's intrusion state and a contact already there. True: the run is over."""
+    ehl = prm[P_EHL]
+    inner = abs(py) - (chl * abs(sn) + chw * abs(c))
+    out[i, INTR_PREV] = inner
+    if inner <= prm[P_INTRUDE]:
+        clos = v - pv * c
+        out[i, INTR_T] = 0.0
+        out[i, INTR_VREL] = clos
+        out[i, INTR_TTC] = _intrusion_ttc(px - x - ehl - chl, clos)
+    near, g = _clearance_cs(px, py, c, sn, x, ehl, prm[P_EHW], chl, chw)
+    if near and g < 0.0:
+        collided[i] = True
+        out[i, T_CONTACT] = 0.0
+        out[i, IMPACT] = math.hypot(v - pv * c, pv * sn)
+        out[i, MIN_GAP] = 0.0
+        out[i, END_TIME] = 0.0
+        code[i] = CONTACT
+        return True
+    return False
+
+
+@njit(cache=True)
+def step_one(i: int, k: int, uo: float, ui: float, d: float, x: FloatArray, v: FloatArray,
+             a: FloatArray, cx: FloatArray, cy: FloatArray, cpsi: FloatArray, cv: FloatArray,
+             ca: FloatArray, chl: float, chw: float, t_p: float, t_end: float,
+             prm: FloatArray, out: FloatArray, code: NDArray[np.int8],
+             collided: NDArray[np.bool_]
+             ) -> tuple[bool, float, float, float, float, float, float, float
+                        ]:  # pragma: no cover - jit
+    """Advance run i from step k to k + 1 (command ``uo`` until ``d`` s into the step, then
+    ``ui``): contact, margins, the regulation's moment and the end of the run.
+
+    Returns (the run is over, and the cutter's x, y, heading, speed, acceleration, cos and
+    sin of the heading at the step's end)."""
+    dt = prm[P_DT]
+    h = prm[P_H]
+    j = prm[P_JERK]
+    ehl = prm[P_EHL]
+    ehw = prm[P_EHW]
+    t0 = k * dt
+    t1 = (k + 1) * dt  # as the next step's observation time
+    if math.isnan(out[i, T_BRAKE]):
+        if uo <= -prm[P_BRAKE]:
+            out[i, T_BRAKE] = t0
+        elif ui <= -prm[P_BRAKE]:
+            out[i, T_BRAKE] = t0 + d
+    xi = x[i]
+    vi = v[i]
+    ai = a[i]
+    x1, v1, a1, stopped = ego_two(xi, vi, ai, uo, ui, d, j, dt)
+    px, py, pp, pv, pa = cutter_at(cx, cy, cpsi, cv, ca, i, h, t1)
+    c = math.cos(pp)
+    sn = math.sin(pp)
+    near, g = _clearance_cs(px, py, c, sn, x1, ehl, ehw, chl, chw)
+    if near and g < 0.0:
+        lo = 0.0
+        hi = dt
+        for _ in range(_BISECT):
+            mid = 0.5 * (lo + hi)
+            if _overlap_at(mid, t0, xi, vi, ai, uo, ui, d, j, cx, cy, cpsi, cv, ca, i, h,
+                           ehl, ehw, chl, chw):
+                hi = mid
+            else:
+                lo = mid
+        xc, vc_e, ac, _ = ego_two(xi, vi, ai, uo, ui, d, j, hi)
+        _, _, qp, qv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t0 + hi)
+        collided[i] = True
+        out[i, T_CONTACT] = t0 + hi
+        out[i, IMPACT] = math.hypot(vc_e - qv * math.cos(qp), qv * math.sin(qp))
+        out[i, MIN_GAP] = 0.0
+        out[i, MAX_DECEL] = max(out[i, MAX_DECEL], -ac)
+        x[i] = xc
+        v[i] = vc_e
+        a[i] = ac
+        out[i, END_TIME] = t0 + hi
+        code[i] = CONTACT
+        return True, px, py, pp, pv, pa, c, sn
+    if not stopped:
+        out[i, MAX_JERK] = max(out[i, MAX_JERK], abs(a1 - ai) / dt)
+    out[i, MAX_DECEL] = max(out[i, MAX_DECEL], -a1)
+    x[i] = x1
+    v[i] = v1
+    a[i] = a1
+    clos = v1 - pv * c
+    # the regulation's moment: the cutter 0.3 m into the ego lane (interpolated)
+    inner = abs(py) - (chl * abs(sn) + chw * abs(c))
+    intrude_at = prm[P_INTRUDE]
+    if inner <= intrude_at and math.isnan(out[i, INTR_T]):
+        prev = out[i, INTR_PREV]
+        f = (prev - intrude_at) / (prev - inner) if prev > inner else 1.0
+        out[i, INTR_T] = t0 + f * dt
+        out[i, INTR_VREL] = clos
+        out[i, INTR_TTC] = _intrusion_ttc(px - x1 - ehl - chl, clos)
+    out[i, INTR_PREV] = inner
+    if near and (math.isnan(t_p) or t1 >= t_p):
+        if g < out[i, MIN_GAP]:
+            out[i, MIN_GAP] = g
+        if clos > 0.0 and g / clos < out[i, MIN_TTC]:
+            out[i, MIN_TTC] = g / clos
+        if v1 > 0.0 and g / v1 < out[i, MIN_THW]:
+            out[i, MIN_THW] = g / v1
+    # the end: the conflict resolved, or the time limit
+    end = RUNNING
+    if t1 >= t_end - 1e-9:
+        straight = abs(sn) < 1e-9
+        behind = px + chl < x1 - ehl
+        if behind and pv * c <= v1:
+            end = LEFT_BEHIND
+        elif not near and straight and not behind:
+            meets, _, _ = _ck.band_range(px, py, c, sn, chl, chw, ehw)
+            if not meets:
+                end = NO_CONFLICT
+        elif near and straight and clos <= 0.0 and a1 <= SETTLE_ACCEL:
+            end = SETTLED
+    if end == RUNNING and t1 >= prm[P_TMAX] - 1e-9:
+        end = TIME_LIMIT
+    if end != RUNNING:
+        code[i] = end
+        out[i, END_TIME] = t1
+        return True, px, py, pp, pv, pa, c, sn
+    return False, px, py, pp, pv, pa, c, sn
+
+
+@njit(cache=True)
+def observe(k: int, delay: int, hist: FloatArray, x: FloatArray, v: FloatArray,
+            a: FloatArray, active: NDArray[np.bool_], cx: FloatArray, cy: FloatArray,
+            cpsi: FloatArray, cv: FloatArray, ca: FloatArray, c_length: FloatArray,
+            c_width: FloatArray, prm: FloatArray, o_t: FloatArray, o_v: FloatArray,
+            o_a: FloatArray, present: NDArray[np.bool_], dx: FloatArray, gap: FloatArray,
+            dy: FloatArray, ov: FloatArray, vx: FloatArray, vy: FloatArray, oa: FloatArray,
+            psi: FloatArray, length: FloatArray, width: FloatArray, lane: NDArray[np.int8],
             dy0: FloatArray) -> None:  # pragma: no cover - jit
     """Fill the observation arrays at step k (objects as of ``delay`` steps before)."""
     n = x.shape[0]
     m = hist.shape[1]
+    dt = prm[P_DT]
+    ehl = prm[P_EHL]
     kd = k - delay
     if kd < 0:
         kd = 0
@@ -177,7 +362,7 @@ def observe(k: int, dt: float, delay: int, h: float, hist: FloatArray, x: FloatA
         o_v[i] = v[i]
         o_a[i] = a[i]
         xe = hist[i, kd % m] if delay > 0 else x[i]
-        px, py, pp, pv, pa = cutter_at(cx, cy, cpsi, cv, ca, i, h, t_obs)
+        px, py, pp, pv, pa = cutter_at(cx, cy, cpsi, cv, ca, i, prm[P_H], t_obs)
         d = px - xe
         dx[i, 0] = d
         gap[i, 0] = d - ehl - 0.5 * c_length[i]
@@ -189,28 +374,21 @@ def observe(k: int, dt: float, delay: int, h: float, hist: FloatArray, x: FloatA
         psi[i, 0] = pp
         length[i, 0] = c_length[i]
         width[i, 0] = c_width[i]
-        lane[i, 0] = 0 if abs(py) <= half_lane else (1 if py > 0.0 else -1)
+        lane[i, 0] = 0 if abs(py) <= prm[P_HALF_LANE] else (1 if py > 0.0 else -1)
         dy0[i, 0] = cy[i, 0]
-        present[i, 0] = active[i] and math.hypot(d, py) <= sensor_range
+        present[i, 0] = active[i] and d * d + py * py <= prm[P_RANGE] * prm[P_RANGE]
 
 
 @njit(cache=True)
-def advance(k: int, dt: float, h: float, j: float, u: FloatArray, x: FloatArray,
+def advance(k: int, u_old: FloatArray, u: FloatArray, onset: FloatArray, x: FloatArray,
             v: FloatArray, a: FloatArray, active: NDArray[np.bool_], hist: FloatArray,
             cx: FloatArray, cy: FloatArray, cpsi: FloatArray, cv: FloatArray, ca: FloatArray,
-            c_length: FloatArray, c_width: FloatArray, ehl: float, ehw: float,
-            t_p: FloatArray, t_end: FloatArray, intrude_at: float, t_max: float,
-            brake_threshold: float, collided: NDArray[np.bool_], t_contact: FloatArray,
-            impact: FloatArray, min_gap: FloatArray, min_ttc: FloatArray,
-            min_thw: FloatArray, max_decel: FloatArray, max_jerk: FloatArray,
-            t_brake: FloatArray, end_time: FloatArray, end_code: NDArray[np.int8],
-            intr_prev: FloatArray, intr_t: FloatArray, intr_ttc: FloatArray,
-            intr_vrel: FloatArray) -> int:  # pragma: no cover - jit
-    """Advance every active run from step k to k + 1 under the commands u (clipped by the
-    caller); contact, margins and the end of the run. Returns the number still active."""
+            c_length: FloatArray, c_width: FloatArray, t_p: FloatArray, t_end: FloatArray,
+            prm: FloatArray, out: FloatArray, code: NDArray[np.int8],
+            collided: NDArray[np.bool_]) -> int:  # pragma: no cover - jit
+    """Advance every active run from step k to k + 1 (:func:`step_one`). Returns the
+    number still active."""
     n = x.shape[0]
-    t0 = k * dt
-    t1 = t0 + dt
     m = hist.shape[1]
     left = 0
     for i in range(n):
@@ -219,102 +397,95 @@ def advance(k: int, dt: float, h: float, j: float, u: FloatArray, x: FloatArray,
         chl = 0.5 * c_length[i]
         chw = 0.5 * c_width[i]
         if k == 0:
-            px, py, pp, pv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, 0.0)
-            near, g = clearance(px, py, pp, x[i], ehl, ehw, chl, chw)
-            inner = abs(py) - (chl * abs(math.sin(pp)) + chw * abs(math.cos(pp)))
-            intr_prev[i] = inner
-            if inner <= intrude_at:
-                intr_t[i] = 0.0
-                clos = v[i] - pv * math.cos(pp)
-                gl = px - x[i] - ehl - chl
-                intr_vrel[i] = clos
-                intr_ttc[i] = gl / clos if clos > 0.0 and gl > 0.0 else (
-                    0.0 if gl <= 0.0 and clos > 0.0 else np.inf)
-            if near and g < 0.0:
-                collided[i] = True
-                t_contact[i] = 0.0
-                impact[i] = math.hypot(v[i] - pv * math.cos(pp), pv * math.sin(pp))
-                min_gap[i] = 0.0
-                end_time[i] = 0.0
-                end_code[i] = CONTACT
+            px, py, pp, pv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, prm[P_H], 0.0)
+            if start_one(i, x[i], v[i], px, py, math.cos(pp), math.sin(pp), pv, chl, chw,
+                         prm, out, code, collided):
                 active[i] = False
                 continue
-        ui = u[i]
-        if ui <= -brake_threshold and math.isnan(t_brake[i]):
-            t_brake[i] = t0
-        x1, v1, a1, stopped = ego_advance(x[i], v[i], a[i], ui, j, dt)
-        px, py, pp, pv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t1)
-        near, g = clearance(px, py, pp, x1, ehl, ehw, chl, chw)
-        if near and g < 0.0:
-            lo = 0.0
-            hi = dt
-            for _ in range(_BISECT):
-                mid = 0.5 * (lo + hi)
-                if _overlap_at(mid, t0, x[i], v[i], a[i], ui, j, cx, cy, cpsi, cv, ca, i, h,
-                               ehl, ehw, chl, chw):
-                    hi = mid
-                else:
-                    lo = mid
-            xc, vc_e, ac, _ = ego_advance(x[i], v[i], a[i], ui, j, hi)
-            _, _, qp, qv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t0 + hi)
-            collided[i] = True
-            t_contact[i] = t0 + hi
-            impact[i] = math.hypot(vc_e - qv * math.cos(qp), qv * math.sin(qp))
-            min_gap[i] = 0.0
-            max_decel[i] = max(max_decel[i], -ac)
-            x[i] = xc
-            v[i] = vc_e
-            a[i] = ac
-            end_time[i] = t0 + hi
-            end_code[i] = CONTACT
-            active[i] = False
-            continue
-        if not stopped:
-            max_jerk[i] = max(max_jerk[i], abs(a1 - a[i]) / dt)
-        max_decel[i] = max(max_decel[i], -a1)
-        x[i] = x1
-        v[i] = v1
-        a[i] = a1
-        hist[i, (k + 1) % m] = x1
-        clos = v1 - pv * math.cos(pp)
-        # the regulation's moment: the cutter 0.3 m into the ego lane (interpolated)
-        inner = abs(py) - (chl * abs(math.sin(pp)) + chw * abs(math.cos(pp)))
-        if math.isnan(intr_t[i]) and inner <= intrude_at:
-            prev = intr_prev[i]
-            f = (prev - intrude_at) / (prev - inner) if prev > inner else 1.0
-            intr_t[i] = t0 + f * dt
-            gl = px - x1 - ehl - chl
-            intr_vrel[i] = clos
-            intr_ttc[i] = gl / clos if clos > 0.0 and gl > 0.0 else (
-                0.0 if gl <= 0.0 and clos > 0.0 else np.inf)
-        intr_prev[i] = inner
-        if near and (math.isnan(t_p[i]) or t1 >= t_p[i]):
-            if g < min_gap[i]:
-                min_gap[i] = g
-            if clos > 0.0 and g / clos < min_ttc[i]:
-                min_ttc[i] = g / clos
-            if v1 > 0.0 and g / v1 < min_thw[i]:
-                min_thw[i] = g / v1
-        # the end: the conflict resolved, or the time limit
-        code = RUNNING
-        if t1 >= t_end[i] - 1e-9:
-            straight = abs(math.sin(pp)) < 1e-9
-            behind = px + chl < x1 - ehl
-            if behind and pv * math.cos(pp) <= v1:
-                code = LEFT_BEHIND
-            elif not near and straight and not behind:
-                meets, _, _ = _ck.band_range(px, py, math.cos(pp), math.sin(pp), chl, chw,
-                                             ehw)
-                if not meets:
-                    code = NO_CONFLICT
-            elif near and straight and clos <= 0.0 and a1 <= SETTLE_ACCEL:
-                code = SETTLED
-        if code == RUNNING and t1 >= t_max - 1e-9:
-            code = TIME_LIMIT
-        if code != RUNNING:
-            end_code[i] = code
-            end_time[i] = t1
+        over, _, _, _, _, _, _, _ = step_one(i, k, u_old[i], u[i], onset[i], x, v, a, cx,
+                                             cy, cpsi, cv, ca, chl, chw, t_p[i], t_end[i],
+                                             prm, out, code, collided)
+        hist[i, (k + 1) % m] = x[i]
+        if over:
             active[i] = False
         else:
             left += 1
     return left
+
+
+# --------------------------------------------------------------------------- built-ins
+# compiled policies of the built-in SUTs (the same formulas as riskcore.sut.suts)
+K_NONE, K_IDM, K_ACC, K_ACC_AEB = range(4)
+
+
+@njit(cache=True)
+def _policy(kind: int, q: FloatArray, t: float, ve: float, has: bool, gap: float,
+            vl: float, v_des: float, firing: bool) -> tuple[float, bool]:  # pragma: no cover
+    """Command of a compiled built-in (``q``: its parameters, see suts.py) and the AEB's
+    firing state."""
+    if kind == K_IDM:  # q: a, b, T, s0, delta
+        r = ve / v_des
+        if q[4] == 4.0:  # the usual exponent: exactly as suts.IDM computes it
+            r2 = r * r
+            free = 1.0 - r2 * r2
+        else:
+            free = 1.0 - r ** q[4]
+        if not has:
+            return q[0] * free, firing
+        s = max(gap, 0.01)
+        s_star = q[3] + max(0.0, ve * q[2] + ve * (ve - vl) / (2.0 * math.sqrt(q[0] * q[1])))
+        return q[0] * (free - (s_star / s) ** 2), firing
+    if kind in (K_ACC, K_ACC_AEB):
+        # q: k0, k1, k2, time_gap, s0, a_min, a_max, range, ttc, a_aeb
+        cruise = q[0] * (v_des - ve)
+        cmd = cruise
+        if has and gap <= q[7]:
+            cmd = min(cruise, q[1] * (gap - q[4] - q[3] * ve) + q[2] * (vl - ve))
+        cmd = min(max(cmd, q[5]), q[6])
+        if kind == K_ACC_AEB:
+            clos = ve - vl
+            if has and clos > 0.0 and gap / clos < q[8]:
+                firing = True
+            if has and not clos > 0.0:
+                firing = False
+            if firing:
+                return -q[9], firing
+        return cmd, firing
+    return 0.0, firing
+
+
+@njit(cache=True)
+def run_builtin(kind: int, q: FloatArray, v_des: FloatArray, upd: int, n_steps: int,
+                a_lo: float, a_hi: float, x: FloatArray, v: FloatArray, a: FloatArray,
+                cx: FloatArray, cy: FloatArray, cpsi: FloatArray, cv: FloatArray,
+                ca: FloatArray, c_length: FloatArray, c_width: FloatArray, t_p: FloatArray,
+                t_end: FloatArray, prm: FloatArray, out: FloatArray, code: NDArray[np.int8],
+                collided: NDArray[np.bool_]) -> None:  # pragma: no cover - jit
+    """Every run of a compiled built-in SUT to its end, run after run (no perception
+    delay): the same steps as :func:`observe`, the SUT's act and :func:`advance`."""
+    n = x.shape[0]
+    dt = prm[P_DT]
+    ehl = prm[P_EHL]
+    for i in range(n):
+        chl = 0.5 * c_length[i]
+        chw = 0.5 * c_width[i]
+        px, py, pp, pv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, prm[P_H], 0.0)
+        c = math.cos(pp)
+        if start_one(i, x[i], v[i], px, py, c, math.sin(pp), pv, chl, chw, prm, out, code,
+                     collided):
+            continue
+        firing = False
+        u = 0.0
+        for k in range(n_steps):
+            if k % upd == 0:
+                d = px - x[i]
+                has = (abs(py) <= prm[P_HALF_LANE] and d > 0.0
+                       and d * d + py * py <= prm[P_RANGE] * prm[P_RANGE])
+                cmd, firing = _policy(kind, q, k * dt, v[i], has, d - ehl - chl, pv * c,
+                                      v_des[i], firing)
+                u = min(max(cmd, a_lo), a_hi)
+            over, px, py, pp, pv, _, c, _ = step_one(i, k, u, u, 0.0, x, v, a, cx, cy, cpsi,
+                                                     cv, ca, chl, chw, t_p[i], t_end[i],
+                                                     prm, out, code, collided)
+            if over:
+                break

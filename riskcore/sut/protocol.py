@@ -25,6 +25,11 @@ class SystemUnderTest(Protocol):
     for bit. ``act(obs)`` returns the ego's longitudinal acceleration command for every
     run, shape (N,), m/s² (the simulator clips it to its limits and applies it until the
     next call). Lateral control is not supported: the ego keeps its lane.
+
+    Optional: after ``act`` a SUT may set ``command_onset`` (N,) to a time within the
+    coming step (``obs.t <= onset < obs.t + obs.dt``) from which the new command applies
+    (the previous one before; NaN: from the step's start). The reference drivers use it
+    to brake at their exact, interpolated moment, as the criticality record does.
     """
 
     name: str

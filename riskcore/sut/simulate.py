@@ -52,9 +52,66 @@ def _seeds(seeds: ArrayLike | int | None, n: int) -> NDArray[np.uint64]:
     return np.asarray(arr, dtype=np.uint64)
 
 
+def _drive(sut: SystemUnderTest, batch: CutInBatch, s: SimSettings, n_steps: int,
+           x: NDArray[np.float64], v: NDArray[np.float64], a: NDArray[np.float64],
+           active: NDArray[np.bool_], hist: NDArray[np.float64], prm: NDArray[np.float64],
+           out: NDArray[np.float64], end_code: NDArray[np.int8], collided: NDArray[np.bool_],
+           cutter: tuple[NDArray[np.float64], ...],
+           keep: list[NDArray[np.float64]] | None) -> None:
+    """The step loop of any SUT: observe, act, advance (module docstring)."""
+    n = batch.n
+    dt = s.dt
+    upd = s.update_steps
+    t_end = batch.t_end
+    assert t_end is not None
+    u = np.zeros(n)
+    u_old = np.zeros(n)
+    onset = np.zeros(n)
+    name = str(getattr(sut, "name", "sut"))
+    for k in range(n_steps):
+        if k % upd == 0:
+            # fresh arrays every time: a SUT may keep the previous observation
+            ego = (np.empty(n), np.empty(n), np.empty(n))
+            obj = [np.empty((n, 1)) for _ in range(11)]
+            present = np.empty((n, 1), dtype=np.bool_)
+            lane = np.empty((n, 1), dtype=np.int8)
+            _k.observe(k, s.delay_steps, hist, x, v, a, active, batch.cx, batch.cy,
+                       batch.cpsi, batch.cv, batch.ca, batch.c_length, batch.c_width, prm,
+                       ego[0], ego[1], ego[2], present, obj[0], obj[1], obj[2], obj[3],
+                       obj[4], obj[5], obj[6], obj[7], obj[8], obj[9], lane, obj[10])
+            obs = Observations(ego[0], ego[1], ego[2], batch.ego_length, batch.ego_width,
+                               batch.lane_width, present, obj[0], obj[1], obj[2], obj[3],
+                               obj[4], obj[5], obj[6], obj[7], obj[8], obj[9], lane,
+                               obj[10], upd * dt)
+            cmd = np.asarray(sut.act(obs), dtype=np.float64)
+            if cmd.shape != (n,):
+                raise SutError(f"{name}.act: expected shape ({n},), got {cmd.shape}")
+            if not np.all(np.isfinite(cmd[active])):
+                raise SutError(f"{name}.act: returned a non-finite command")
+            u_old[:] = u
+            np.clip(cmd, -s.a_brake_max, s.a_accel_max, out=u)
+            when = getattr(sut, "command_onset", None)
+            if when is None:
+                onset[:] = 0.0
+            else:
+                d = np.asarray(when, dtype=np.float64) - k * dt
+                onset[:] = np.where(np.isnan(d), 0.0, np.clip(d, 0.0, dt))
+        elif k % upd == 1:
+            u_old[:] = u
+            onset[:] = 0.0
+        if keep is not None:
+            keep.append(np.stack([x, v, a]).copy())
+        left = _k.advance(k, u_old, u, onset, x, v, a, active, hist, batch.cx, batch.cy,
+                          batch.cpsi, batch.cv, batch.ca, batch.c_length, batch.c_width,
+                          batch.t_p, t_end, prm, out, end_code, collided)
+        if left == 0:
+            break
+
+
 def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
              settings: SimSettings | None = None, profiles: bool = False,
-             risk: bool = False, must_avoid_variant: str = "6") -> RunBatch:
+             risk: bool = False, must_avoid_variant: str = "6",
+             fast_path: bool = True) -> RunBatch:
     """Drive the ego of every run of ``batch`` with ``sut`` (module docstring).
 
     Parameters
@@ -74,6 +131,10 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
         Monte-Carlo scene per step of the batch's grid and run); NaN when False.
     must_avoid_variant : "6" or "2.4"
         The regulation's deceleration for ``must_avoid``.
+    fast_path : bool
+        Built-in SUTs with a compiled policy (none, idm, acc, acc_aeb) run through one
+        compiled loop, run after run, when there is no perception delay and no profile is
+        asked for; False: through the step loop every SUT takes (same results, slower).
 
     Returns
     -------
@@ -88,73 +149,51 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
     seed_arr = _seeds(seeds, n)
     sut.reset(n, seed_arr)
     dt = s.dt
-    h = batch.dt
     n_steps = math.ceil(s.t_max / dt - 1e-9)
     x = np.zeros(n)
     v = batch.ego_v0.copy()
     a = np.zeros(n)
     active = np.ones(n, dtype=np.bool_)
     hist = np.zeros((n, s.delay_steps + 1))
-    collided = np.zeros(n, dtype=np.bool_)
-    t_contact = np.full(n, np.nan)
-    impact = np.zeros(n)
-    min_gap = np.full(n, np.inf)
-    min_ttc = np.full(n, np.inf)
-    min_thw = np.full(n, np.inf)
-    max_decel = np.zeros(n)
-    max_jerk = np.zeros(n)
-    t_brake = np.full(n, np.nan)
-    end_time = np.full(n, np.nan)
+    out = _k.new_outcomes(n)
     end_code = np.zeros(n, dtype=np.int8)
-    intr_prev = np.full(n, np.inf)
-    intr_t = np.full(n, np.nan)
-    intr_ttc = np.full(n, np.nan)
-    intr_vrel = np.full(n, np.nan)
-    ehl = 0.5 * batch.ego_length
-    ehw = 0.5 * batch.ego_width
-    half_lane = 0.5 * batch.lane_width
-    intrude_at = half_lane - INTRUSION_DEPTH
+    collided = np.zeros(n, dtype=np.bool_)
+    prm = np.empty(_k.N_PRM)
+    prm[_k.P_DT] = dt
+    prm[_k.P_H] = batch.dt
+    prm[_k.P_JERK] = s.jerk_max
+    prm[_k.P_EHL] = 0.5 * batch.ego_length
+    prm[_k.P_EHW] = 0.5 * batch.ego_width
+    prm[_k.P_INTRUDE] = 0.5 * batch.lane_width - INTRUSION_DEPTH
+    prm[_k.P_TMAX] = s.t_max
+    prm[_k.P_BRAKE] = s.brake_threshold
+    prm[_k.P_RANGE] = s.sensor_range
+    prm[_k.P_HALF_LANE] = 0.5 * batch.lane_width
     assert batch.t_end is not None
-    obs_arrays = (np.empty(n), np.empty(n), np.empty(n))
-    obj = [np.empty((n, 1)) for _ in range(11)]
-    present = np.zeros((n, 1), dtype=np.bool_)
-    lane = np.zeros((n, 1), dtype=np.int8)
-    u = np.zeros(n)
+    cutter = (batch.cx, batch.cy, batch.cpsi, batch.cv, batch.ca, batch.c_length,
+              batch.c_width)
+    # built-ins run through a compiled loop (the same steps; tests prove equality)
+    compiled = getattr(sut, "compiled", None) if fast_path else None
+    fast = (compiled(batch.ego_v0) if callable(compiled) and s.delay_steps == 0
+            and not profiles else None)
     upd = s.update_steps
-    keep: list[NDArray[np.float64]] = []
-    for k in range(n_steps):
-        if k % upd == 0:
-            _k.observe(k, dt, s.delay_steps, h, hist, x, v, a, active, batch.cx, batch.cy,
-                       batch.cpsi, batch.cv, batch.ca, batch.c_length, batch.c_width, ehl,
-                       half_lane, s.sensor_range, *obs_arrays, present, obj[0], obj[1],
-                       obj[2], obj[3], obj[4], obj[5], obj[6], obj[7], obj[8], obj[9], lane,
-                       obj[10])
-            obs = Observations(obs_arrays[0], obs_arrays[1], obs_arrays[2],
-                               batch.ego_length, batch.ego_width, batch.lane_width, present,
-                               obj[0], obj[1], obj[2], obj[3], obj[4], obj[5], obj[6],
-                               obj[7], obj[8], obj[9], lane, obj[10])
-            cmd = np.asarray(sut.act(obs), dtype=np.float64)
-            if cmd.shape != (n,):
-                raise SutError(f"{getattr(sut, 'name', 'sut')}.act: expected shape ({n},), "
-                               f"got {cmd.shape}")
-            if not np.all(np.isfinite(cmd[active])):
-                raise SutError(f"{getattr(sut, 'name', 'sut')}.act: returned a non-finite "
-                               "command")
-            np.clip(cmd, -s.a_brake_max, s.a_accel_max, out=u)
-        if profiles:
-            keep.append(np.stack([x, v, a]).copy())
-        left = _k.advance(k, dt, h, s.jerk_max, u, x, v, a, active, hist, batch.cx,
-                          batch.cy, batch.cpsi, batch.cv, batch.ca, batch.c_length,
-                          batch.c_width, ehl, ehw, batch.t_p, batch.t_end, intrude_at,
-                          s.t_max, s.brake_threshold, collided, t_contact, impact, min_gap,
-                          min_ttc, min_thw, max_decel, max_jerk, t_brake, end_time,
-                          end_code, intr_prev, intr_t, intr_ttc, intr_vrel)
-        if left == 0:
-            break
+    keep: list[NDArray[np.float64]] | None = [] if profiles else None
+    if fast is not None:
+        kind, q, v_des = fast
+        _k.run_builtin(kind, q, v_des, upd, n_steps, -s.a_brake_max, s.a_accel_max, x, v, a,
+                       batch.cx, batch.cy, batch.cpsi, batch.cv, batch.ca, batch.c_length,
+                       batch.c_width, batch.t_p, batch.t_end, prm, out, end_code, collided)
+    else:
+        _drive(sut, batch, s, n_steps, x, v, a, active, hist, prm, out, end_code, collided,
+               cutter, keep)
     names = np.asarray(_k.END_NAMES)
+    intr_ttc = out[:, _k.INTR_TTC]
+    intr_vrel = out[:, _k.INTR_VREL]
+    end_time = out[:, _k.END_TIME].copy()
     m_av = must_avoid(intr_ttc, intr_vrel, must_avoid_variant)
     prof = None
     if profiles:
+        assert keep is not None
         keep.append(np.stack([x, v, a]).copy())
         arr = np.stack(keep, axis=2)  # (3, N, K)
         tk = np.arange(arr.shape[2]) * dt
@@ -163,12 +202,15 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
             arr[c][after] = np.nan
         prof = {"t": tk, "x": arr[0], "v": arr[1], "a": arr[2]}
     nan = np.full(n, np.nan)
+    col = {name: out[:, c].copy() for name, c in (
+        ("impact_speed", _k.IMPACT), ("t_contact", _k.T_CONTACT), ("min_ttc", _k.MIN_TTC),
+        ("min_thw", _k.MIN_THW), ("min_gap", _k.MIN_GAP), ("max_decel", _k.MAX_DECEL),
+        ("max_jerk", _k.MAX_JERK))}
     runs = RunBatch(
-        collided=collided, impact_speed=impact, t_contact=t_contact, min_ttc=min_ttc,
-        min_thw=min_thw, min_gap=min_gap, max_decel=max_decel, max_jerk=max_jerk,
-        t_brake_rel_tp=t_brake - batch.t_p, r_dep_peak=nan.copy(), r_ind_peak=nan.copy(),
+        collided=collided, **col, t_brake_rel_tp=out[:, _k.T_BRAKE] - batch.t_p,
+        r_dep_peak=nan.copy(), r_ind_peak=nan.copy(),
         r_dep_time_above=nan.copy(), must_avoid=m_av, violation=m_av & collided,
-        ttc_intrusion=intr_ttc, v_rel_intrusion=intr_vrel, end_time=end_time,
+        ttc_intrusion=intr_ttc.copy(), v_rel_intrusion=intr_vrel.copy(), end_time=end_time,
         end=names[end_code], sut=str(getattr(sut, "name", type(sut).__name__)),
         profiles=prof)
     if risk:

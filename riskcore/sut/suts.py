@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riskcore.criticality.record import CriticalitySettings
+from riskcore.sut import kernels as _k
 from riskcore.sut.batch import Observations
 from riskcore.sut.errors import SutError
 from riskcore.sut.protocol import SystemUnderTest
@@ -40,15 +41,29 @@ class _Base:
     def __init__(self, **params: float) -> None:
         self.params = params
         self.n = 0
+        self.command_onset: FloatArray | None = None
 
     def reset(self, n: int, seeds: NDArray[np.uint64]) -> None:
         self.n = n
+
+    def _brake_from(self, t: FloatArray, t_b: FloatArray, obs: Observations) -> FloatArray:
+        """Full braking from the moment t_b (NaN: never): the command of the step that
+        contains t_b, with ``command_onset`` = t_b so that the simulator starts it there
+        (the criticality record's drivers brake at their exact, interpolated moment)."""
+        step = obs.dt if obs.dt > 0 else 0.0
+        on = t_b < t + step - 1e-12
+        self.command_onset = np.where(on & (t_b > t), t_b, np.nan)
+        return np.where(on, -self.params["decel_max"], 0.0)
 
 
 class NoReaction(_Base):
     """The ego keeps its speed (command 0)."""
 
     name = "none"
+
+    def compiled(self, ego_v0: FloatArray) -> tuple[int, FloatArray, FloatArray]:
+        """The simulator's compiled fast path (kernels.run_builtin)."""
+        return _k.K_NONE, np.zeros(1), np.zeros(ego_v0.shape[0])
 
     def act(self, obs: Observations) -> FloatArray:
         return np.zeros(obs.t.shape[0])
@@ -63,6 +78,15 @@ class IDM(_Base):
         super().reset(n, seeds)
         self.v0: FloatArray | None = None
 
+    def compiled(self, ego_v0: FloatArray) -> tuple[int, FloatArray, FloatArray]:
+        """The simulator's compiled fast path (kernels.run_builtin): (kind, parameters,
+        desired speeds) for runs starting at ``ego_v0``."""
+        p = self.params
+        v0 = p.get("v0", math.nan)
+        v_des = (np.maximum(ego_v0, 0.1) if math.isnan(v0)
+                 else np.full(ego_v0.shape[0], float(v0)))
+        return _k.K_IDM, np.array([p["a"], p["b"], p["T"], p["s0"], p["delta"]]), v_des
+
     def act(self, obs: Observations) -> FloatArray:
         p = self.params
         v = obs.ego_v
@@ -72,7 +96,8 @@ class IDM(_Base):
                        else np.full(v.shape[0], float(v0)))
         has, gap, vl = _leader(obs)
         a_max, b, big_t, s0, delta = p["a"], p["b"], p["T"], p["s0"], p["delta"]
-        free = 1.0 - (v / self.v0) ** delta
+        r = v / self.v0
+        free = 1.0 - (r * r) ** 2 if delta == 4.0 else 1.0 - r ** delta
         s = np.maximum(gap, 0.01)
         s_star = s0 + np.maximum(0.0, v * big_t + v * (v - vl) / (2.0 * math.sqrt(a_max * b)))
         inter = np.where(has, (s_star / s) ** 2, 0.0)
@@ -83,10 +108,22 @@ class ACC(_Base):
     """Adaptive cruise control after Xiao, Wang, van Arem (2017), as in de Gelder et al."""
 
     name = "acc"
+    kind = _k.K_ACC
 
     def reset(self, n: int, seeds: NDArray[np.uint64]) -> None:
         super().reset(n, seeds)
         self.v_set: FloatArray | None = None
+
+    def compiled(self, ego_v0: FloatArray) -> tuple[int, FloatArray, FloatArray]:
+        """The simulator's compiled fast path (kernels.run_builtin): (kind, parameters,
+        set speeds) for runs starting at ``ego_v0``."""
+        p = self.params
+        vs = p.get("v_set", math.nan)
+        v_des = (ego_v0.copy() if math.isnan(vs)
+                 else np.full(ego_v0.shape[0], float(vs)))
+        q = np.array([p["k0"], p["k1"], p["k2"], p["time_gap"], p["s0"], p["a_min"],
+                      p["a_max"], p["range"], p.get("ttc", 0.0), p.get("a_aeb", 0.0)])
+        return self.kind, q, v_des
 
     def acc(self, obs: Observations) -> FloatArray:
         p = self.params
@@ -108,6 +145,7 @@ class ACCWithAEB(ACC):
     """ACC plus an automatic emergency brake firing on a TTC threshold."""
 
     name = "acc_aeb"
+    kind = _k.K_ACC_AEB
 
     def reset(self, n: int, seeds: NDArray[np.uint64]) -> None:
         super().reset(n, seeds)
@@ -160,7 +198,7 @@ class R157Careful(_Base):
         g = obs.gap[:, 0]
         clos = obs.ego_v - obs.vx[:, 0]
         ahead = obs.dx[:, 0] > 0.0
-        cur = (t, move, g, clos, obs.dx[:, 0])
+        cur = (t, move, g, clos, obs.dx[:, 0], obs.ego_v, obs.v[:, 0], obs.psi[:, 0])
         prev = self.prev if self.prev is not None else cur
         # perception, interpolated between the previous step and this one
         new = np.isnan(self.t_p) & (move >= wz)
@@ -172,14 +210,16 @@ class R157Careful(_Base):
             self.t_p[new] = _interp(prev[0], t, f)[new]
             # the state at t_p (linear between the steps) is the first one checked
             at_g = _interp(prev[2], g, f)
-            at_c = _interp(prev[3], clos, f)
+            # as the record: the speeds and the heading interpolated, then combined
+            at_c = (_interp(prev[5], obs.ego_v, f)
+                    - _interp(prev[6], obs.v[:, 0], f) * np.cos(_interp(prev[7], obs.psi[:, 0], f)))
             at_ahead = _interp(prev[4], obs.dx[:, 0], f) > 0.0
             crit = self._critical(at_ahead, at_g, at_c, ttc_c)
             fresh = new & crit
             self.t_r[fresh] = self.t_p[fresh]
             # where not critical at t_p: the margin at t_p is the previous point
             prev = (np.where(new, self.t_p, prev[0]), prev[1], np.where(new, at_g, prev[2]),
-                    np.where(new, at_c, prev[3]), prev[4])
+                    np.where(new, at_c, prev[3]), *prev[4:])
         look = ~np.isnan(self.t_p) & np.isnan(self.t_r) & (t > self.t_p)
         if look.any():
             crit = self._critical(ahead, g, clos, ttc_c)
@@ -192,8 +232,7 @@ class R157Careful(_Base):
                     t_root = prev[0] + (t - prev[0]) * f_prev / (f_prev - f_cur)
                 self.t_r[hit] = np.where(interp, t_root, t)[hit]
         self.prev = cur
-        t_b = self.t_r + p["reaction_time"]
-        return np.where(t >= t_b - 1e-9, -p["decel_max"], 0.0)
+        return self._brake_from(t, self.t_r + p["reaction_time"], obs)
 
     @staticmethod
     def _critical(ahead: BoolArray, g: FloatArray, clos: FloatArray,
@@ -267,8 +306,7 @@ class RSS(_Base):
                         lo = np.where(d, lo, mid)
                     self.t_trig[idx] = _interp(pv[0], cv[0], hi)
         self.prev = cur
-        t_b = self.t_trig + p["rho"]
-        return np.where(obs.t >= t_b - 1e-9, -p["decel_max"], 0.0)
+        return self._brake_from(obs.t, self.t_trig + p["rho"], obs)
 
 
 class _Sub:

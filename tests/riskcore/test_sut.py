@@ -247,3 +247,31 @@ def test_every_builtin_has_a_source_and_runs() -> None:
         assert spec.source and spec.summary
         r = simulate(spec.factory(), b, seeds=0)
         assert r.sut == name and len(r) == 1
+
+
+class _Hidden:
+    """A built-in without its compiled policy: the step loop every SUT takes."""
+
+    def __init__(self, name: str, **params: float) -> None:
+        self._sut = make_sut(name, **params)
+        self.name = name
+
+    def reset(self, n: int, seeds: np.ndarray) -> None:
+        self._sut.reset(n, seeds)
+
+    def act(self, obs: Observations) -> np.ndarray:
+        return self._sut.act(obs)
+
+
+@pytest.mark.parametrize("name", ["none", "idm", "acc", "acc_aeb"])
+def test_the_compiled_path_equals_the_step_loop(name: str) -> None:
+    from tests.riskcore.test_sut_reference import _ttc3_sample
+
+    b = CutInBatch.from_scenarios(_ttc3_sample(40, 3))
+    fast = simulate(make_sut(name), b, seeds=5)
+    slow = simulate(_Hidden(name), b, seeds=5)
+    assert _bytes(fast) == _bytes(slow)
+    for period in (0.05,):
+        s = SimSettings(update_period=period)
+        assert _bytes(simulate(make_sut(name), b, seeds=5, settings=s)) == _bytes(
+            simulate(_Hidden(name), b, seeds=5, settings=s))
