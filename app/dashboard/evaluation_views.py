@@ -57,8 +57,8 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
     failures_total, failures = service.page_runs(
         ctx, evaluation_id, service.RunFilter(flags=(("collided", True),)), 0, FAILURES,
         order_by="impact_speed", desc=True)
-    scatter: dict[str, Any] = {"run": [], "btn": [], "r_dep_peak": [], "collided": [],
-                               "vs_careful": [], "note": None}
+    scatter: dict[str, Any] = {"run": [], "btn": [], "r_dep_peak": [], "impact_speed": [],
+                               "collided": [], "vs_careful": [], "note": None}
     _, hits = service.page_runs(ctx, evaluation_id,
                                 service.RunFilter(flags=(("collided", True),)), 0,
                                 SCATTER_RUNS, order_by="run", desc=False)
@@ -74,12 +74,14 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
         btn = np.asarray(crit["btn"], dtype=float)
         scatter.update(run=[int(r["run"]) for r in shown], btn=btn.tolist(),
                        r_dep_peak=[r.get("r_dep_peak") for r in shown],
+                       impact_speed=[r.get("impact_speed") for r in shown],
                        collided=[bool(r.get("collided")) for r in shown],
                        vs_careful=[r.get("vs_careful") for r in shown])
         if all(v is None or (isinstance(v, float) and math.isnan(v))
                for v in scatter["r_dep_peak"]):
-            scatter["note"] = ("no r_dep: the runner did not compute the risk of the SUT's "
-                               "drive")
+            # the page then plots the impact speed against btn instead, and says why
+            scatter["note"] = ("r_dep of the SUT's drive not computed by the runner: impact "
+                               "speed shown instead")
     return {
         "evaluation": {k: st[k] for k in ("id", "status", "sut", "model", "seed",
                                           "constraints", "runs_done", "runs_planned",

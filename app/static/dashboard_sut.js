@@ -165,19 +165,24 @@
       return;
     }
     const pick = (hit) => s.run.map((_, i) => i).filter((i) => s.collided[i] === hit);
+    // without r_dep (the runner did not compute it) the impact speed stands in, said so
+    const y = s.note ? s.impact_speed : s.r_dep_peak;
+    const yName = s.note ? "impact speed [m/s]" : "peak r_dep of the SUT's drive";
     const trace = (idx, name, color) => ({
       type: "scatter", mode: "markers", name: name,
-      x: idx.map((i) => s.btn[i]), y: idx.map((i) => s.r_dep_peak[i]),
+      x: idx.map((i) => s.btn[i]), y: idx.map((i) => y[i]),
       customdata: idx.map((i) => s.run[i]),
       marker: { size: 7, color: color, opacity: 0.75, line: { width: 0.5, color: "#333" } },
-      hovertemplate: "run %{customdata}<br>btn %{x:.3f}<br>peak r_dep %{y:.3f}<extra></extra>",
+      hovertemplate: "run %{customdata}<br>btn %{x:.3f}<br>" + yName +
+        " %{y:.3f}<extra></extra>",
     });
     await S.draw(div, [trace(pick(false), "no collision", "#8a94a3"),
                        trace(pick(true), "collided", SUT)], {
-      title: { text: "SUT's peak r_dep against btn" + (s.note ? " (" + s.note + ")" : ""),
-               font: { size: 12 } },
+      title: { text: s.note ? "Impact speed against btn (" + s.note + ")"
+                            : "SUT's peak r_dep against btn", font: { size: 11 } },
       xaxis: { title: { text: "btn (braking needed ÷ available)" } },
-      yaxis: { title: { text: "peak r_dep of the SUT's drive" } },
+      yaxis: { title: { text: yName } },
+      legend: { orientation: "h", x: 0, y: -0.25, font: { size: 10 } },
     }, view.evaluation.id);
     div.on("plotly_click", (ev) => {
       const p = ev.points && ev.points[0];
