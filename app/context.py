@@ -22,6 +22,7 @@ from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import DatasetRow
 from app.errors import ServiceUnavailable
+from app.jobs.chunk import warm_worker
 from app.jobs.executors import ChunkExecutor, make_executor
 from app.jobs.runner import CatalogueRunner
 from app.schemas import DEFAULT_CONSTRAINTS
@@ -46,6 +47,8 @@ class ServiceContext:
     #: named caches of this context's users (dashboard views, status statistics)
     _caches: dict[str, ViewCache] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
+    #: the start-up warm-up (``warm_start``) while it runs; /health says "warming" meanwhile
+    _warm_thread: threading.Thread | None = None
 
     @classmethod
     def open(cls, settings: Settings) -> ServiceContext:
@@ -106,23 +109,39 @@ class ServiceContext:
 
     def warm_start(self) -> threading.Thread:
         """In the background: start the executor's workers and load their kernels
-        (``ChunkExecutor.warm``), and estimate what a first request with the default model
-        and region would (P(B) and the model interval are memoised on the model object,
-        ``sampler.model.memo``). Failures are logged only. Returns the thread of the latter."""
-        self.executor.warm()
+        (``ChunkExecutor.warm``), load the same kernels in this process (a small
+        ``POST /scenarios`` is scored here), and estimate what a first request with the
+        default model and region would (P(B), the model interval and the data-support
+        index are memoised on the model object, ``sampler.model.memo``). ``warming`` is
+        true until all of it is done (/health: ``"status": "warming"``). Failures are
+        logged only. Returns the thread."""
 
         def run() -> None:
+            workers = self.executor.warm()
             try:
-                if self.default_model_id is None:
-                    return
-                model = self.model(self.default_model_id)
-                domain.sample(model, domain.parse_constraints(DEFAULT_CONSTRAINTS), 1, 0)
+                warm_worker()
+            except Exception as exc:
+                log.warning("warming this process's kernels failed: %r", exc)
+            try:
+                if self.default_model_id is not None:
+                    model = self.model(self.default_model_id)
+                    domain.sample(model, domain.parse_constraints(DEFAULT_CONSTRAINTS), 1, 0)
             except Exception as exc:
                 log.warning("warming the default model's region failed: %r", exc)
+            if isinstance(workers, threading.Thread):
+                workers.join()
 
-        thread = threading.Thread(target=run, name="scengen-warm-region", daemon=True)
+        thread = threading.Thread(target=run, name="scengen-warm-start", daemon=True)
+        with self._lock:
+            self._warm_thread = thread
         thread.start()
         return thread
+
+    @property
+    def warming(self) -> bool:
+        """True while the start-up warm-up (``warm_start``) runs."""
+        thread = self._warm_thread
+        return thread is not None and thread.is_alive()
 
     def close(self) -> None:
         with self._lock:

@@ -14,7 +14,9 @@ router = APIRouter(tags=["service"])
 
 
 class Health(ApiModel):
-    status: str = Field(description="ok")
+    status: str = Field(description="ok: ready; warming: up, but still loading what the "
+                        "first scored request needs (the workers' compiled kernels, the "
+                        "default model's region estimate), which a request sent now waits for")
     database: str = Field(description="sqlite | postgresql")
     default_model: str | None
     default_dataset: str | None
@@ -31,7 +33,7 @@ class Versions(ApiModel):
 def health(ctx: ContextDep) -> Health:
     with ctx.db.read_engine.connect() as conn:
         conn.execute(text("select 1"))
-    return Health(status="ok", database=ctx.db.engine.dialect.name,
+    return Health(status="warming" if ctx.warming else "ok", database=ctx.db.engine.dialect.name,
                   default_model=ctx.default_model_id, default_dataset=ctx.default_dataset_id,
                   executor="dask" if ctx.settings.dask_scheduler else "local",
                   startup_error=ctx.startup_error)

@@ -143,11 +143,13 @@ def test_the_pool_scores_parts_as_the_request_itself_does() -> None:
 
 
 def loaded_kernels(_: object) -> int:
-    """In a pool worker: how many compiled signatures the batched Wagner kernel holds (0
-    until a scenario was scored in this process; for the test only)."""
+    """In a pool worker: how many compiled signatures the criticality record's closed-loop
+    kernel holds (0 until a scenario was scored in this process; for the test only). Not
+    the batched Wagner kernel: the scan is opt-in since issue 25, a default record does
+    not load it."""
     from riskcore.criticality import kernels as _criticality_kernels
 
-    return len(_criticality_kernels.scene_risks.signatures)
+    return len(_criticality_kernels.drive.signatures)
 
 
 @pytest.mark.slow
@@ -183,9 +185,13 @@ def test_warm_start_estimates_the_default_regions_model_figures(model_cache_dir:
         assert ctx.default_model_id is not None
         model = ctx.model(ctx.default_model_id)
         assert "_scengen_memo" not in model.__dict__  # nothing estimated yet
-        ctx.warm_start().join(timeout=300)
+        thread = ctx.warm_start()
+        assert ctx.warming
+        thread.join(timeout=300)
+        assert not ctx.warming  # /health now says "ok"
         kinds = {key[0] for key in model.__dict__["_scengen_memo"]}
         assert model.bootstrap_  # the default model has replicates (n_bootstrap 100) ...
         assert {"p_bounds", "pooled_interval"} <= kinds  # ... so its model interval too
+        assert "support" in model.__dict__["_scengen_memo"]  # issue 25's data-support index
     finally:
         ctx.close()

@@ -39,3 +39,24 @@ def test_unknown_path_and_method_use_the_error_shape(client: Any) -> None:
     assert r.status_code == 404 and r.json()["error"]["status"] == 404
     r = client.put("/health")
     assert r.status_code == 405 and r.json()["error"]["status"] == 405
+
+
+def test_health_says_warming_while_the_start_up_warm_up_runs(client: Any) -> None:
+    """Issue 25 item 4: a first scored request sent while /health says "ok" must not wait
+    for kernels or estimates; while they load, /health says "warming"."""
+    import threading
+
+    ctx = client.app.state.ctx
+    release = threading.Event()
+    thread = threading.Thread(target=release.wait, daemon=True)
+    before = ctx._warm_thread
+    ctx._warm_thread = thread
+    try:
+        thread.start()
+        assert client.get("/health").json()["status"] == "warming"
+        release.set()
+        thread.join(timeout=10)
+        assert client.get("/health").json()["status"] == "ok"
+    finally:
+        release.set()
+        ctx._warm_thread = before
