@@ -164,6 +164,13 @@ class ScenarioRow(Base):
     r_ind_cross_r157: Mapped[float | None] = mapped_column(Float, nullable=True)
     alarm_time: Mapped[float | None] = mapped_column(Float, nullable=True)
     risk_peak: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # the data support (issue 25, sampler.model.support); null: stored before, or the
+    # model has no training rows
+    support: Mapped[str | None] = mapped_column(Text, nullable=True)
+    support_distance: Mapped[float | None] = mapped_column(Float, nullable=True)
+    support_excess: Mapped[float | None] = mapped_column(Float, nullable=True)
+    #: support_nearest, density_pct, support_outside
+    support_detail: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
 
 
 class EvaluationRow(Base):

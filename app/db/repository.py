@@ -206,10 +206,33 @@ def page_scenarios(session: Session, catalogue_id: str, flt: ScenarioFilter, off
 
 
 def class_counts(session: Session, catalogue_id: str) -> dict[str, int]:
-    """How many scenarios of each criticality class (null: not scored) a catalogue has."""
+    """How many scenarios of each criticality class a catalogue has: every class, zeros
+    included, in the classes' order (``unscored``: not scored, only when there are any)."""
+    from riskcore.criticality import CLASSES
+
     stmt = (select(ScenarioRow.class_, func.count()).where(
         ScenarioRow.catalogue_id == catalogue_id).group_by(ScenarioRow.class_))
-    return {("unscored" if k is None else str(k)): int(v) for k, v in session.execute(stmt)}
+    found = {("unscored" if k is None else str(k)): int(v) for k, v in session.execute(stmt)}
+    return _with_zeros(found, CLASSES, "unscored")
+
+
+def support_counts(session: Session, catalogue_id: str) -> dict[str, int]:
+    """How many scenarios of each data-support class (issue 25) a catalogue has, zeros
+    included (``unknown``: stored without support, only when there are any)."""
+    from sampler.model import SUPPORT_CLASSES
+
+    stmt = (select(ScenarioRow.support, func.count()).where(
+        ScenarioRow.catalogue_id == catalogue_id).group_by(ScenarioRow.support))
+    found = {("unknown" if k is None else str(k)): int(v) for k, v in session.execute(stmt)}
+    return _with_zeros(found, SUPPORT_CLASSES, "unknown")
+
+
+def _with_zeros(found: dict[str, int], names: Sequence[str], missing: str) -> dict[str, int]:
+    out = {name: found.pop(name, 0) for name in names}
+    out.update(sorted(found.items()))  # a class this code does not know, then "missing"
+    if missing in out:
+        out[missing] = out.pop(missing)
+    return out
 
 
 def iter_scenarios(session: Session, catalogue_id: str,

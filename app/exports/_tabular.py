@@ -39,13 +39,14 @@ PARQUET_MANIFEST_KEY = b"scengen.manifest"
 
 _INT_COLUMNS = frozenset({"index", "seed", "n_steps", "n_objects"})
 _FLOAT_COLUMNS = frozenset({
-    *PARAM_NAMES, "ttc", "duration", "dt", "exposure_weight",
+    *PARAM_NAMES, "ttc", "duration", "dt", "exposure_weight", "support_distance",
+    "support_excess",
     *(name for name, spec in CRITICALITY_FIELDS.items() if spec.kind == "float"),
 })
 _BOOL_COLUMNS = frozenset(name for name, spec in CRITICALITY_FIELDS.items()
                           if spec.kind == "bool")
 _STRING_COLUMNS = frozenset({
-    "error", *(name for name, spec in CRITICALITY_FIELDS.items() if spec.kind == "str")})
+    "error", "support", *(name for name, spec in CRITICALITY_FIELDS.items() if spec.kind == "str")})
 
 
 def _with_index(index: int, row: Row) -> Row:

@@ -146,6 +146,15 @@ def scenario_row(record: ScenarioRecord, chunk_index: int) -> dict[str, Any]:
         "error": record.error,
         "summary": jsonconv.encode(scores),
         **{("class_" if k == "class" else k): v for k, v in scores.items()},
+        # the data support (issue 25): class and the two measures as columns (filtered,
+        # ranked, counted in SQL), the rest (nearest row, density percentile, the
+        # parameters outside the data's range) as JSON
+        "support": record.support,
+        "support_distance": record.support_distance,
+        "support_excess": record.support_excess,
+        "support_detail": None if record.support is None else jsonconv.encode(
+            {k: v for k, v in record.support_fields().items()
+             if k in ("support_nearest", "density_pct", "support_outside")}),
     }
 
 
@@ -169,7 +178,8 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
             drawn.params, start=start, exposure_weights=weights, lane_width=drawn.lane_width,
             seed=spec.seed, provenance=lambda idx: scenario_provenance(spec, idx),
             score=spec.score, include_scenario=spec.store_trajectories,
-            wagner_scan=spec.wagner_scan):
+            wagner_scan=spec.wagner_scan,
+            support=None if drawn.sample_set is None else drawn.sample_set.support):
         rows.append(scenario_row(record, index))
         scenarios.append(record.scenario)  # None: the builder refused the vector
         if spec.progress_dir is not None and time.monotonic() - reported >= PROGRESS_EVERY:

@@ -150,10 +150,11 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     def compute() -> dict[str, Any]:
         with ctx.db.read_session() as s:
             return {"summary": repo.statistics_of(_stat_values(ctx, s, catalogue_id)),
-                    "classes": repo.class_counts(s, catalogue_id)}
+                    "classes": repo.class_counts(s, catalogue_id),
+                    "support": repo.support_counts(s, catalogue_id)}
 
     cached: dict[str, Any] = ctx.cache("catalogue.statistics", 256).get(key, compute)
-    stats, classes = cached["summary"], cached["classes"]
+    stats, classes, support = cached["summary"], cached["classes"], cached["support"]
     return {
         "id": row.id,
         "status": row.status,
@@ -176,6 +177,8 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
         "rates": catalogue_rates(row.p_region, stats.get("exposure_weight")),
         "summary": stats,
         "classes": classes,
+        # issue 25: how many scenarios the data support (inside / near / extrapolated)
+        "support": support,
         "error": row.error,
         "created_at": row.created_at.isoformat(),
         "updated_at": row.updated_at.isoformat(),
@@ -235,7 +238,17 @@ def record_of(row: ScenarioRow) -> ScenarioRecord:
     scores = {k: getattr(row, "class_" if k == "class" else k) for k in SCORE_FIELDS}
     return ScenarioRecord.model_validate({
         "index": row.idx, "params": row.params, "ttc": math.inf if row.ttc is None else row.ttc,
-        "exposure_weight": row.exposure_weight, "error": row.error, **scores})
+        "exposure_weight": row.exposure_weight, "error": row.error, **scores,
+        **support_of(row)})
+
+
+def support_of(row: ScenarioRow) -> dict[str, Any]:
+    """The stored scenario's data-support fields (``SUPPORT_FIELDS``; all null when it was
+    stored before issue 25 or its model has no training rows)."""
+    out: dict[str, Any] = {"support": row.support, "support_distance": row.support_distance,
+                           "support_excess": row.support_excess}
+    out.update(jsonconv.decode(row.support_detail or {}))
+    return out
 
 
 def export_summary(row: ScenarioRow) -> dict[str, Any]:
@@ -243,6 +256,9 @@ def export_summary(row: ScenarioRow) -> dict[str, Any]:
     summary: dict[str, Any] = dict(jsonconv.decode(row.summary or {}))
     summary["scenario_id"] = row.idx
     summary["exposure_weight"] = row.exposure_weight
+    summary["support"] = row.support
+    summary["support_distance"] = row.support_distance
+    summary["support_excess"] = row.support_excess
     summary["error"] = row.error
     return summary
 

@@ -14,11 +14,13 @@
 from sampler.model.bootstrap import bootstrap_fit, log_density_z_boot, pooled_model, replicate_model
 from sampler.model.gmm import CutInGMM
 from sampler.model.memo import memoised
+from sampler.model.support import CLASSES as SUPPORT_CLASSES
 from sampler.model.support import density_percentile
 from sampler.model.transforms import DEFAULT_TRANSFORMS, FeatureTransform, transform_spec
 
 __all__ = [
     "DEFAULT_TRANSFORMS",
+    "SUPPORT_CLASSES",
     "CutInGMM",
     "FeatureTransform",
     "bootstrap_fit",

@@ -47,8 +47,10 @@ def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> Non
     assert catalogue["chunks"] == {"total": 3, "done": 3} and catalogue["progress"] == 1.0
     p = catalogue["p_region"]
     assert 0.0 < p["estimate"] < 1.0 and p["ci"][0] <= p["estimate"] <= p["ci"][1]
-    risk = catalogue["summary"]["risk"]
-    assert risk["count"] == N and 0.0 <= risk["min"] <= risk["p50"] <= risk["max"] <= 1.0
+    # the Wagner scan is opt-in (issue 25): a catalogue has no peak risk, it ranks by btn
+    assert catalogue["summary"]["risk"]["count"] == 0
+    btn = catalogue["summary"]["btn"]
+    assert btn["count"] == N and 0.0 <= btn["min"] <= btn["p50"] <= btn["max"]
     assert catalogue["summary"]["ttc"]["max"] < 3.0
     assert catalogue["finished_at"] is not None
 
@@ -78,6 +80,42 @@ def test_status_rates_with_both_intervals_and_weights_summing_to_the_rate(
     assert p["model_interval"]["n_boot"] >= 2 and p["model_interval"]["lower_resolved"]
 
 
+def test_rows_export_and_status_carry_the_data_support(client: Any,
+                                                      catalogue: dict[str, Any]) -> None:
+    """Issue 25 item 1: every stored scenario says what the data support (the model's own
+    measures of its parameters, passed through), the CSV has the columns, and the status
+    counts each support class (zeros included) and each criticality class."""
+    import numpy as np
+
+    from datasets import PARAM_NAMES
+
+    cid = catalogue["id"]
+    rows = client.get(f"/catalogues/{cid}/scenarios",
+                      params={"limit": 100, "order_by": "index"}).json()["scenarios"]
+    model = client.app.state.ctx.model(catalogue["model"])
+    m = model.support_measures(np.array([[s["params"][k] for k in PARAM_NAMES] for s in rows]),
+                               with_density=True)
+    for i, s in enumerate(rows):
+        want = m.record(i)
+        assert s["support"] == want["support"] in ("inside", "near", "extrapolated")
+        assert s["support_distance"] == pytest.approx(want["support_distance"], rel=1e-12)
+        assert s["support_excess"] == pytest.approx(want["support_excess"], rel=1e-12, abs=0)
+        assert s["support_nearest"] == want["support_nearest"]
+        assert len(s["support_outside"]) == len(want["support_outside"])
+    status = client.get(f"/catalogues/{cid}").json()
+    tally = {c: sum(1 for s in rows if s["support"] == c)
+             for c in ("inside", "near", "extrapolated")}
+    assert status["support"] == tally  # every class, zeros included, in this order
+    assert list(status["classes"]) == ["no_conflict", "preventable", "unpreventable",
+                                       "unavoidable"]
+    assert sum(status["classes"].values()) == N
+    text = client.get(f"/catalogues/{cid}/export", params={"format": "csv"}).text
+    table = list(csv.DictReader(io.StringIO(text)))
+    by_index = {s["index"]: s for s in rows}
+    for r in table:
+        assert r["support"] == by_index[int(r["index"])]["support"]
+
+
 def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> None:
     cid = catalogue["id"]
     all_rows = client.get(f"/catalogues/{cid}/scenarios",
@@ -92,9 +130,9 @@ def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> No
     low = client.get(f"/catalogues/{cid}/scenarios", params={"ttc_max": cut}).json()
     assert low["total"] == sum(1 for t in ttcs if t <= cut)
     assert all(s["ttc"] <= cut for s in low["scenarios"])
-    risks = sorted(s["risk_peak"] for s in all_rows["scenarios"])  # the risk filter's field
-    high = client.get(f"/catalogues/{cid}/scenarios", params={"risk_min": risks[-3]}).json()
-    assert high["total"] == sum(1 for r in risks if r >= risks[-3])
+    btns = sorted(s["btn"] for s in all_rows["scenarios"])
+    high = client.get(f"/catalogues/{cid}/scenarios", params={"btn_min": btns[-3]}).json()
+    assert high["total"] == sum(1 for r in btns if r >= btns[-3])
     for s in all_rows["scenarios"]:
         assert s["params"]["gap"] / s["params"]["dv"] == pytest.approx(s["ttc"])
         assert set(s) >= {"risk_peak", "btn", "class", "t_p", "error"}  # the flat record
@@ -160,8 +198,10 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     assert not {"risk", "risk_ind", "min_ttr", "min_ttc", "step_of_max_risk"} & set(table[0])
     assert {"exposure_weight", "ttr_true", "class", "risk_peak", "error"} <= set(table[0])
     empty = [c for c in table[0] if c != "error" and all(row[c] == "" for row in table)]
-    assert empty == [] or set(empty) <= {"scenario_id", "alarm_time", "r157_cc_t_brake",
-                                         "rss_t_brake", "ttr_manoeuvre"}, empty
+    wagner = {"r_dep_cross", "r_ind_cross", "r_dep_cross_r157", "r_ind_cross_r157",
+              "alarm_time", "risk_peak"}  # the Wagner scan's, opt-in since issue 25
+    assert empty == [] or set(empty) <= {"scenario_id", "r157_cc_t_brake", "rss_t_brake",
+                                         "ttr_manoeuvre", *wagner}, empty
     r = client.get(f"/catalogues/{cid}/export", params={"format": "parquet"})
     assert r.status_code == 200
     assert pq.read_table(io.BytesIO(r.content)).num_rows == N

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import pytest
 
+from datasets import PARAM_NAMES
 from riskcore.scenario import ConcreteScenario
 
 
@@ -20,6 +22,7 @@ def test_ten_cutins_with_ttc_below_3(client: Any) -> None:
     lo, hi = body["p_region"]["ci"]
     assert lo <= body["p_region"]["estimate"] <= hi
     assert isinstance(body["diagnostics"], dict) and body["diagnostics"]
+    model = client.app.state.ctx.model(body["model"])
     for item in body["scenarios"]:
         p = item["params"]
         assert p["dv"] > 0 and p["gap"] / p["dv"] < 3.0  # TTC by hand
@@ -30,6 +33,10 @@ def test_ten_cutins_with_ttc_below_3(client: Any) -> None:
         assert item["btn"] >= 0.0 and 0.0 <= item["r_dep_tp"] <= 1.0
         assert item["risk_peak"] is None and item["alarm_time"] is None
         assert item["r_dep_cross"] is None and item["r_ind_cross_r157"] is None
+        # issue 25 item 1: what the data support, the model's measures passed through
+        want = model.support_measures(np.array([[p[k] for k in PARAM_NAMES]])).record(0)
+        assert item["support"] == want["support"] in ("inside", "near", "extrapolated")
+        assert item["support_distance"] == pytest.approx(want["support_distance"], rel=1e-12)
         assert item["class"] in ("no_conflict", "preventable", "unpreventable", "unavoidable")
         assert item["error"] is None and item["scenario"] is None
 
