@@ -44,16 +44,19 @@ def _derive(seed: int, *key: int) -> int:
     return int(state[0]) & 0x7FFFFFFF
 
 
-def warm_worker() -> int:
+def warm_worker(hold: float = 0.0) -> int:
     """Import the chunk machinery in this worker process and load its compiled kernels
     (numba's on-disk cache) by scoring one vector and running the sampler's crossing
     kinematics once, so that the first chunk or request does not pay for it (1-3 s on a
-    fresh worker). Returns the worker's pid."""
+    fresh worker). ``hold``: seconds to stay busy afterwards, so that another idle worker
+    takes the next warm-up task. Returns the worker's pid."""
     from sampler.region import crossing_kinematics
 
     score_vector(_WARM_VECTOR, wagner_scan=True)  # every kernel: the scan's too
     crossing_kinematics(np.array([[_WARM_VECTOR[k] for k in ("p_y1", "p_t", "p_a1", "p_a2",
                                                              "p_a3", "p_v0")]]), 1.875)
+    if hold > 0:
+        time.sleep(hold)
     return os.getpid()
 
 

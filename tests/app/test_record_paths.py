@@ -172,6 +172,35 @@ def test_warm_loads_the_kernels_in_the_pool_workers_and_inline_does_nothing() ->
         pool.close()
 
 
+def loaded_kernels_held(_: object) -> tuple[int, int]:
+    """(pid, loaded_kernels) after holding a moment, so that the other idle worker takes
+    the next task."""
+    import os
+    import time
+
+    time.sleep(0.5)
+    return os.getpid(), loaded_kernels(None)
+
+
+@pytest.mark.slow
+def test_warm_reaches_every_worker_of_the_pool() -> None:
+    """Issue 25 item 4: a worker still starting while the other took every warm-up task
+    made the first request wait; after the warm-up each worker has its kernels."""
+    from app.jobs.executors import LocalPoolExecutor
+
+    pool = LocalPoolExecutor(2)
+    try:
+        pool.warm().join(timeout=600)
+        seen: dict[int, int] = {}
+        for _ in range(20):
+            seen.update(pool.map(loaded_kernels_held, [None, None]))
+            if len(seen) == 2:
+                break
+        assert len(seen) == 2 and set(seen.values()) == {1}, seen
+    finally:
+        pool.close()
+
+
 @pytest.mark.slow
 def test_warm_start_estimates_the_default_regions_model_figures(model_cache_dir: Path,
                                                                 tmp_path: Path) -> None:

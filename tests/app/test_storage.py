@@ -42,7 +42,7 @@ def test_migrations_create_the_schema_and_are_idempotent(database_url: str) -> N
     assert {"datasets", "models", "catalogues", "catalogue_chunks",
             "catalogue_scenarios", "alembic_version"} <= names
     with db.engine.connect() as conn:
-        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0006"
+        assert conn.execute(text("select version_num from alembic_version")).scalar() == "0007"
     db.dispose()
 
 
