@@ -261,11 +261,19 @@ class CatalogueRunner:
             self._refine_region(catalogue_id, spec, note, stages)
             return self._finish(catalogue_id, "done", None)
         except Exception as exc:
+            if not self._exists(catalogue_id):  # deleted under the job: not a failure
+                log.info("catalogue %s deleted while its job ran (%s)", catalogue_id,
+                         type(exc).__name__)
+                return "deleted"
             log.exception("catalogue %s failed", catalogue_id)
             return self._finish(catalogue_id, "failed", f"{type(exc).__name__}: {exc}")
         finally:
             meter.close()
             stages.clear()
+            if not self._exists(catalogue_id):
+                # what the job wrote after the deletion removed the folder (its progress and
+                # stage files) goes too: a deleted catalogue leaves nothing behind
+                repo.remove_catalogue_files(self.data_dir, catalogue_id)
 
     def _refine_region(self, catalogue_id: str, spec: CatalogueSpec,
                        note: Callable[[str], None] | None, stage: _StageFile) -> None:

@@ -18,7 +18,7 @@ from app.context import ServiceContext
 from app.db import chunkfile
 from app.db import repository as repo
 from app.db.models import CatalogueRow, ScenarioRow
-from app.errors import Conflict, InvalidInput, ServiceError
+from app.errors import Conflict, InvalidInput, NotFound, ServiceError
 from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
@@ -297,17 +297,23 @@ def iter_items(ctx: ServiceContext,
         cat = repo.get_catalogue(s, catalogue_id)
         spec = _spec_of(cat)
         model_id = cat.model_id
+        expected = cat.n
     lane_width: float | None = None
     current: int | None = None
     stream: Iterator[dict[str, Any] | None] | None = None
     last = -1
+    seen = 0
     while True:
         # one short transaction per batch: never hold the database during a long export
         with ctx.db.read_session() as s:
             rows = repo.scenario_batch(s, catalogue_id, last, 500)
         if not rows:
+            if seen != expected:  # rows gone under the export: deleted meanwhile
+                raise ExportInterrupted(f"catalogue {catalogue_id}: {seen} of {expected} "
+                                        "scenarios read")
             return
         last = rows[-1].idx
+        seen += len(rows)
         for row in rows:
             if row.chunk_index != current:
                 current = row.chunk_index
@@ -363,8 +369,25 @@ def export(ctx: ServiceContext, catalogue_id: str, fmt: str, out: Path,
     try:
         return export_catalogue(fmt, iter_items(ctx, catalogue_id),
                                 manifest(ctx, catalogue_id), out, mode=mode)
-    except ExportError as exc:
-        raise ServiceError(f"export of catalogue {catalogue_id} failed: {exc}") from None
+    except Exception as exc:
+        # A done catalogue's rows and files never change, so what was read is a consistent
+        # snapshot unless the catalogue was deleted while it was read (a chunk file or the
+        # rows gone): then the export is refused whole, never truncated nor a 500.
+        if not _exists(ctx, catalogue_id):
+            raise NotFound(f"catalogue {catalogue_id} was deleted while it was being "
+                           "exported", field="path.catalogue_id") from None
+        if isinstance(exc, ExportError):
+            raise ServiceError(f"export of catalogue {catalogue_id} failed: {exc}") from None
+        raise
+
+
+class ExportInterrupted(RuntimeError):
+    """The rows of a catalogue being exported went away (it was deleted meanwhile)."""
+
+
+def _exists(ctx: ServiceContext, catalogue_id: str) -> bool:
+    with ctx.db.read_session() as s:
+        return s.get(CatalogueRow, catalogue_id) is not None
 
 
 def delete(ctx: ServiceContext, catalogue_id: str) -> None:
