@@ -63,6 +63,9 @@ class CutInBatch:
         From this time on the cutter drives straight at constant speed (its script is
         over); None: the grid's last time for every run. The simulator's conflict
         resolution waits for it.
+    c_yaw_rate : ndarray of shape (N, T) or None
+        The cutter's yaw rate, rad/s (Wagner's omega0 for ``simulate(risk=True)``); None:
+        the gradient of ``cpsi``.
     """
 
     t: FloatArray
@@ -80,6 +83,7 @@ class CutInBatch:
     t_p: FloatArray
     t_cross: FloatArray
     t_end: FloatArray | None = field(default=None)
+    c_yaw_rate: FloatArray | None = field(default=None)
 
     def __post_init__(self) -> None:
         t = np.ascontiguousarray(self.t, dtype=np.float64)
@@ -120,6 +124,11 @@ class CutInBatch:
         t_end = (np.full(n, t[-1]) if self.t_end is None else
                  np.ascontiguousarray(np.broadcast_to(self.t_end, (n,)), dtype=np.float64))
         object.__setattr__(self, "t_end", np.minimum(t_end, t[-1]))
+        if self.c_yaw_rate is not None:
+            yr = np.ascontiguousarray(self.c_yaw_rate, dtype=np.float64)
+            if yr.shape != (n, t.shape[0]):
+                raise SutError(f"c_yaw_rate: expected shape (N, T) = ({n}, {t.shape[0]})")
+            object.__setattr__(self, "c_yaw_rate", yr)
 
     @property
     def n(self) -> int:
@@ -139,7 +148,8 @@ class CutInBatch:
             ego_length=self.ego_length, ego_width=self.ego_width, cx=self.cx[index],
             cy=self.cy[index], cpsi=self.cpsi[index], cv=self.cv[index], ca=self.ca[index],
             c_length=self.c_length[index], c_width=self.c_width[index],
-            t_p=self.t_p[index], t_cross=self.t_cross[index], t_end=self.t_end[index])
+            t_p=self.t_p[index], t_cross=self.t_cross[index], t_end=self.t_end[index],
+            c_yaw_rate=None if self.c_yaw_rate is None else self.c_yaw_rate[index])
 
     @classmethod
     def from_scenarios(cls, scenarios: Sequence[ConcreteScenario], *,
@@ -166,7 +176,7 @@ class CutInBatch:
         T = max(round((float(s.t[-1]) - float(s.t[0])) / h) + 1 for s in scenarios)
         n = len(scenarios)
         t = np.round(np.arange(T) * h, 12)
-        arrays = {k: np.empty((n, T)) for k in ("cx", "cy", "cpsi", "cv", "ca")}
+        arrays = {k: np.empty((n, T)) for k in ("cx", "cy", "cpsi", "cv", "ca", "c_yaw_rate")}
         v0 = np.empty(n)
         cl = np.empty(n)
         cw = np.empty(n)
@@ -201,6 +211,9 @@ class CutInBatch:
             arrays["cpsi"][i, m:] = psi[-1]
             arrays["cv"][i, m:] = c.v[-1]
             arrays["ca"][i, m:] = 0.0
+            arrays["c_yaw_rate"][i, :m] = (c.yaw_rate if c.yaw_rate is not None
+                                           else np.gradient(psi, ts))
+            arrays["c_yaw_rate"][i, m:] = 0.0
             v0[i] = float(e.v[0])
             cl[i] = c.length
             cw[i] = c.width

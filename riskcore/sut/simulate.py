@@ -30,6 +30,7 @@ from riskcore.sut.batch import CutInBatch, Observations
 from riskcore.sut.errors import SutError
 from riskcore.sut.protocol import SystemUnderTest
 from riskcore.sut.regulation import INTRUSION_DEPTH, must_avoid
+from riskcore.sut.risk import drive_risk
 from riskcore.sut.runs import RunBatch
 from riskcore.sut.settings import SimSettings
 
@@ -175,9 +176,9 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
     # built-ins run through a compiled loop (the same steps; tests prove equality)
     compiled = getattr(sut, "compiled", None) if fast_path else None
     fast = (compiled(batch.ego_v0) if callable(compiled) and s.delay_steps == 0
-            and not profiles else None)
+            and not profiles and not risk else None)
     upd = s.update_steps
-    keep: list[NDArray[np.float64]] | None = [] if profiles else None
+    keep: list[NDArray[np.float64]] | None = [] if profiles or risk else None
     if fast is not None:
         kind, q, v_des = fast
         _k.run_builtin(kind, q, v_des, upd, n_steps, -s.a_brake_max, s.a_accel_max, x, v, a,
@@ -192,8 +193,7 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
     end_time = out[:, _k.END_TIME].copy()
     m_av = must_avoid(intr_ttc, intr_vrel, must_avoid_variant)
     prof = None
-    if profiles:
-        assert keep is not None
+    if keep is not None:
         keep.append(np.stack([x, v, a]).copy())
         arr = np.stack(keep, axis=2)  # (3, N, K)
         tk = np.arange(arr.shape[2]) * dt
@@ -214,5 +214,15 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
         end=names[end_code], sut=str(getattr(sut, "name", type(sut).__name__)),
         profiles=prof)
     if risk:
-        raise SutError("risk: Wagner's risk of the SUT's drive is not implemented yet")
+        assert prof is not None
+        peak, peak_ind, above, r_prof = drive_risk(batch, prof["t"], prof["x"], prof["v"],
+                                                   end_time)
+        runs.r_dep_peak = peak
+        runs.r_ind_peak = peak_ind
+        runs.r_dep_time_above = above
+        if profiles:
+            prof["r_dep"] = r_prof
+            prof["t_batch"] = batch.t
+    if not profiles:
+        runs.profiles = None
     return runs

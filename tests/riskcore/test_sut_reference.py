@@ -81,3 +81,29 @@ def test_the_jrc_rule_collides_no_less_than_the_conflict_rule(
     jrc = simulate(make_sut("r157_cc"), b, seeds=0)
     conflict = simulate(make_sut("r157_cc_conflict"), b, seeds=0)
     assert not np.any(conflict.collided & ~jrc.collided)
+
+
+def test_drive_risk_of_none_is_the_records_risk_peak() -> None:
+    """The scripted ego's r_dep peak (the record's ``risk_peak``) is the peak of the
+    ``none`` SUT's own drive: the same scenes through the same engine."""
+    scs = _ttc3_sample(6, 5)
+    recs = [evaluate_criticality(s).to_record() for s in scs]
+    runs = simulate(make_sut("none"), CutInBatch.from_scenarios(scs), seeds=0, risk=True,
+                    profiles=True)
+    peaks = np.array([r["risk_peak"] for r in recs], dtype=float)
+    np.testing.assert_allclose(runs.r_dep_peak, peaks, rtol=0, atol=1e-9)
+    assert 0.0 < peaks.min() < 1.0 == peaks.max()  # graded and saturated cases
+    assert runs.profiles is not None and runs.profiles["r_dep"].shape[0] == 6
+    # r_dep >= 0.5 time: whole grid steps
+    steps = runs.r_dep_time_above / 0.1
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-9)
+
+
+def test_a_careful_drive_without_contact_scores_lower_than_none() -> None:
+    scs = _ttc3_sample(6, 5)
+    b = CutInBatch.from_scenarios(scs)
+    none = simulate(make_sut("none"), b, seeds=0, risk=True)
+    careful = simulate(make_sut("r157_cc_conflict"), b, seeds=0, risk=True)
+    assert np.all(careful.r_dep_peak <= none.r_dep_peak + 1e-12)
+    assert np.any(careful.r_dep_peak < none.r_dep_peak)
+    assert np.all(np.isnan(simulate(make_sut("none"), b, seeds=0).r_dep_peak))
