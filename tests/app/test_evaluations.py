@@ -199,14 +199,15 @@ def test_delete_cancels_and_removes(eval_client: Any) -> None:
 
 # --------------------------------------------------------------------------- resume
 def test_an_interrupted_job_resumes_from_its_stored_chunks(
-        model_cache_dir: Path, tmp_path: Path) -> None:
+        model_cache_dir: Path, tmp_path: Path, database_url: str) -> None:
     """Stop after 2 of 5 chunks, resume: the stored chunks are replayed, not simulated
-    again, and the result equals an uninterrupted run's, bit for bit."""
+    again, and the result equals an uninterrupted run's, bit for bit (SQLite and
+    PostgreSQL); the runs' filters and order work on both."""
     from app.services.store import open_context
 
     data_dir = tmp_path / "data"
     copy_model_cache(model_cache_dir, data_dir)
-    ctx = open_context(make_settings(data_dir))
+    ctx = open_context(make_settings(data_dir, database_url=database_url))
     try:
         runner = CountingRunner()
         ctx.campaign_runner = lambda factory, settings: runner
@@ -233,11 +234,18 @@ def test_an_interrupted_job_resumes_from_its_stored_chunks(
         assert simulated_before > 0 and 0 < runner.rows < rows_a
         sa, sb = service.describe(ctx, a)["summary"], service.describe(ctx, b)["summary"]
         assert sa == sb
-        ta, ra = service.page_runs(ctx, a, service.RunFilter(), 0, 1000, order_by="run",
+        ta, ra = service.page_runs(ctx, a, service.RunFilter(), 0, 10_000, order_by="run",
                                    desc=False)
-        tb, rb = service.page_runs(ctx, b, service.RunFilter(), 0, 1000, order_by="run",
+        tb, rb = service.page_runs(ctx, b, service.RunFilter(), 0, 10_000, order_by="run",
                                    desc=False)
-        assert ta == tb and ra == rb
+        assert ta == tb == len(ra) and ra == rb
+        # filters in SQL against the same filter in Python on every run
+        flt = service.run_filter([("impact_speed_min", "0.5"), ("collided", "true")])
+        total, got = service.page_runs(ctx, b, flt, 0, 1000, order_by="impact_speed",
+                                       desc=True)
+        want = sorted((r for r in rb if r["collided"] and r["impact_speed"] >= 0.5),
+                      key=lambda r: (-r["impact_speed"], r["run"]))
+        assert total == len(want) and [r["run"] for r in got] == [r["run"] for r in want]
     finally:
         ctx.close()
 
