@@ -1,0 +1,233 @@
+"""Campaign estimator vs naive Monte Carlo (issue 24 item 8; docs/evaluation.md).
+
+Part A, a stand-in SUT whose runs cost nothing (``late_brake_runner``: a late careful
+driver, reaction ``--reaction`` s after the crossing, then ``--decel`` m/s²), on the
+embedded TNO model with its bootstrap replicates:
+
+* naive Monte Carlo of P(collision | physical cut-in) with ``--naive`` model draws
+  (default 10^7; ``--quick`` 10^6) — the reference;
+* ``--seeds`` (30) campaigns with the stop rule (relative half-width 0.3, >= 10
+  collisions): how often the reported 95 % interval covers the naive estimate, the mean
+  estimate, SUT runs per campaign, and the runs naive Monte Carlo needs for the same
+  standard error (``P (1 - P) / SE^2``) and for the same relative half-width;
+* wall clock of a campaign against naive Monte Carlo's time for those runs.
+
+Part B (``--sut acc|idm|...``, skipped with ``--no-sut``): the same campaign with a
+built-in SUT of ``riskcore.sut`` in the closed-loop simulator (``--sut-param k=v``), the
+simulator's runs per second, and naive Monte Carlo of ``--naive-sut`` runs with that SUT
+(default 0: its cost at the measured runs/s is printed instead).
+
+    .venv/bin/python benchmarks/bench_campaign.py [--quick] [--seeds 30] [--naive 1e7]
+        [--sut acc --sut-param a_min=-3] [--sut-seeds 1] [--naive-sut 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+from scipy.stats import beta, norm
+
+from datasets.embedded import default_parameter_table
+from riskcore.sut import SimSettings, make_sut
+from sampler import CutInGMM
+from sampler.campaign import evaluate, late_brake_runner, sut_runner
+from sampler.model import bootstrap_fit
+from sampler.rates import tno_exposure
+from sampler.region import Region
+
+
+def naive(model: CutInGMM, runner, n_draws: int, seed: int, block: int = 1 << 20,
+          sim_block: int | None = None) -> tuple[int, int, float]:
+    """(collisions, physical cut-ins, seconds) of plain model draws."""
+    rng = np.random.default_rng(seed)
+    region = Region.from_constraints((), lane_width=model.lane_width_).bind(model)
+    hits = inside = 0
+    t0 = time.perf_counter()
+    done = 0
+    while done < n_draws:
+        b = min(block, n_draws - done)
+        z = model.sample_z(b, rng)
+        x = model.params_matrix(model.from_z(z))
+        ok = region.in_bounds(x)
+        xs = x[ok]
+        seeds = rng.integers(0, 2**63, size=xs.shape[0], dtype=np.uint64)
+        step = sim_block or max(xs.shape[0], 1)
+        for i in range(0, xs.shape[0], step):
+            hits += int(np.asarray(runner(xs[i:i + step], seeds[i:i + step]).collided).sum())
+        inside += int(ok.sum())
+        done += b
+    return hits, inside, time.perf_counter() - t0
+
+
+def envelope_reference(model: CutInGMM, runner, reaction: float, decel: float,
+                       n_draws: int, seed: int, dv_max: float = 20.0
+                       ) -> tuple[float, float, float, float]:
+    """P(C | B) of the late-braking stand-in without the campaign's machinery: C needs
+    dv > 0 and gap < dv reaction + dv^2 / (2 decel) <= dv (reaction + dv_max / (2 decel))
+    for dv <= dv_max, so C lies in the half-space envelope of ``ttc < reaction + dv_max /
+    (2 decel)`` (``sampler.methods.find_envelope``, exact mass P(S)); exact draws of the
+    model restricted to S give P(C and B | S) by counting, times P(S), over P(B) (plain
+    draws). The mass with dv > dv_max is below 1e-9 of the model's. Returns (P, CI low,
+    CI high, seconds)."""
+    from sampler.methods import find_envelope
+
+    t0 = time.perf_counter()
+    lane = model.lane_width_
+    c = reaction + dv_max / (2 * decel)
+    hs = find_envelope(model, Region.from_constraints([f"ttc<{c}"], lane_width=lane))
+    region = Region.from_constraints((), lane_width=lane).bind(model)
+    rng = np.random.default_rng(seed)
+    hits = 0
+    done = 0
+    while done < n_draws:
+        b = min(1 << 18, n_draws - done)
+        x = model.params_matrix(model.from_z(hs.sample_z(model, b, rng)))
+        ok = region.in_bounds(x)
+        hits += int(np.asarray(runner(x[ok], np.zeros(int(ok.sum()), dtype=np.uint64))
+                               .collided).sum())
+        done += b
+    k_b, n_b = 0, 0
+    for _ in range(8):
+        x = model.params_matrix(model.from_z(model.sample_z(1 << 18, rng)))
+        k_b += int(region.in_bounds(x).sum())
+        n_b += 1 << 18
+    p_b = k_b / n_b
+    lo, hi = cp(hits, n_draws)
+    scale = hs.mass / p_b
+    return hits / n_draws * scale, lo * scale, hi * scale, time.perf_counter() - t0
+
+
+def cp(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
+    a = 1 - conf
+    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
+    return lo, hi
+
+
+def campaigns(model: CutInGMM, runner, seeds: range, **kw) -> list[dict]:
+    # the model-level figures (P(B), each replicate's P_b(B)) are memoised on the model
+    # once: not part of a campaign's cost
+    evaluate(model, runner, seed=10**6, n=1, batch_size=1).summary()
+    out = []
+    for s in seeds:
+        t0 = time.perf_counter()
+        r = evaluate(model, runner, seed=s, **kw)
+        summ = r.summary()
+        summ["wall_s"] = time.perf_counter() - t0
+        out.append(summ)
+        p = summ["p_collision"]
+        print(f"  seed {s:3d}: P {p['estimate']:.3e} CI [{p['ci'][0]:.2e}, {p['ci'][1]:.2e}] "
+              f"rhw {p['rhw']:.2f} sut runs {summ['sut_runs']:6d} collisions "
+              f"{summ['collisions']:4d} accel {summ['acceleration'] or 0:8.0f} "
+              f"{summ['wall_s']:6.1f} s ({summ['stop_reason']})", flush=True)
+    return out
+
+
+def report(name: str, res: list[dict], p_ref: float | None, ref_ci: tuple[float, float],
+           naive_s_per_run: float) -> None:
+    est = np.array([r["p_collision"]["estimate"] for r in res])
+    runs = np.array([r["sut_runs"] for r in res], dtype=float)
+    wall = np.array([r["wall_s"] for r in res])
+    se = np.array([r["p_collision"]["se"] for r in res])
+    p = float(est.mean())
+    z = float(norm.ppf(0.975))
+    need_se = p * (1 - p) / se ** 2  # naive runs for each campaign's standard error
+    need_rhw = z * z * (1 - p) / (p * 0.3 * 0.3)  # naive runs for rhw 0.3
+    print(f"\n[{name}] {len(res)} campaign(s)")
+    print(f"  mean estimate {p:.3e} (sd of estimates {est.std(ddof=1) if est.size > 1 else 0:.2e})"
+          f"; mean reported rhw {np.mean([r['p_collision']['rhw'] for r in res]):.2f}")
+    if p_ref is not None:
+        cov = np.mean([r["p_collision"]["ci"][0] <= p_ref <= r["p_collision"]["ci"][1]
+                       for r in res])
+        print(f"  naive reference {p_ref:.3e} [{ref_ci[0]:.2e}, {ref_ci[1]:.2e}]; "
+              f"coverage of the 95 % interval: {cov * 100:.0f} %; mean / naive "
+              f"{p / p_ref:.3f}")
+    print(f"  SUT runs per campaign: mean {runs.mean():.0f} (min {runs.min():.0f}, max "
+          f"{runs.max():.0f}); wall {wall.mean():.1f} s")
+    print(f"  naive runs for the same SE: {np.mean(need_se):.3e} -> "
+          f"{np.mean(need_se / runs):.0f}x fewer SUT runs (acceleration reported: "
+          f"{np.mean([r['acceleration'] for r in res]):.0f})")
+    print(f"  naive runs for rhw 0.3 at P: {need_rhw:.3e} -> {need_rhw / runs.mean():.0f}x "
+          "fewer SUT runs")
+    naive_wall = need_rhw * naive_s_per_run
+    print(f"  wall: naive {naive_wall:.0f} s ({naive_s_per_run * 1e6:.1f} us per run) vs "
+          f"campaign {wall.mean():.1f} s -> {naive_wall / wall.mean():.0f}x")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--seeds", type=int, default=30)
+    ap.add_argument("--naive", type=float, default=1e7)
+    ap.add_argument("--envelope", type=float, default=2e6)
+    ap.add_argument("--reaction", type=float, default=0.6)
+    ap.add_argument("--decel", type=float, default=6.0)
+    ap.add_argument("--sut", default="acc")
+    ap.add_argument("--sut-param", action="append", default=[])
+    ap.add_argument("--sut-seeds", type=int, default=1)
+    ap.add_argument("--naive-sut", type=float, default=0)
+    ap.add_argument("--no-sut", action="store_true")
+    ap.add_argument("--no-standin", action="store_true")
+    ap.add_argument("--batch", type=int, default=2000)
+    a = ap.parse_args()
+    if a.quick:
+        a.seeds, a.naive = min(a.seeds, 10), min(a.naive, 1e6)
+        a.envelope = min(a.envelope, 2e5)
+    t0 = time.perf_counter()
+    table = default_parameter_table()
+    model = CutInGMM().fit(table)
+    bootstrap_fit(model, table, n_boot=100, seed=0)
+    model.exposure_ = tno_exposure(table.shape[0]).to_dict()
+    print(f"model: embedded TNO, K={model.n_components_}, 100 bootstrap replicates "
+          f"({time.perf_counter() - t0:.0f} s)")
+
+    if not a.no_standin:
+        runner = late_brake_runner(a.reaction, a.decel)
+        print(f"\nA. stand-in: late careful driver, reaction {a.reaction} s after the "
+              f"crossing, {a.decel} m/s^2")
+        k, n_in, secs = naive(model, runner, int(a.naive), seed=12345)
+        lo, hi = cp(k, n_in)
+        print(f"  naive: {int(a.naive):.2e} draws, {n_in} physical cut-ins, {k} collisions "
+              f"-> P {k / n_in:.3e} [{lo:.2e}, {hi:.2e}] ({secs:.0f} s, "
+              f"{secs / n_in * 1e6:.2f} us per run)")
+        p_env, e_lo, e_hi, e_s = envelope_reference(model, runner, a.reaction, a.decel,
+                                                    int(a.envelope), seed=54321)
+        print(f"  reference by exact envelope draws ({int(a.envelope):.1e}): P {p_env:.3e} "
+              f"[{e_lo:.2e}, {e_hi:.2e}] ({e_s:.0f} s); inside the naive interval: "
+              f"{lo <= p_env <= hi}")
+        res = campaigns(model, runner, range(a.seeds), batch_size=a.batch)
+        report("stand-in vs naive", res, k / n_in, (lo, hi), secs / n_in)
+        report("stand-in vs envelope reference", res, p_env, (e_lo, e_hi), secs / n_in)
+
+    if not a.no_sut:
+        params = {kv.split("=")[0]: float(kv.split("=")[1]) for kv in a.sut_param}
+        settings = SimSettings(t_max=40.0)
+        print(f"\nB. riskcore.sut '{a.sut}' {params} in the closed-loop simulator "
+              f"(t_max {settings.t_max} s)")
+
+        def factory() -> object:
+            return make_sut(a.sut, **params)
+
+        runner_s = sut_runner(factory, careful=False, settings=settings, name=a.sut)
+        res = campaigns(model, runner_s, range(a.sut_seeds), batch_size=a.batch)
+        runs = sum(r["sut_runs"] for r in res)
+        secs = sum(r["wall_s"] for r in res)
+        per_run = secs / runs
+        print(f"  campaign throughput incl. proposal and weights: {runs / secs:.0f} runs/s")
+        p_ref = None
+        ci = (math.nan, math.nan)
+        if a.naive_sut > 0:
+            k, n_in, secs_n = naive(model, runner_s, int(a.naive_sut), seed=777,
+                                    block=1 << 16, sim_block=4096)
+            p_ref = k / n_in if k else None
+            ci = cp(k, n_in)
+            per_run = secs_n / n_in
+            print(f"  naive: {n_in} runs, {k} collisions, CI {ci}, {n_in / secs_n:.0f} runs/s")
+        report(a.sut, res, p_ref, ci, per_run)
+
+
+if __name__ == "__main__":
+    main()
