@@ -66,6 +66,16 @@ class Conflict(ServiceError, ValueError):
     status = 409
 
 
+class TooManyRequests(ServiceError):
+    """A client over one of its quotas (429); ``Retry-After`` says when to try again."""
+
+    status = 429
+
+    def __init__(self, message: str, *, retry_after: int, field: str | None = None) -> None:
+        super().__init__(message, field=field)
+        self.headers = {"Retry-After": str(int(retry_after))}
+
+
 class ServiceUnavailable(ServiceError):
     status = 503
 
@@ -101,7 +111,7 @@ def _loc_to_field(loc: tuple[int | str, ...] | list[int | str]) -> str:
 
 async def _service_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, ServiceError)
-    return _response(exc.status, exc.message, exc.field)
+    return _response(exc.status, exc.message, exc.field, getattr(exc, "headers", None))
 
 
 #: HTTP status of a domain error class (the first match in the class's MRO; else 422)

@@ -39,7 +39,8 @@ ERROR_SCHEMA: dict[str, Any] = {
 }
 
 ERRORS = {
-    "400": "the body cannot be parsed (malformed JSON or form)",
+    "400": "the body cannot be parsed (malformed JSON or form), or the Host header names a "
+           "host the service does not answer to (SCENGEN_TRUSTED_HOSTS)",
     "401": "the API key is missing or wrong (only when SCENGEN_API_KEY is set)",
     "403": "a cross-site browser request that would change something",
     "404": "an unknown id (in the path or the body) or page",
@@ -47,9 +48,14 @@ ERRORS = {
            "before it is done)",
     "413": "the body is larger than its limit (SCENGEN_BODY_LIMIT_BYTES, "
            "SCENGEN_UPLOAD_LIMIT_BYTES, SCENGEN_UPLOAD_EXPANDED_LIMIT_BYTES)",
+    "429": "the client is over a quota (SCENGEN_CLIENT_JOBS_LIMIT, "
+           "SCENGEN_CLIENT_QUEUED_SCENARIOS_LIMIT); Retry-After says when to try again",
     "422": "a value out of range or not understood; the message names the field and, for "
            "a limit, its setting",
 }
+
+#: the operations that queue a job, so count against the client's quotas (``app.quotas``)
+QUOTA_OPERATIONS = {("/catalogues", "post"), ("/evaluations", "post")}
 
 _BINARY = {"type": "string", "format": "binary"}
 _TEXT = {"type": "string"}
@@ -146,9 +152,11 @@ def enrich(spec: dict[str, Any]) -> dict[str, Any]:
             if op is None:
                 continue
             responses = op.setdefault("responses", {})
-            codes = ["404", "422"]
+            codes = ["400", "404", "422"]  # 400: also an untrusted Host, on every route
             if "requestBody" in op:
-                codes += ["400", "413"]
+                codes += ["413"]
+            if (path, method) in QUOTA_OPERATIONS:
+                codes.append("429")
             if method != "get":
                 codes += ["401", "403"]
             if "{catalogue_id}" in path or path == "/evaluations/{evaluation_id}/export":

@@ -87,6 +87,16 @@ class Settings(BaseSettings):
         "loopback through DNS rebinding. Default the loopback names; SCENGEN_HOST is added "
         "when it is a name or a specific address. '*.example.org' trusts the subdomains, "
         "'*' every host. JSON in SCENGEN_TRUSTED_HOSTS, e.g. '[\"scengen.lab.example\"]'")
+    # quotas of one client (app/quotas.py): 429 with Retry-After naming the setting
+    client_jobs_limit: int = Field(
+        default=4, ge=1, description="most jobs (catalogues, evaluations) one client may "
+        "have queued or running at once")
+    client_queued_scenarios_limit: int = Field(
+        default=200_000, ge=1, description="most scenarios one client may have in its "
+        "queued and running jobs together (about 40 min of work on 2 cores)")
+    quota_retry_after: int = Field(
+        default=60, ge=1, description="seconds a client over a quota is told to wait "
+        "(Retry-After)")
     # limits on what one request may ask for (app/limits.py): 422/413 naming the setting
     body_limit_bytes: int = Field(
         default=10 * 1024 * 1024, ge=1,

@@ -15,6 +15,7 @@ from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow
 from app.jobs.runner import CatalogueRunner
+from app.quotas import ClientQuotas, QuotaToken
 
 log = logging.getLogger("scengen.jobs")
 
@@ -35,6 +36,9 @@ class JobManager:
         self.kinds = dict(kinds or {})
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._cancel: dict[str, threading.Event] = {}
+        #: per-client quotas of every job kind (``app.quotas``), released as jobs end
+        self.quotas = ClientQuotas()
+        self._tokens: dict[str, QuotaToken] = {}
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -57,9 +61,12 @@ class JobManager:
                     log.info("resuming unfinished %s job %s", prefix, jid)
                     self.submit(jid)
 
-    def submit(self, catalogue_id: str) -> None:
+    def submit(self, catalogue_id: str, quota: QuotaToken | None = None) -> None:
+        """Queue a job; ``quota`` (from ``self.quotas``) is released when it ends."""
         with self._lock:
             self._cancel[catalogue_id] = threading.Event()
+            if quota is not None:
+                self._tokens[catalogue_id] = quota
         self._queue.put(catalogue_id)
 
     def cancel(self, catalogue_id: str) -> None:
@@ -103,3 +110,5 @@ class JobManager:
             finally:
                 with self._lock:
                     self._cancel.pop(cid, None)
+                    token = self._tokens.pop(cid, None)
+                self.quotas.release(token)

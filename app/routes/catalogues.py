@@ -14,6 +14,7 @@ from pydantic import ConfigDict, Field
 from app import jsonconv
 from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
+from app.quotas import client_of
 from app.rates import RegionRates
 from app.schemas import ApiModel, SamplingRequest
 from app.services import catalogues as service
@@ -115,11 +116,13 @@ class CatalogueStatus(ApiModel):
 
 @router.post("", status_code=202, response_model=CatalogueCreated,
              summary="Start a catalogue job; answers with its id")
-def create_catalogue(body: CatalogueRequest, ctx: ContextDep, jobs: JobsDep) -> CatalogueCreated:
-    row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
-                         model=body.model, method=body.sampler, score=body.score,
-                         chunk_size=body.chunk_size, wagner_scan=body.wagner_scan)
-    jobs.submit(row.id)
+def create_catalogue(body: CatalogueRequest, request: Request, ctx: ContextDep,
+                     jobs: JobsDep) -> CatalogueCreated:
+    with jobs.quotas.hold(client_of(request), body.n, ctx.settings) as quota:
+        row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
+                             model=body.model, method=body.sampler, score=body.score,
+                             chunk_size=body.chunk_size, wagner_scan=body.wagner_scan)
+    jobs.submit(row.id, quota=quota)
     return CatalogueCreated(id=row.id, status=row.status, href=f"/catalogues/{row.id}")
 
 
