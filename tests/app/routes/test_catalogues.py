@@ -47,10 +47,8 @@ def test_status_counts_p_region_and_statistics(catalogue: dict[str, Any]) -> Non
     assert catalogue["chunks"] == {"total": 3, "done": 3} and catalogue["progress"] == 1.0
     p = catalogue["p_region"]
     assert 0.0 < p["estimate"] < 1.0 and p["ci"][0] <= p["estimate"] <= p["ci"][1]
-    # the Wagner scan is opt-in (issue 25): a catalogue has no peak risk, it ranks by btn
-    assert catalogue["summary"]["risk"]["count"] == 0
-    btn = catalogue["summary"]["btn"]
-    assert btn["count"] == N and 0.0 <= btn["min"] <= btn["p50"] <= btn["max"]
+    risk = catalogue["summary"]["risk"]
+    assert risk["count"] == N and 0.0 <= risk["min"] <= risk["p50"] <= risk["max"] <= 1.0
     assert catalogue["summary"]["ttc"]["max"] < 3.0
     assert catalogue["finished_at"] is not None
 
@@ -130,9 +128,9 @@ def test_scenarios_page_and_filter(client: Any, catalogue: dict[str, Any]) -> No
     low = client.get(f"/catalogues/{cid}/scenarios", params={"ttc_max": cut}).json()
     assert low["total"] == sum(1 for t in ttcs if t <= cut)
     assert all(s["ttc"] <= cut for s in low["scenarios"])
-    btns = sorted(s["btn"] for s in all_rows["scenarios"])
-    high = client.get(f"/catalogues/{cid}/scenarios", params={"btn_min": btns[-3]}).json()
-    assert high["total"] == sum(1 for r in btns if r >= btns[-3])
+    risks = sorted(s["risk_peak"] for s in all_rows["scenarios"])  # the risk filter's field
+    high = client.get(f"/catalogues/{cid}/scenarios", params={"risk_min": risks[-3]}).json()
+    assert high["total"] == sum(1 for r in risks if r >= risks[-3])
     for s in all_rows["scenarios"]:
         assert s["params"]["gap"] / s["params"]["dv"] == pytest.approx(s["ttc"])
         assert set(s) >= {"risk_peak", "btn", "class", "t_p", "error"}  # the flat record
@@ -198,10 +196,8 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     assert not {"risk", "risk_ind", "min_ttr", "min_ttc", "step_of_max_risk"} & set(table[0])
     assert {"exposure_weight", "ttr_true", "class", "risk_peak", "error"} <= set(table[0])
     empty = [c for c in table[0] if c != "error" and all(row[c] == "" for row in table)]
-    wagner = {"r_dep_cross", "r_ind_cross", "r_dep_cross_r157", "r_ind_cross_r157",
-              "alarm_time", "risk_peak"}  # the Wagner scan's, opt-in since issue 25
-    assert empty == [] or set(empty) <= {"scenario_id", "r157_cc_t_brake", "rss_t_brake",
-                                         "ttr_manoeuvre", *wagner}, empty
+    assert empty == [] or set(empty) <= {"scenario_id", "alarm_time", "r157_cc_t_brake",
+                                         "rss_t_brake", "ttr_manoeuvre"}, empty
     r = client.get(f"/catalogues/{cid}/export", params={"format": "parquet"})
     assert r.status_code == 200
     assert pq.read_table(io.BytesIO(r.content)).num_rows == N
