@@ -30,14 +30,10 @@ from numpy.typing import NDArray
 from datasets import PARAM_NAMES
 from riskcore import ConcreteScenario
 from sampler._threads import single_threaded
-from sampler.errors import EmptyRegionError, SamplerError
-from sampler.methods.envelope import find_envelope
-from sampler.methods.mcmc import MCMCSampler
+from sampler.errors import SamplerError
 from sampler.methods.probability import PRegion, PRegionEstimator
-from sampler.methods.problem import Problem, ProgressFn, Sampler
-from sampler.methods.rare import SubsetISSampler
-from sampler.methods.samplers import AutoSampler, make_sampler
-from sampler.methods.subset import SubsetSampler
+from sampler.methods.problem import Problem, ProgressFn, Run, Sampler
+from sampler.methods.samplers import SAMPLERS, AutoSampler, make_sampler
 from sampler.model.gmm import CutInGMM
 from sampler.region.constraints import DERIVED, Region
 from sampler.scenario.builder import build_scenario
@@ -135,28 +131,9 @@ class SampleSet:
 
     def summary(self) -> str:
         """One line: n, method, P(A) with interval, the sampler's main diagnostics."""
-        d = self.diagnostics
         parts = [f"{len(self)} samples of {self.region.describe()} by {self.method}",
                  str(self.p_region)]
-        if self.method == "mcmc":
-            parts.append(f"acceptance {d['acceptance_mean']:.2f} (min {d['acceptance_min']:.2f})"
-                         f", tau {d['tau_max']:.1f}, ESS {d['ess']:.0f} "
-                         f"(chain {d['ess_chain_min']:.0f}), {d['n_steps']} steps")
-            parts.extend(d.get("warnings", []))
-        elif self.method == "subset":
-            sub = d["subset"]
-            parts.append(f"subset simulation: {sub['levels']} levels of {sub['n_per_level']}, "
-                         f"{sub['n_evaluations']} evaluations, CoV {sub['cov']:.2f} "
-                         f"(independent levels) ... {sub['cov_upper']:.2f} (bound)")
-        elif self.method == "subset-is":
-            r = d["subset_is"]
-            parts.append(f"subset-is: {r['n_evaluations']} evaluations ({r['subset']['levels']} "
-                         f"subset levels), CoV {r['cov']:.3f}; independence chains: "
-                         f"acceptance {d['acceptance_mean']:.2f}, tau {d['tau_max']:.1f}, "
-                         f"ESS {d['ess']:.0f}")
-            parts.extend(d.get("warnings", []))
-        else:
-            parts.append(f"acceptance {d['acceptance_rate']:.3g} of {d['n_draws']} draws")
+        parts.extend(SAMPLERS.get(self.method, Sampler).summarise(self.diagnostics))
         return "; ".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
@@ -227,81 +204,19 @@ def _seed(seed: int | None) -> int:
     return int(seed)
 
 
-def _costly(region: Region) -> bool:
-    """Whether the region has a criticality constraint (closed-loop simulations)."""
-    return any(c.tier == 2 for c in region.constraints)
-
-
-#: A region whose criticality constraints are all on ``SPLIT_QUANTITIES`` and which has
-#: no half-space envelope (no kinematic constraint such as ``ttc<3``) is estimated in two
-#: parts split at this TTC when the pilot finds too few hits: inside the
-#: ``ttc < SPLIT_TTC`` envelope (plain Monte Carlo there, exact, when its budget allows)
-#: and outside it (subset-is). ``btn`` has a second route outside it (the cutter brakes
-#: after a cut-in at a safe TTC) that subset-is over the whole region under-represents:
-#: its intervals covered 5-8 of 10 seeds, the split's 10 of 10. On ``ttr_true`` the split
-#: cost 3x the simulations and its outside part's levels can fail to converge, so it is
-#: not used there (docs/sampler.md, "Standalone `btn` regions: split at the envelope").
-SPLIT_TTC = 3.0
-SPLIT_QUANTITIES = frozenset({"btn", "a_req"})
-
-
-def _split_parts(region: Region) -> list[Region] | None:
-    """The two parts of a region ``auto`` estimates apart (see ``SPLIT_TTC``), or None
-    when it is not such a region: a criticality constraint not on ``SPLIT_QUANTITIES``
-    (or none), a constraint on ``ttc`` already, or no half-space envelope for
-    ``ttc < SPLIT_TTC`` (the model lacks gap/dv)."""
-    critical = {c.name for c in region.constraints if c.tier == 2}
-    if not critical or not critical <= SPLIT_QUANTITIES:
-        return None
-    if any(c.name == "ttc" for c in region.constraints):
-        return None
-    model = region._model
-    if model is None:
-        return None
-    if find_envelope(model, region) is not None:
-        return None
-    parts = [Region.from_constraints([*region.constraints, extra],
-                                     lane_width=region.lane_width,
-                                     physical_bounds=region.physical_bounds).bind(model)
-             for extra in (f"ttc<{SPLIT_TTC:g}", f"ttc>={SPLIT_TTC:g}")]
-    return parts if find_envelope(model, parts[0]) is not None else None
-
-
-def _split_estimate(model: CutInGMM, parts: list[Region], seed: int, est: PRegionEstimator,
-                    bounds: tuple[float, float, float],
-                    progress: ProgressFn | None) -> tuple[PRegion, list[dict[str, Any]]]:
-    """P(A) as the sum of its parts' estimates (``PRegionEstimator.combine``), each from
-    ``estimate_p_region`` with its own seed derived from ``seed``; and the parts' figures
-    for the diagnostics. A part found empty counts with its upper bound as its error (its
-    ``EmptyRegionError`` is raised when the levels stalled, so that the bound is not
-    reliable, or when every part is empty)."""
-    out: list[PRegion] = []
-    info: list[dict[str, Any]] = []
-    empty: list[EmptyRegionError] = []
-    for k, part in enumerate(parts):
-        child = int(np.random.SeedSequence([seed, 12, k]).generate_state(1, np.uint64)[0])
-        child %= 2**63
-        try:
-            p = estimate_p_region(model, part, child, estimator=est, progress=progress)
-        except EmptyRegionError as exc:
-            if exc.stalled is not None or not math.isfinite(exc.p_upper):
-                raise
-            empty.append(exc)
-            p = PRegion(estimate=0.0, ci_low=0.0, ci_high=min(1.0, exc.p_upper / bounds[0]),
-                        confidence=est.confidence, method="empty", n_draws=exc.n_draws,
-                        n_hits=0, p_bounds=bounds[0], p_bounds_ci=(bounds[1], bounds[2]),
-                        p_joint=0.0)
-        out.append(p)
-        info.append({"constraints": part.describe(), "seed": child, **p.to_dict()})
-    if len(empty) == len(parts):
-        raise empty[-1]
-    return est.combine(out, bounds), info
-
-
 def _model_info(model: CutInGMM) -> dict[str, Any]:
     return {"features": list(model.features_), "n_components": model.n_components_,
             "training_sha256": getattr(model, "training_", {}).get("sha256"),
             "lane_width": model.lane_width_}
+
+
+def _settings(strategy: Sampler, est: PRegionEstimator, use_envelope: bool,
+              known_region: PRegion | None) -> dict[str, Any]:
+    out: dict[str, Any] = {"sampler": strategy.settings(), "estimator": est.settings(),
+                           "use_envelope": use_envelope}
+    if known_region is not None:
+        out["known_region"] = known_region.to_dict()
+    return out
 
 
 @single_threaded
@@ -315,6 +230,7 @@ def sample(
     lane_width: float | None = None,
     physical_bounds: bool = True,
     estimator: PRegionEstimator | None = None,
+    known_region: PRegion | None = None,
     use_envelope: bool = True,
     progress: ProgressFn | None = None,
 ) -> SampleSet:
@@ -335,6 +251,10 @@ def sample(
         Lane width in m; default the model's ``lane_width_``.
     estimator : PRegionEstimator, optional
         Pilot, search and P(A) settings.
+    known_region : PRegion, optional
+        P(A) (and P(B)) of this region when it is known already (a catalogue estimates it
+        once and its chunks reuse it): it is the result's P(A), and neither P(B) nor P(A)
+        is estimated (the generator does not draw for them).
     use_envelope : bool
         Draw from the model restricted to the region's half-space envelope when one exists
         (``sampler.methods.envelope``); False draws from the whole model.
@@ -362,49 +282,16 @@ def sample(
     est = estimator or PRegionEstimator()
     rng = np.random.default_rng(seed_i)
     problem = Problem(model, region, use_envelope=use_envelope)
-
-    bounds = est.p_bounds(problem, rng)
-    need = getattr(getattr(strategy, "mcmc", strategy), "n_walkers", 0)
-    if isinstance(strategy, SubsetSampler | SubsetISSampler):
-        need = 0  # subset simulation finds its own way in
-    elif isinstance(strategy, AutoSampler):
-        # no pilot hit: the broadened search (which ends empty regions); few: subset-is.
-        # Not for criticality regions: 10^5-10^6 simulations; subset-is ends empty ones
-        need = 0 if _costly(region) else 1
-    pilot = est.pilot(problem, rng, need=need, progress=progress,
-                      extend=isinstance(strategy, AutoSampler))
-    if isinstance(strategy, AutoSampler) and strategy.choose(
-            n, pilot, _costly(region)).name == "mcmc":
-        est.search(problem, rng, pilot, strategy.mcmc.n_walkers)
+    bounds = (est.p_bounds(problem, rng) if known_region is None else
+              (known_region.p_bounds, known_region.p_bounds_ci[0],
+               known_region.p_bounds_ci[1]))
+    run = Run(problem, rng, est, bounds, seed_i, progress)
+    plan = strategy.pilot_plan(problem)
+    pilot = est.pilot(problem, rng, need=plan.need, progress=progress, extend=plan.extend)
+    strategy.prepare(run, n, pilot)
     drawn = strategy.draw(problem, n, rng, pilot, progress)
-    parts = (_split_parts(region) if isinstance(strategy, AutoSampler)
-             and drawn.subset is not None and est.known is None and not pilot.plain
-             else None)
-    if pilot.plain and pilot.n_hits > 0 and isinstance(strategy, AutoSampler):
-        # P(A) from the extended pilot's plain run alone (exact, unbiased; the draws
-        # rejection adds were continued until enough hits, which would bias it)
-        p_region = est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
-                                region_z=pilot.hits, bounds=bounds, plain=True)
-    elif parts is not None:
-        # P(A) as estimate_p_region gives it, from the two parts; the samples are still
-        # those of the whole region's subset-is run
-        p_region, info = _split_estimate(model, parts, seed_i, est, bounds, progress)
-        drawn.diagnostics["split"] = {
-            "parts": info, "whole_region_estimate": float(drawn.subset.probability),
-            "note": f"P(A) is the sum of two parts estimated apart (ttc < {SPLIT_TTC:g} "
-                    "and the rest); the samples come from one subset-is run over the whole "
-                    "region, which may under-represent the part outside ttc < 3"}
-    elif drawn.subset is not None:
-        p_region = est.from_subset(problem, drawn.subset, bounds,
-                                   pilot if _costly(region) else None)
-        if p_region.method != drawn.method:  # overruled by the pilot's exact draws
-            drawn.diagnostics["overruled"] = (
-                f"{drawn.method}'s P(A) lay below the pilot's exact lower bound (99.9 %): "
-                f"P(A) is the pilot's plain estimate ({pilot.n_hits} hits); the samples "
-                "may cover only part of the region")
-    else:
-        p_region = est.estimate(problem, rng, mc_draws=drawn.mc_draws, mc_hits=drawn.mc_hits,
-                                region_z=drawn.z, bounds=bounds, plain=pilot.plain)
+    p_region = (strategy.estimate_p(run, pilot, drawn) if known_region is None
+                else known_region)
     x = model.from_z(drawn.z)
     params = pd.DataFrame(model.params_matrix(x), columns=list(PARAM_NAMES))
     for j, f in enumerate(model.features_):
@@ -434,8 +321,7 @@ def sample(
         requested=strategy.name,
         diagnostics=diag,
         seed=seed_i,
-        sampler_settings={"sampler": strategy.settings(), "estimator": est.settings(),
-                          "use_envelope": use_envelope},
+        sampler_settings=_settings(strategy, est, use_envelope, known_region),
         region=region,
         model_info=_model_info(model),
         support=None if measures is None else [measures.record(i) for i in range(n)],
@@ -459,32 +345,4 @@ def estimate_p_region(model: CutInGMM, constraints: Iterable[Any] | Region | Non
     model.check_fitted()
     region = _region(model, constraints, lane_width, physical_bounds)
     est = estimator or PRegionEstimator()
-    seed_i = _seed(seed)
-    rng = np.random.default_rng(seed_i)
-    problem = Problem(model, region)
-    bounds = est.p_bounds(problem, rng)
-    mcmc = MCMCSampler()
-    pilot = est.pilot(problem, rng, need=0, progress=progress, extend=True)
-
-    def starting(stage: str) -> None:
-        if progress is not None:
-            progress(stage, 0, 1)
-
-    if pilot.n_hits >= est.mc_min_hits or (pilot.plain and pilot.n_hits > 0):
-        return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
-                            region_z=pilot.hits, bounds=bounds, plain=pilot.plain)
-    if pilot.n_hits < mcmc.n_walkers:  # as ``auto``: too few hits -> subset(-is)
-        if not _costly(region):
-            starting("subset simulation")
-            if pilot.n_hits == 0:
-                est.search(problem, rng, pilot, 1)  # ends an empty region with its bound
-            return est.from_subset(problem, SubsetSampler().run(problem, 1, rng), bounds)
-        parts = _split_parts(region)
-        if parts is not None:
-            return _split_estimate(model, parts, seed_i, est, bounds, progress)[0]
-        starting("subset-is (rare-event estimate)")
-        result = SubsetISSampler().run(problem, rng)
-        return est.from_subset(problem, result, bounds, pilot)
-    drawn = mcmc.draw(problem, 500, rng, pilot, progress)
-    return est.estimate(problem, rng, mc_draws=pilot.n_draws, mc_hits=pilot.n_hits,
-                        region_z=drawn.z, bounds=bounds)
+    return AutoSampler().estimate_region(model, region, _seed(seed), est, progress)

@@ -18,14 +18,13 @@ from sampler import (
     CutInGMM,
     EmptyRegionError,
     PRegion,
-    PRegionEstimator,
     SamplerError,
     SampleSet,
     estimate_p_region,
     parse_constraint,
 )
 from sampler import sample as sampler_sample
-from sampler.methods import Problem, ProgressFn
+from sampler.methods import ProgressFn
 from sampler.rates import region_report, uncertainty_report
 from sampler.region import Region
 
@@ -72,28 +71,6 @@ def _sampling_error(exc: FieldError) -> InvalidInput:
     return InvalidInput(f"sampling failed: {exc}", field=field)
 
 
-class KnownRegion(PRegionEstimator):
-    """The sampler's estimator when P(A) (and P(B)) are already known for the region: a
-    catalogue estimates them once and every chunk reuses them instead of spending
-    ``n_bounds`` draws on P(B) and an estimate of P(A) it would throw away."""
-
-    known: PRegion
-
-    def __init__(self, known: PRegion) -> None:
-        super().__init__()
-        self.known = known
-
-    def p_bounds(self, problem: Problem, rng: np.random.Generator) -> tuple[float, float, float]:
-        lo, hi = self.known.p_bounds_ci
-        return self.known.p_bounds, lo, hi
-
-    def estimate(self, problem: Problem, rng: np.random.Generator, **kwargs: Any) -> PRegion:
-        return self.known
-
-    def from_subset(self, problem: Problem, *args: Any, **kwargs: Any) -> PRegion:
-        return self.known
-
-
 def region_of(data: dict[str, Any]) -> PRegion:
     """A stored P(A) dict (``region_dict``, maybe JSON-encoded) back as a PRegion."""
     values = jsonconv.decode(data)
@@ -111,9 +88,9 @@ def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int
     interval and rates out of ``p_region`` for the caller to add later
     (``add_region_report``, e.g. while the samples are being scored). ``lane_width``,
     ``use_envelope`` and ``progress``: as ``sampler.sample``."""
-    estimator = None if known_region is None else KnownRegion(region_of(known_region))
+    known = None if known_region is None else region_of(known_region)
     try:
-        ss = sampler_sample(model, list(constraints), n, seed, method, estimator=estimator,
+        ss = sampler_sample(model, list(constraints), n, seed, method, known_region=known,
                             lane_width=lane_width, use_envelope=use_envelope,
                             progress=progress)
     except FieldError as exc:  # the user's input; a library's ValueError is our bug (500)

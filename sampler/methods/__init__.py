@@ -13,9 +13,10 @@
 
 from sampler.methods.envelope import HalfSpace, find_envelope
 from sampler.methods.probability import PRegion, PRegionEstimator
-from sampler.methods.problem import Draw, Pilot, Problem, ProgressFn, Sampler
+from sampler.methods.problem import Draw, Pilot, PilotPlan, Problem, ProgressFn, Run, Sampler
 from sampler.methods.rare import RareResult, rare_probability
 from sampler.methods.samplers import (
+    SAMPLER_NAMES,
     SAMPLERS,
     AutoSampler,
     MCMCSampler,
@@ -28,6 +29,7 @@ from sampler.methods.subset import SubsetResult, region_limit_state, subset_simu
 
 __all__ = [
     "SAMPLERS",
+    "SAMPLER_NAMES",
     "AutoSampler",
     "Draw",
     "HalfSpace",
@@ -35,10 +37,12 @@ __all__ = [
     "PRegion",
     "PRegionEstimator",
     "Pilot",
+    "PilotPlan",
     "Problem",
     "ProgressFn",
     "RareResult",
     "RejectionSampler",
+    "Run",
     "Sampler",
     "SubsetISSampler",
     "SubsetResult",

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import emcee
 import numpy as np
@@ -23,10 +23,22 @@ from scipy.special import logsumexp
 
 from sampler.errors import EmptyRegionError, SamplerError
 from sampler.intervals import upper95
-from sampler.methods.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
+from sampler.methods.problem import (
+    Draw,
+    FloatArray,
+    Pilot,
+    PilotPlan,
+    Problem,
+    ProgressFn,
+    Run,
+    Sampler,
+)
 from sampler.model.gmm import CutInGMM
 
-__all__ = ["MCMCSampler"]
+if TYPE_CHECKING:  # annotations only (probability builds on this module)
+    from sampler.methods.probability import PRegion
+
+__all__ = ["MCMCSampler", "integrated_time"]
 
 
 class MixtureProposal:
@@ -180,6 +192,26 @@ class MCMCSampler(Sampler):
         self.min_tau_multiple = float(min_tau_multiple)
         self.max_steps = int(max_steps)
 
+    def pilot_plan(self, problem: Problem) -> PilotPlan:
+        """A point inside the region per walker (the broadened search finds the rest)."""
+        return PilotPlan(need=self.n_walkers)
+
+    def estimate_alone(self, run: Run, pilot: Pilot) -> PRegion:
+        """P(A) without samples: a short chain (500 samples) inside the region gives the
+        importance sampler its proposal (``PRegionEstimator.estimate``)."""
+        drawn = self.draw(run.problem, 500, run.rng, pilot, run.progress)
+        return run.estimator.estimate(run.problem, run.rng, mc_draws=pilot.n_draws,
+                                      mc_hits=pilot.n_hits, region_z=drawn.z,
+                                      bounds=run.bounds)
+
+    @classmethod
+    def summarise(cls, diagnostics: dict[str, Any]) -> list[str]:
+        d = diagnostics
+        return [f"acceptance {d['acceptance_mean']:.2f} (min {d['acceptance_min']:.2f})"
+                f", tau {d['tau_max']:.1f}, ESS {d['ess']:.0f} "
+                f"(chain {d['ess_chain_min']:.0f}), {d['n_steps']} steps",
+                *d.get("warnings", [])]
+
     def _start(self, problem: Problem, rng: np.random.Generator, pilot: Pilot,
                nw: int) -> tuple[FloatArray, FloatArray]:
         """Distinct starting points inside the region, and the pool they came from."""
@@ -255,7 +287,7 @@ class MCMCSampler(Sampler):
             todo = min(self.chunk, self.max_steps - steps)
             current = sampler.run_mcmc(current, todo, skip_initial_state_check=True)
             steps += todo
-            tau = _tau(sampler.get_chain())
+            tau = integrated_time(sampler.get_chain())
             tau_max = float(np.max(tau)) if np.isfinite(tau).all() else float(steps)
             burn = math.ceil(2 * tau_max)
             thin = max(1, math.ceil(tau_max))
@@ -322,7 +354,7 @@ class MCMCSampler(Sampler):
         return sampler
 
 
-def _tau(chain: FloatArray, c: float = 5.0) -> FloatArray:
+def integrated_time(chain: FloatArray, c: float = 5.0) -> FloatArray:
     """Integrated autocorrelation time per dimension, chain of shape (steps, walkers, d).
 
     emcee's estimator (``emcee.autocorr``: normalised autocorrelation per walker, averaged

@@ -185,10 +185,6 @@ class PRegionEstimator:
         the simulations, that bound such a run.
     """
 
-    #: P(A) when it is known already (a catalogue's chunks reuse their catalogue's): the
-    #: estimator then returns it instead of estimating (``app.domain.sampling.KnownRegion``)
-    known: PRegion | None = None
-
     def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
                  pilot_max_costly: int = 1 << 13,
                  mc_min_hits: int = 100, n_is: int = 1 << 15, defensive: float = 0.1,

@@ -3,15 +3,19 @@
 ``Problem`` binds a fitted model and a region (membership, log-probability and the
 proposal draws in the model's z-space); ``Pilot`` holds the plain Monte-Carlo draws made
 before sampling; ``Draw`` is what every sampler returns; ``Sampler`` is the strategy
-interface (one method, ``draw``). The strategies live in ``sampler.methods.samplers`` (rejection,
-auto) and ``sampler.methods.mcmc`` (emcee).
+interface: ``draw`` and the hooks ``sampler.sample`` asks instead of checking which sampler
+it holds (``pilot_plan``: what pilot it needs; ``prepare``: anything between the pilot and
+``draw``; ``estimate_p``: P(A) for its draw; ``summarise``: its part of the summary line).
+A ``Run`` carries what the hooks share (the problem, the generator, the P(A) estimator,
+P(B), the seed). The strategies live in ``sampler.methods.samplers`` (rejection, auto),
+``sampler.methods.mcmc`` (emcee), ``sampler.methods.subset`` and ``sampler.methods.rare``.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +24,11 @@ from sampler.methods.envelope import HalfSpace, find_envelope
 from sampler.model.gmm import CutInGMM
 from sampler.region.constraints import Region
 
-__all__ = ["BoolArray", "Draw", "FloatArray", "Pilot", "Problem", "ProgressFn", "Sampler"]
+if TYPE_CHECKING:  # probability builds on this module
+    from sampler.methods.probability import PRegion, PRegionEstimator
+
+__all__ = ["BoolArray", "Draw", "FloatArray", "Pilot", "PilotPlan", "Problem", "ProgressFn",
+           "Run", "Sampler"]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -55,6 +63,11 @@ class Problem:
     def proposal_mass(self) -> float:
         """Model mass of what ``draw_z`` draws from (P(S), or 1)."""
         return self.envelope.mass if self.envelope is not None else 1.0
+
+    @property
+    def costly(self) -> bool:
+        """Whether the region has a criticality constraint (closed-loop simulations)."""
+        return any(c.tier == 2 for c in self.region.constraints)
 
     @property
     def ndim(self) -> int:
@@ -133,8 +146,48 @@ class Pilot:
         return self.n_hits / self.n_draws if self.n_draws else 0.0
 
 
+@dataclass(frozen=True)
+class PilotPlan:
+    """What pilot a sampler needs before ``draw`` (``PRegionEstimator.pilot``).
+
+    Attributes
+    ----------
+    need : int
+        Points inside the region ``draw`` starts from: when the plain pilot finds fewer,
+        the broadened search looks for the rest (and ends an empty region). 0: none.
+    extend : bool
+        Extend the pilot of a criticality region into a plain Monte-Carlo run when its
+        budget allows (``PRegionEstimator.extend_pilot``).
+    """
+
+    need: int = 0
+    extend: bool = False
+
+
+@dataclass
+class Run:
+    """What the hooks of one ``sample`` (or ``estimate_p_region``) call share."""
+
+    problem: Problem
+    rng: np.random.Generator
+    estimator: PRegionEstimator
+    bounds: tuple[float, float, float]  # P(B) and its interval
+    seed: int
+    progress: ProgressFn | None = None
+
+    def starting(self, stage: str) -> None:
+        """Tell ``progress`` that a stage starts (without counts)."""
+        if self.progress is not None:
+            self.progress(stage, 0, 1)
+
+
 class Sampler(ABC):
-    """Strategy: draw ``n`` samples of the truncated model given the pilot's draws."""
+    """Strategy: draw ``n`` samples of the truncated model given the pilot's draws.
+
+    ``sampler.sample`` asks the strategy, never its type: ``pilot_plan`` (the pilot it
+    needs), ``prepare`` (between the pilot and ``draw``), ``draw``, ``estimate_p`` (P(A)
+    for its draw) and, for a stored set, ``summarise`` (by its ``name``). The defaults fit
+    a sampler that needs no pilot point and whose draws are the model's plain draws."""
 
     name: str = "abstract"
 
@@ -142,6 +195,32 @@ class Sampler(ABC):
     def draw(self, problem: Problem, n: int, rng: np.random.Generator, pilot: Pilot,
              progress: ProgressFn | None = None) -> Draw:
         """Return ``n`` samples inside the region (advancing ``rng``)."""
+
+    def pilot_plan(self, problem: Problem) -> PilotPlan:
+        """The pilot ``draw`` needs (default: no point, not extended)."""
+        return PilotPlan()
+
+    def prepare(self, run: Run, n: int, pilot: Pilot) -> None:  # noqa: B027 - a hook
+        """Anything between the pilot and ``draw`` (default: nothing)."""
+
+    def estimate_p(self, run: Run, pilot: Pilot, drawn: Draw) -> PRegion:
+        """P(A) for ``drawn`` (default: plain Monte Carlo over the model draws it made, or
+        importance sampling when they hit too rarely: ``PRegionEstimator.estimate``)."""
+        return run.estimator.estimate(run.problem, run.rng, mc_draws=drawn.mc_draws,
+                                      mc_hits=drawn.mc_hits, region_z=drawn.z,
+                                      bounds=run.bounds, plain=pilot.plain)
+
+    def estimate_alone(self, run: Run, pilot: Pilot) -> PRegion:
+        """P(A) without samples, given the pilot (``sampler.estimate_p_region``; default:
+        plain Monte Carlo over the pilot's draws, or importance sampling around its hits)."""
+        return run.estimator.estimate(run.problem, run.rng, mc_draws=pilot.n_draws,
+                                      mc_hits=pilot.n_hits, region_z=pilot.hits,
+                                      bounds=run.bounds, plain=pilot.plain)
+
+    @classmethod
+    def summarise(cls, diagnostics: dict[str, Any]) -> list[str]:
+        """The summary line's parts about a draw of this sampler (``SampleSet.summary``)."""
+        return [f"ESS {diagnostics['ess']:.0f}"] if "ess" in diagnostics else []
 
     def settings(self) -> dict[str, Any]:
         """JSON-able settings, stored with the sample set."""

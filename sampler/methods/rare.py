@@ -37,14 +37,14 @@ Samples of the model restricted to A come from independence Metropolis-Hastings 
 draws themselves (i.i.d. from q): a proposal ``z'`` replaces the state ``z`` with
 probability ``min(1, w(z') / w(z))``, ``w = 1_A p / q``. Exact for its stationary law,
 no new evaluations, honest diagnostics: acceptance, integrated autocorrelation time
-(``sampler.methods.mcmc._tau``), effective sample size. More draws of q are made (and enter P(A)
-too) until the chains' effective sample size reaches ``ess_target * n``, within the time
-budget.
+(``sampler.methods.mcmc.integrated_time``), effective sample size. More draws of q are made
+(and enter P(A) too) until the chains' effective sample size reaches ``ess_target * n``,
+within the time budget.
 
-**Stratified** (``stratified_importance``, ``SubsetISSampler(stratify="always")``): the
+**Stratified** (``stratified_importance``, ``StrataSettings(stratify="always")``): the
 model is a mixture, so ``P(A) = sum_s pi_s P_s(A)`` over its strata (``sampler.methods.strata``:
 component x cut-in side, or component x the region's half-space envelope S when it has
-one, ``SubsetISSampler(strat_envelope=True)``: then A lies inside S, the masses sum to
+one, ``StrataSettings(envelope=True)``: then A lies inside S, the masses sum to
 P(S) and each ``P_s`` is conditional on S; ``pi_s`` exact, ``P_s`` sampled exactly); one
 subset-is per
 stratum, budgeted by what its first levels reveal (strata probed and ordered nearest
@@ -73,8 +73,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -90,15 +90,113 @@ from sampler.methods.importance import (
     independence_chain,
     kish_ess,
 )
-from sampler.methods.mcmc import _tau
-from sampler.methods.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
+from sampler.methods.mcmc import integrated_time
+from sampler.methods.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Run, Sampler
 from sampler.methods.strata import Stratum, halfspace_strata, make_strata
-from sampler.methods.subset import LimitState, SubsetResult, region_limit_state, subset_simulation
+from sampler.methods.subset import (
+    LimitState,
+    SubsetResult,
+    estimate_from_levels,
+    region_limit_state,
+    subset_simulation,
+)
 from sampler.model.gmm import CutInGMM
 from sampler.region.constraints import Region
 
-__all__ = ["RareResult", "StratumRun", "SubsetISSampler", "rare_probability",
+if TYPE_CHECKING:  # annotations only (probability builds on the samplers)
+    from sampler.methods.probability import PRegion
+
+__all__ = ["ChainSettings", "ImportanceSettings", "RareResult", "StrataBudget",
+           "StrataSettings", "StratumRun", "SubsetISSampler", "rare_probability",
            "stratified_importance", "subset_importance"]
+
+
+@dataclass(frozen=True)
+class ImportanceSettings:
+    """Settings of one subset-is run (``subset_importance``; per stratum in
+    ``stratified_importance``).
+
+    Attributes
+    ----------
+    n_per_level : int
+        Points per subset level (the stage that finds the region).
+    n_is : int
+        Importance draws of the final proposal (the estimate).
+    alpha : float
+        The model's share of the proposal, in (0, 1).
+    inflate : float
+        Scale of the kernels' standard deviations (on Silverman's bandwidth).
+    p0 : float
+        Conditional probability of each subset level.
+    n_adapt, adapt_rounds : int
+        Draws per adaptation round, and rounds.
+    n_centres : int
+        Centres resampled after each adaptation round (distinct ones are kept).
+    nu : float
+        Degrees of freedom of the kernels (Student t).
+    max_seconds, min_probability : float
+        Time budget of the whole run; the subset stage gives up below this mass.
+    level_share : float
+        Share of the final kernel density kept on the subset levels' final points, in
+        [0, 1) (0: the adapted one alone; used only after adaptation rounds; default 0.3,
+        measured in ``docs/sampler.md``).
+
+    Raises
+    ------
+    SamplerError
+        A setting out of its range.
+    """
+
+    n_per_level: int = 1000
+    n_is: int = 4000
+    alpha: float = 0.1
+    inflate: float = 1.3
+    p0: float = 0.1
+    n_adapt: int = 1500
+    adapt_rounds: int = 2
+    n_centres: int = 300
+    nu: float = 5.0
+    max_seconds: float = 120.0
+    min_probability: float = 1e-14
+    level_share: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.alpha < 1.0:
+            raise SamplerError(f"alpha: must be in (0, 1), got {self.alpha!r}")
+        if not 0.0 <= self.level_share < 1.0:
+            raise SamplerError(f"level_share: must be in [0, 1), got {self.level_share!r}")
+        if (self.n_is < 2 or self.n_adapt < 2 or not self.inflate > 0
+                or self.adapt_rounds < 0 or self.n_centres < 2):
+            raise SamplerError("n_is and n_adapt must be >= 2, inflate > 0, "
+                               "adapt_rounds >= 0, n_centres >= 2")
+
+
+@dataclass(frozen=True)
+class StrataBudget:
+    """How ``stratified_importance`` shares its budget among the strata (its steps 1-4).
+
+    Attributes
+    ----------
+    n_is_min : int
+        Final importance draws of a stratum that reached A, at least.
+    n_probe : int
+        Exact draws per stratum that order the strata (0: by mass alone).
+    rel_floor : float
+        A stratum's levels stop at ``rel_floor`` x the running total / its mass.
+    adapt_share : float
+        Adaptation rounds only for strata holding at least this share of the total.
+    n_per_level_rest : int
+        Points per level once a stratum before has reached A.
+    weighted_centres : bool
+        Resampled centres keep their multiplicity (else the distinct ones).
+    """
+
+    n_is_min: int = 300
+    n_probe: int = 200
+    rel_floor: float = 1e-3
+    adapt_share: float = 0.01
+    n_per_level_rest: int = 200
+    weighted_centres: bool = True
 
 
 @dataclass(frozen=True)
@@ -159,42 +257,22 @@ class RareResult:
                 "seconds": self.seconds, "subset": self.subset.summary()}
 
 
-def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
-                      n_per_level: int = 1000, n_is: int = 4000, alpha: float = 0.1,
-                      inflate: float = 1.3, p0: float = 0.1,
-                      n_adapt: int = 1500, adapt_rounds: int = 2, n_centres: int = 300,
-                      nu: float = 5.0,
-                      max_seconds: float = 120.0, min_probability: float = 1e-14,
+def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int,
+                      settings: ImportanceSettings | None = None, *,
                       keep_stage: list[ImportanceStage] | None = None,
-                      stratum: Stratum | None = None, level_share: float = 0.3) -> RareResult:
+                      stratum: Stratum | None = None) -> RareResult:
     """Estimate ``P(limit_state(z) <= 0)`` under the model: subset levels, then importance
     sampling from a defensive kernel density (module docstring).
 
     Parameters
     ----------
-    n_per_level : int
-        Points per subset level (the stage that finds the region).
-    n_is : int
-        Importance draws of the final proposal (the estimate).
-    alpha : float
-        The model's share of the proposal, in (0, 1).
-    inflate : float
-        Scale of the kernels' standard deviations (on Silverman's bandwidth).
-    n_adapt, adapt_rounds : int
-        Draws per adaptation round, and rounds.
-    n_centres : int
-        Centres resampled after each adaptation round (distinct ones are kept).
-    max_seconds, min_probability : float
-        Time budget of the whole run; the subset stage gives up below this mass.
+    settings : ImportanceSettings, optional
+        Levels, proposal, adaptation and budget (defaults: ``ImportanceSettings()``).
     keep_stage : list, optional
         If given, the importance stage is appended to it (to draw more later).
     stratum : Stratum, optional
         Estimate under this stratum of the model (``sampler.methods.strata``: one component,
         optionally one side) instead of the whole model: ``P_s(A)``.
-    level_share : float
-        Share of the final kernel density kept on the subset levels' final points, in
-        [0, 1) (0: the adapted one alone; used only after adaptation rounds; default 0.3,
-        measured in ``docs/sampler.md``).
 
     Raises
     ------
@@ -203,17 +281,14 @@ def subset_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
     EmptyRegionError
         The subset levels did not reach the region (see ``subset_simulation``).
     """
+    cfg = settings or ImportanceSettings()
     t0 = time.monotonic()
-    ex = _explore(model, limit_state, seed, stratum=stratum, n_per_level=n_per_level,
-                  alpha=alpha, inflate=inflate, p0=p0, n_adapt=n_adapt,
-                  adapt_rounds=adapt_rounds, n_centres=n_centres, nu=nu, n_is=n_is,
-                  max_seconds=max_seconds, min_probability=min_probability,
-                  level_share=level_share)
-    stage = ImportanceStage(ex.base, ex.limit_state, ex.proposal, ex.deadline, max_seconds)
-    stage.add(int(n_is), ex.rng)
+    ex = _explore(model, limit_state, seed, cfg, stratum=stratum)
+    stage = ImportanceStage(ex.base, ex.limit_state, ex.proposal, ex.deadline, cfg.max_seconds)
+    stage.add(int(cfg.n_is), ex.rng)
     if keep_stage is not None:
         keep_stage.append(stage)
-    return _result(stage, ex.sub, t0, ex.n_adapt, inflate)
+    return _result(stage, ex.sub, t0, ex.n_adapt, cfg.inflate)
 
 
 @dataclass
@@ -246,28 +321,22 @@ def _in_stratum(stratum: Stratum, limit_state: LimitState) -> LimitState:
     return g
 
 
-def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: Stratum | None,
-             n_per_level: int, alpha: float, inflate: float, p0: float, n_adapt: int,
-             adapt_rounds: int, n_centres: int, nu: float, n_is: int, max_seconds: float,
-             min_probability: float, deadline: float | None = None,
+def _explore(model: CutInGMM, limit_state: LimitState, seed: int, cfg: ImportanceSettings, *,
+             stratum: Stratum | None = None, deadline: float | None = None,
              weighted_centres: bool = False, sub: SubsetResult | None = None,
-             level_share: float = 0.3) -> _Explored:
-    if not 0.0 < alpha < 1.0:
-        raise SamplerError(f"alpha: must be in (0, 1), got {alpha!r}")
-    if not 0.0 <= level_share < 1.0:
-        raise SamplerError(f"level_share: must be in [0, 1), got {level_share!r}")
-    if n_is < 2 or n_adapt < 2 or not inflate > 0 or adapt_rounds < 0 or n_centres < 2:
-        raise SamplerError("n_is and n_adapt must be >= 2, inflate > 0, adapt_rounds >= 0, "
-                           "n_centres >= 2")
+             adapt_rounds: int | None = None) -> _Explored:
+    """The subset levels (unless ``sub`` is given) and the adaptation rounds
+    (``adapt_rounds``, default the settings') of one subset-is run."""
+    rounds = cfg.adapt_rounds if adapt_rounds is None else adapt_rounds
     if deadline is None:
-        deadline = time.monotonic() + float(max_seconds)
+        deadline = time.monotonic() + float(cfg.max_seconds)
     base: ZDensity = model if stratum is None else stratum
     if stratum is not None:
         limit_state = _in_stratum(stratum, limit_state)
     if sub is None:
-        sub = subset_simulation(model, limit_state, seed, n_per_level=n_per_level, p0=p0,
-                                max_seconds=max(deadline - time.monotonic(), 1e-9),
-                                min_probability=min_probability,
+        sub = subset_simulation(model, limit_state, seed, n_per_level=cfg.n_per_level,
+                                p0=cfg.p0, max_seconds=max(deadline - time.monotonic(), 1e-9),
+                                min_probability=cfg.min_probability,
                                 from_normal=None if stratum is None else stratum.from_normal)
     pts = np.unique(sub.z, axis=0)
     d = model.n_features
@@ -277,15 +346,15 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
             "the region, too few to fit an importance density; raise n_per_level",
             n_draws=sub.n_evaluations, n_hits=int(pts.shape[0]), p_upper=sub.probability)
     rng = np.random.default_rng([int(seed) % (2**32), 1])
-    first = KernelProposal(base, pts, inflate, alpha, nu)
+    first = KernelProposal(base, pts, cfg.inflate, cfg.alpha, cfg.nu)
     proposal = first
     n_adapt_evals = 0
     pilot = (sub.probability, sub.cov)
-    for _ in range(adapt_rounds):
+    for _ in range(rounds):
         # importance draws inside A resampled by their weights (they follow the model
         # restricted to A, not the subset chains' coverage of it) are the next centres
-        stage = ImportanceStage(base, limit_state, proposal, deadline, max_seconds)
-        stage.add(int(n_adapt), rng)
+        stage = ImportanceStage(base, limit_state, proposal, deadline, cfg.max_seconds)
+        stage.add(int(cfg.n_adapt), rng)
         n_adapt_evals += stage.n
         pilot = stage.estimate()
         lw = stage.log_w
@@ -293,23 +362,24 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, *, stratum: St
         if ok.sum() > d + 1:
             zi, lwi = stage.z[ok], lw[ok]
             ww = np.exp(lwi - lwi.max())
-            pick = rng.choice(zi.shape[0], size=min(n_centres, zi.shape[0]),
+            pick = rng.choice(zi.shape[0], size=min(cfg.n_centres, zi.shape[0]),
                               p=ww / ww.sum())
             # weighted_centres: each resampled centre as often as it was drawn (a part of A
             # the previous q under-covered, whose draws carry large weights, gets more
             # kernels), the bandwidth from the distinct ones; else the distinct centres
             if weighted_centres:
-                proposal = KernelProposal(base, zi[pick], inflate, alpha, nu, shape=zi[pick],
+                proposal = KernelProposal(base, zi[pick], cfg.inflate, cfg.alpha, cfg.nu,
+                                          shape=zi[pick],
                                           n_bandwidth=int(np.unique(pick).size))
             else:
-                proposal = KernelProposal(base, zi[np.unique(pick)], inflate, alpha, nu,
+                proposal = KernelProposal(base, zi[np.unique(pick)], cfg.inflate, cfg.alpha, cfg.nu,
                                           shape=zi[pick])
     final: Proposal = proposal
-    if level_share > 0 and proposal is not first:
+    if cfg.level_share > 0 and proposal is not first:
         # the kernel density on the subset levels' final points keeps a share: the
         # adaptation's resampling can lose a part of A that the levels found
-        final = KernelMixture(base, [proposal, first], [1.0 - level_share, level_share],
-                              alpha)
+        final = KernelMixture(base, [proposal, first],
+                              [1.0 - cfg.level_share, cfg.level_share], cfg.alpha)
     return _Explored(base, limit_state, sub, final, n_adapt_evals, rng, deadline, pilot)
 
 
@@ -363,14 +433,9 @@ class StratumRun:
 
 
 def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *,
-                          strata: list[Stratum] | None = None, n_per_level: int = 1000,
-                          n_is: int = 4000, n_is_min: int = 300, alpha: float = 0.1,
-                          inflate: float = 1.3, p0: float = 0.1, n_adapt: int = 1500,
-                          adapt_rounds: int = 2, n_centres: int = 300, nu: float = 5.0,
-                          max_seconds: float = 120.0, min_probability: float = 1e-14,
-                          n_probe: int = 200, rel_floor: float = 1e-3,
-                          adapt_share: float = 0.01, n_per_level_rest: int = 200,
-                          weighted_centres: bool = True, level_share: float = 0.3,
+                          strata: list[Stratum] | None = None,
+                          settings: ImportanceSettings | None = None,
+                          budget: StrataBudget | None = None,
                           keep_runs: list[StratumRun] | None = None) -> RareResult:
     """``P(A) = sum_s pi_s P_s(A)`` over the model's strata (``sampler.methods.strata``: component
     x cut-in side), each ``P_s(A)`` by subset-is under that stratum.
@@ -404,6 +469,9 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
        ``n_is_min`` each: every stratum that reached A gets an unbiased estimate of its
        own.
 
+    ``settings`` (``ImportanceSettings``) hold each stratum's subset-is settings (``n_is``
+    the final draws in all), ``budget`` (``StrataBudget``) the figures named above.
+
     The estimate is unbiased given the strata's proposals, up to the reported bounds of
     the cut strata; its variance is ``sum pi_s^2 var_s``.
 
@@ -415,164 +483,215 @@ def stratified_importance(model: CutInGMM, limit_state: LimitState, seed: int, *
         No stratum reached the region.
     """
     t0 = time.monotonic()
-    deadline = t0 + float(max_seconds)
+    cfg = settings or ImportanceSettings()
+    bud = budget or StrataBudget()
     strata = make_strata(model) if strata is None else strata
     if not strata:
         raise SamplerError("stratified subset-is: no stratum (the model has no component)")
-    if n_is_min < 2 or n_is < n_is_min:
+    if bud.n_is_min < 2 or cfg.n_is < bud.n_is_min:
         raise SamplerError("n_is_min must be >= 2 and n_is >= n_is_min")
-    if n_probe < 0 or not 0.0 <= rel_floor < 1.0 or not 0.0 <= adapt_share <= 1.0:
+    if bud.n_probe < 0 or not 0.0 <= bud.rel_floor < 1.0 or not 0.0 <= bud.adapt_share <= 1.0:
         raise SamplerError("n_probe >= 0, 0 <= rel_floor < 1, 0 <= adapt_share <= 1")
-    # 1. probes: the strata nearest the region first (so that T is known early)
-    near = np.zeros(len(strata))
-    n_probe_evals = [0] * len(strata)
-    if n_probe > 0:
-        for i, st in enumerate(strata):
-            rng_p = np.random.default_rng([int(seed) % (2**32), 11, i])
-            gp = np.asarray(_in_stratum(st, limit_state)(st.sample_z(int(n_probe), rng_p)))
-            n_probe_evals[i] = int(n_probe)
-            near[i] = float(np.quantile(np.where(np.isfinite(gp), gp, 1e300), 0.1))
-    order = sorted(range(len(strata)), key=lambda i: (near[i], -strata[i].mass))
-    # 2. subset levels, down to a floor relative to what the strata before found
-    runs: list[StratumRun | None] = [None] * len(strata)
-    subs: list[SubsetResult | None] = [None] * len(strata)
-    total = 0.0
-    def levels(i: int, n: int, floor: float) -> SubsetResult:
+    run = _Stratified(model, limit_state, seed, strata, cfg, bud, t0 + float(cfg.max_seconds))
+    run.probe()
+    run.find_levels()
+    explored = run.adapt()
+    out = run.final_draws(explored)
+    if keep_runs is not None:
+        keep_runs.extend(out)
+    return _stratified_result(out, t0, cfg.inflate)
+
+
+class _Stratified:
+    """The steps of one ``stratified_importance`` run over shared state: per stratum its
+    evaluations outside its subset result (probes, discarded levels), its levels and its
+    run; the running total of the contributions found."""
+
+    def __init__(self, model: CutInGMM, limit_state: LimitState, seed: int,
+                 strata: list[Stratum], cfg: ImportanceSettings, budget: StrataBudget,
+                 deadline: float) -> None:
+        self.model, self.limit_state, self.seed = model, limit_state, seed
+        self.strata, self.cfg, self.budget, self.deadline = strata, cfg, budget, deadline
+        n = len(strata)
+        self.near = np.zeros(n)
+        self.extra_evals = [0] * n  # probes and discarded levels (not in the SubsetResult)
+        self.runs: list[StratumRun | None] = [None] * n
+        self.subs: list[SubsetResult | None] = [None] * n
+        self.total = 0.0
+
+    def levels(self, i: int, n: int, floor: float) -> SubsetResult:
         """Stratum i's subset levels with n points per level, down to floor."""
-        return subset_simulation(model, _in_stratum(strata[i], limit_state),
-                                 _stratum_seed(seed, i), n_per_level=n, p0=p0,
-                                 max_seconds=max(deadline - time.monotonic(), 1e-9),
-                                 min_probability=floor, from_normal=strata[i].from_normal)
+        return subset_simulation(self.model, _in_stratum(self.strata[i], self.limit_state),
+                                 _stratum_seed(self.seed, i), n_per_level=n, p0=self.cfg.p0,
+                                 max_seconds=max(self.deadline - time.monotonic(), 1e-9),
+                                 min_probability=floor, from_normal=self.strata[i].from_normal)
 
-    def explore(i: int, sub: SubsetResult, rounds: int) -> _Explored:
+    def explore(self, i: int, sub: SubsetResult, rounds: int) -> _Explored:
         """Stratum i's adaptation from its levels (rounds: 0 keeps the levels' density)."""
-        return _explore(model, limit_state, _stratum_seed(seed, i), stratum=strata[i],
-                        n_per_level=n_per_level, alpha=alpha, inflate=inflate, p0=p0,
-                        n_adapt=n_adapt, adapt_rounds=rounds, n_centres=n_centres, nu=nu,
-                        n_is=n_is, max_seconds=max_seconds, min_probability=min_probability,
-                        deadline=deadline, weighted_centres=weighted_centres, sub=sub,
-                        level_share=level_share)
+        return _explore(self.model, self.limit_state, _stratum_seed(self.seed, i), self.cfg,
+                        stratum=self.strata[i], deadline=self.deadline,
+                        weighted_centres=self.budget.weighted_centres, sub=sub,
+                        adapt_rounds=rounds)
 
-    for i in order:
-        st = strata[i]
-        if time.monotonic() > deadline:
-            raise SamplerError(f"stratified subset-is: stopped after max_seconds="
-                               f"{max_seconds:g} s exploring stratum {i + 1} of {len(strata)} "
-                               f"({st.label}); raise max_seconds")
-        floor = min_probability
-        if total > 0 and st.mass > 0:
-            floor = min(max(min_probability, rel_floor * total / st.mass), 0.5)
+    def probe(self) -> None:
+        """1. ``n_probe`` exact draws per stratum: its limit state's lower decile."""
+        n_probe = self.budget.n_probe
+        if n_probe <= 0:
+            return
+        for i, st in enumerate(self.strata):
+            rng_p = np.random.default_rng([int(self.seed) % (2**32), 11, i])
+            gp = np.asarray(_in_stratum(st, self.limit_state)(st.sample_z(int(n_probe), rng_p)))
+            self.extra_evals[i] = int(n_probe)
+            self.near[i] = float(np.quantile(np.where(np.isfinite(gp), gp, 1e300), 0.1))
+
+    def find_levels(self) -> None:
+        """2. Subset levels, the strata nearest the region first (so that the running total
+        is known early), each down to a floor relative to what the strata before found."""
+        strata = self.strata
+        order = sorted(range(len(strata)), key=lambda i: (self.near[i], -strata[i].mass))
+        for i in order:
+            st = strata[i]
+            if time.monotonic() > self.deadline:
+                raise SamplerError(f"stratified subset-is: stopped after max_seconds="
+                                   f"{self.cfg.max_seconds:g} s exploring stratum {i + 1} of "
+                                   f"{len(strata)} ({st.label}); raise max_seconds")
+            floor = self.cfg.min_probability
+            if self.total > 0 and st.mass > 0:
+                floor = min(max(self.cfg.min_probability,
+                                self.budget.rel_floor * self.total / st.mass), 0.5)
+            sub = self._stratum_levels(i, floor)
+            if sub is not None:
+                self.subs[i] = sub
+                self.total += st.mass * sub.probability
+        if not any(sub is not None for sub in self.subs):
+            done = [r for r in self.runs if r is not None]
+            raise EmptyRegionError(
+                f"stratified subset-is: the subset levels reached the region in none of the "
+                f"{len(strata)} strata", n_draws=sum(r.n_evaluations for r in done), n_hits=0,
+                p_upper=sum(r.stratum.mass * r.p_upper for r in done))
+
+    def _stratum_levels(self, i: int, floor: float) -> SubsetResult | None:
+        """Stratum i's levels (the evaluations of discarded attempts added to its extra
+        ones), or None when it is bounded, not estimated (its run then says why)."""
+        st, cfg, bud, total = self.strata[i], self.cfg, self.budget, self.total
         rerun_evals = 0
         try:
             # once a stratum has reached A, the others' levels only have to show that
             # they are negligible or find A for their kernel density: fewer points
-            sub = levels(i, n_per_level if total == 0 else n_per_level_rest, floor)
-            if total > 0 and n_per_level_rest < n_per_level and st.mass * sub.probability > total:
+            sub = self.levels(i, cfg.n_per_level if total == 0 else bud.n_per_level_rest,
+                              floor)
+            if (total > 0 and bud.n_per_level_rest < cfg.n_per_level
+                    and st.mass * sub.probability > total):
                 # the probes ordered it wrongly: it holds more than all strata before it,
                 # so its kernel density needs the full levels (from n_per_level_rest points
                 # the final level has too few distinct centres: measured 0.47 and 4e-8 of
                 # the reference on `ttc<3 & btn>0.5`, seeds 1014 and 1026)
                 rerun_evals = sub.n_evaluations
-                sub = levels(i, n_per_level, min_probability)
+                sub = self.levels(i, cfg.n_per_level, cfg.min_probability)
         except LevelsNotConvergedError as exc:
             # the levels met A but could not converge on it (a thin region): once more with
             # THIN_RETRY times the points per level, else refuse (the stratum may hold
             # most of P(A); counting it 0 would be silently wrong)
             try:
-                sub = levels(i, THIN_RETRY * n_per_level, floor)
-            except LevelsNotConvergedError as again:
-                raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
+                sub = self._thin_retry(i, floor)
             except EmptyRegionError as below:
-                runs[i] = StratumRun(st, None, None, int(exc.n_draws) + int(below.n_draws)
-                                     + n_probe_evals[i],
-                                     float(below.p_upper) if math.isfinite(below.p_upper)
-                                     else floor, str(below).splitlines()[0])
-                continue
+                self.runs[i] = StratumRun(st, None, None, int(exc.n_draws) + int(below.n_draws)
+                                          + self.extra_evals[i],
+                                          float(below.p_upper) if math.isfinite(below.p_upper)
+                                          else floor, str(below).splitlines()[0])
+                return None
             rerun_evals += int(exc.n_draws)
         except EmptyRegionError as exc:
             if exc.stalled is not None:
                 # the levels stalled (their chains did not move): "empty" bounds nothing
                 # here (on `2.9 < ttc < 3 & btn > 0.5` such a stratum held nearly all of
                 # P(A)); once more with THIN_RETRY times the points, as above
+                rerun_evals += int(exc.n_draws)  # the first attempt's
                 try:
-                    sub = levels(i, THIN_RETRY * n_per_level, floor)
-                except LevelsNotConvergedError as again:
-                    raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
+                    sub = self._thin_retry(i, floor)
                 except EmptyRegionError as below:
-                    rerun_evals += int(exc.n_draws)  # the first attempt's; below's next
                     exc = below
                 else:
-                    rerun_evals += int(exc.n_draws)
-                    subs[i] = sub
-                    n_probe_evals[i] += rerun_evals
-                    total += st.mass * sub.probability
-                    continue
+                    self.extra_evals[i] += rerun_evals
+                    return sub
             why = str(exc).splitlines()[0]
-            if floor > min_probability and not rerun_evals:
+            if floor > cfg.min_probability and not rerun_evals:
                 why = (f"cut at {floor:.3g} = rel_floor x the running total / pi_s: "
-                       f"contribution below {rel_floor:g} of the strata before it ({why})")
-            runs[i] = StratumRun(st, None, None,
-                                 int(exc.n_draws) + n_probe_evals[i] + rerun_evals,
-                                 float(exc.p_upper) if math.isfinite(exc.p_upper) else floor,
-                                 why)
-            continue
-        subs[i] = sub
-        n_probe_evals[i] += rerun_evals  # counted with the probes (not in sub)
-        total += st.mass * sub.probability
-    live = [i for i in range(len(strata)) if subs[i] is not None]
-    if not live:
-        done = [r for r in runs if r is not None]
-        raise EmptyRegionError(
-            f"stratified subset-is: the subset levels reached the region in none of the "
-            f"{len(strata)} strata", n_draws=sum(r.n_evaluations for r in done), n_hits=0,
-            p_upper=sum(r.stratum.mass * r.p_upper for r in done))
-    # 3. adaptation where the contribution is worth it
-    explored: dict[int, _Explored] = {}
-    for i in live:
-        st, found = strata[i], subs[i]
-        assert found is not None
-        sub = found
-        big = total > 0 and st.mass * sub.probability >= adapt_share * total
+                       f"contribution below {bud.rel_floor:g} of the strata before it ({why})")
+            self.runs[i] = StratumRun(st, None, None,
+                                      int(exc.n_draws) + self.extra_evals[i] + rerun_evals,
+                                      float(exc.p_upper) if math.isfinite(exc.p_upper)
+                                      else floor, why)
+            return None
+        self.extra_evals[i] += rerun_evals  # counted with the probes (not in sub)
+        return sub
+
+    def _thin_retry(self, i: int, floor: float) -> SubsetResult:
+        """Stratum i's levels once more with ``THIN_RETRY`` times the points; levels that
+        do not converge again are refused (``_unconverged``)."""
+        n = THIN_RETRY * self.cfg.n_per_level
         try:
-            ex = explore(i, sub, adapt_rounds if big else 0)
-        except EmptyRegionError as exc:
-            if st.mass * sub.probability < rel_floor * total:  # negligible: bounded
-                runs[i] = StratumRun(st, None, None, sub.n_evaluations + n_probe_evals[i],
-                                     sub.probability, str(exc).splitlines()[0])
+            return self.levels(i, n, floor)
+        except LevelsNotConvergedError as again:
+            raise _unconverged(self.strata[i], again, n) from None
+
+    def adapt(self) -> dict[int, _Explored]:
+        """3. Adaptation where the contribution is worth it (``adapt_share``); a stratum
+        whose final level is too thin for a kernel density is bounded when negligible,
+        else its levels are re-run with more points."""
+        explored: dict[int, _Explored] = {}
+        cfg, bud, total = self.cfg, self.budget, self.total
+        for i, found in enumerate(self.subs):
+            if found is None:
                 continue
-            # too few distinct points in a stratum that matters (a thin region: the final
-            # level's chains barely moved): its levels once more with more points
-            n_probe_evals[i] += sub.n_evaluations
+            st, sub = self.strata[i], found
+            big = total > 0 and st.mass * sub.probability >= bud.adapt_share * total
+            rounds = cfg.adapt_rounds if big else 0
             try:
-                sub = levels(i, THIN_RETRY * n_per_level, min_probability)
-                ex = explore(i, sub, adapt_rounds if big else 0)
-            except (EmptyRegionError, LevelsNotConvergedError) as again:
-                raise _unconverged(st, again, THIN_RETRY * n_per_level) from None
-        explored[i] = ex
-        runs[i] = StratumRun(st, None, ex.sub,
-                             n_probe_evals[i] + ex.sub.n_evaluations + ex.n_adapt)
-    if not explored:
-        done = [r for r in runs if r is not None]
-        raise EmptyRegionError(
-            "stratified subset-is: no stratum's final subset level held enough distinct "
-            "points inside the region for an importance density; raise n_per_level",
-            n_draws=sum(r.n_evaluations for r in done), n_hits=0)
-    # 4. the final importance draws, by estimated contribution
-    keys = list(explored)
-    contrib = np.array([strata[i].mass * max(explored[i].pilot[0], 0.0) for i in keys])
-    share = contrib / contrib.sum() if contrib.sum() > 0 else np.full(len(keys), 1 / len(keys))
-    for i, sh in zip(keys, share, strict=True):
-        ex_i = explored[i]
-        stage = ImportanceStage(ex_i.base, ex_i.limit_state, ex_i.proposal, deadline,
-                                max_seconds)
-        stage.add(max(int(n_is_min), round(n_is * float(sh))), ex_i.rng)
-        run_i = runs[i]
-        assert run_i is not None
-        run_i.stage = stage
-    out = [r for r in runs if r is not None]
-    if keep_runs is not None:
-        keep_runs.extend(out)
-    return _stratified_result(out, t0, inflate)
+                ex = self.explore(i, sub, rounds)
+            except EmptyRegionError as exc:
+                if st.mass * sub.probability < bud.rel_floor * total:  # negligible: bounded
+                    self.runs[i] = StratumRun(st, None, None,
+                                              sub.n_evaluations + self.extra_evals[i],
+                                              sub.probability, str(exc).splitlines()[0])
+                    continue
+                # too few distinct points in a stratum that matters (a thin region: the
+                # final level's chains barely moved): its levels once more with more points
+                self.extra_evals[i] += sub.n_evaluations
+                try:
+                    sub = self.levels(i, THIN_RETRY * cfg.n_per_level, cfg.min_probability)
+                    ex = self.explore(i, sub, rounds)
+                except (EmptyRegionError, LevelsNotConvergedError) as again:
+                    raise _unconverged(st, again, THIN_RETRY * cfg.n_per_level) from None
+            explored[i] = ex
+            self.runs[i] = StratumRun(st, None, ex.sub,
+                                      self.extra_evals[i] + ex.sub.n_evaluations + ex.n_adapt)
+        if not explored:
+            done = [r for r in self.runs if r is not None]
+            raise EmptyRegionError(
+                "stratified subset-is: no stratum's final subset level held enough distinct "
+                "points inside the region for an importance density; raise n_per_level",
+                n_draws=sum(r.n_evaluations for r in done), n_hits=0)
+        return explored
+
+    def final_draws(self, explored: dict[int, _Explored]) -> list[StratumRun]:
+        """4. The final importance draws, ``n_is`` in all, by estimated contribution (at
+        least ``n_is_min`` each); the runs of every stratum."""
+        keys = list(explored)
+        contrib = np.array([self.strata[i].mass * max(explored[i].pilot[0], 0.0)
+                            for i in keys])
+        share = (contrib / contrib.sum() if contrib.sum() > 0
+                 else np.full(len(keys), 1 / len(keys)))
+        for i, sh in zip(keys, share, strict=True):
+            ex_i = explored[i]
+            stage = ImportanceStage(ex_i.base, ex_i.limit_state, ex_i.proposal, self.deadline,
+                                    self.cfg.max_seconds)
+            stage.add(max(int(self.budget.n_is_min), round(self.cfg.n_is * float(sh))),
+                      ex_i.rng)
+            run_i = self.runs[i]
+            assert run_i is not None
+            run_i.stage = stage
+        return [r for r in self.runs if r is not None]
 
 
 #: a stratum whose levels met the region but could not converge on it, or whose final
@@ -655,37 +774,28 @@ def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> Rar
         seconds=time.monotonic() - t0)
 
 
-class SubsetISSampler(Sampler):
-    """Subset levels, importance sampling for P(A), an independence chain for the samples.
+@dataclass(frozen=True)
+class StrataSettings:
+    """Whether and how ``SubsetISSampler`` stratifies (``stratified_importance``).
 
-    Parameters
+    Attributes
     ----------
-    n_per_level, n_is, alpha, inflate, n_adapt, adapt_rounds, n_centres :
-        See ``subset_importance``.
-    max_seconds : float
-        Time budget of the whole run; exceeded -> ``SamplerError``.
-    min_probability : float
-        Give up (``EmptyRegionError``) when the subset levels get below this mass.
-    ess_target : float
-        Draw more proposals until the chains' effective sample size is at least
-        ``ess_target * n`` (when the budget is nearly spent first: a warning in the
-        diagnostics instead).
-    n_chains : int
-        Independence chains the proposals are dealt to.
     stratify : {"auto", "always", "never"}
-        ``always``: ``stratified_importance`` (one subset-is per stratum of the model:
-        component x cut-in side, or component x envelope, ``strat_envelope``);
-        ``never``: one subset-is on the whole model; ``auto``: see ``STRATIFY_AUTO``.
-    strat_per_level, strat_n_adapt, strat_n_is_min :
+        ``always``: one subset-is per stratum of the model (component x cut-in side, or
+        component x envelope, ``envelope``); ``never``: one subset-is on the whole model;
+        ``auto``: see ``STRATIFY_AUTO``.
+    per_level, n_adapt, n_is_min :
         The stratified run's ``n_per_level``, ``n_adapt`` and ``n_is_min``
-        (``stratified_importance``); ``n_is`` is shared.
-    level_share : float
-        See ``subset_importance`` (both paths; per stratum in the stratified one).
-    strat_envelope : bool
+        (``stratified_importance``; ``n_is`` is the sampler's).
+    split_side : bool
+        Split each component by the cut-in side (``make_strata``).
+    weighted_centres : bool
+        ``StrataBudget.weighted_centres``.
+    envelope : bool
         Stratify inside the region's half-space envelope when it has one (component x S,
-        ``_strata``): the levels then only go down to P(A | S), and nothing outside S is
-        simulated (measured in ``docs/sampler.md``).
-    strat_env_n_adapt : int
+        ``SubsetISSampler._strata``): the levels then only go down to P(A | S), and nothing
+        outside S is simulated (measured in ``docs/sampler.md``).
+    env_n_adapt : int
         ``n_adapt`` of a run stratified inside the envelope (its levels cost less, and the
         adaptation needs more draws there: on a closed-form region the reported CoV was
         27 % low with 1,500 and right with 2,000; on the TNO envelope regions 2,000 kept
@@ -693,41 +803,108 @@ class SubsetISSampler(Sampler):
         coverage; ``docs/sampler.md``).
     """
 
+    stratify: str = "auto"
+    per_level: int = 1000
+    n_adapt: int = 1500
+    n_is_min: int = 300
+    split_side: bool = True
+    weighted_centres: bool = True
+    envelope: bool = True
+    env_n_adapt: int = 2000
+
+    def __post_init__(self) -> None:
+        if self.stratify not in ("auto", "always", "never"):
+            raise SamplerError(f"stratify: expected auto, always or never, got "
+                               f"{self.stratify!r}")
+
+
+@dataclass(frozen=True)
+class ChainSettings:
+    """The independence chains that turn subset-is's importance draws into samples.
+
+    Attributes
+    ----------
+    ess_target : float
+        Draw more proposals until the chains' effective sample size is at least
+        ``ess_target * n`` (when the budget is nearly spent first: a warning in the
+        diagnostics instead).
+    n_chains : int
+        Independence chains the proposals are dealt to.
+    """
+
+    ess_target: float = 0.25
+    n_chains: int = 4
+
+
+#: ``SubsetISSampler``'s settings by their flat names (``settings()``, ``from_settings``):
+#: name -> (settings object, field, type)
+_FLAT: dict[str, tuple[str, str, type]] = {
+    "n_per_level": ("importance", "n_per_level", int), "n_is": ("importance", "n_is", int),
+    "alpha": ("importance", "alpha", float), "inflate": ("importance", "inflate", float),
+    "n_adapt": ("importance", "n_adapt", int),
+    "adapt_rounds": ("importance", "adapt_rounds", int),
+    "n_centres": ("importance", "n_centres", int),
+    "max_seconds": ("importance", "max_seconds", float),
+    "min_probability": ("importance", "min_probability", float),
+    "ess_target": ("chains", "ess_target", float), "n_chains": ("chains", "n_chains", int),
+    "stratify": ("stratification", "stratify", str),
+    "strat_per_level": ("stratification", "per_level", int),
+    "strat_n_adapt": ("stratification", "n_adapt", int),
+    "strat_n_is_min": ("stratification", "n_is_min", int),
+    "strat_split_side": ("stratification", "split_side", bool),
+    "strat_weighted_centres": ("stratification", "weighted_centres", bool),
+    "strat_envelope": ("stratification", "envelope", bool),
+    "strat_env_n_adapt": ("stratification", "env_n_adapt", int),
+    "level_share": ("importance", "level_share", float),
+}
+
+
+class SubsetISSampler(Sampler):
+    """Subset levels, importance sampling for P(A), an independence chain for the samples.
+
+    Parameters
+    ----------
+    importance : ImportanceSettings, optional
+        The subset-is run (``subset_importance``; per stratum in the stratified one, whose
+        ``n_per_level`` and ``n_adapt`` come from ``stratification``): levels, proposal,
+        adaptation, the time budget of the whole run (exceeded -> ``SamplerError``) and the
+        smallest mass the levels go down to (below: ``EmptyRegionError``).
+    stratification : StrataSettings, optional
+    chains : ChainSettings, optional
+
+    ``from_settings(**flat)`` builds one from the flat names ``settings()`` records (e.g.
+    ``strat_envelope=False``; what ``rare_probability`` passes on).
+    """
+
     name = "subset-is"
 
-    def __init__(self, n_per_level: int = 1000, n_is: int = 4000, alpha: float = 0.1,
-                 inflate: float = 1.3, n_adapt: int = 1500, adapt_rounds: int = 2,
-                 n_centres: int = 300, max_seconds: float = 120.0,
-                 min_probability: float = 1e-14, ess_target: float = 0.25,
-                 n_chains: int = 4, stratify: str = "auto", strat_per_level: int = 1000,
-                 strat_n_adapt: int = 1500, strat_n_is_min: int = 300,
-                 strat_split_side: bool = True, strat_weighted_centres: bool = True,
-                 level_share: float = 0.3, strat_envelope: bool = True,
-                 strat_env_n_adapt: int = 2000) -> None:
-        if stratify not in ("auto", "always", "never"):
-            raise SamplerError(f"stratify: expected auto, always or never, got {stratify!r}")
-        self.n_per_level = int(n_per_level)
-        self.n_is = int(n_is)
-        self.alpha = float(alpha)
-        self.inflate = float(inflate)
-        self.n_adapt = int(n_adapt)
-        self.adapt_rounds = int(adapt_rounds)
-        self.n_centres = int(n_centres)
-        self.max_seconds = float(max_seconds)
-        self.min_probability = float(min_probability)
-        self.ess_target = float(ess_target)
-        self.n_chains = int(n_chains)
-        self.stratify = stratify
-        self.strat_per_level = int(strat_per_level)
-        self.strat_n_adapt = int(strat_n_adapt)
-        self.strat_n_is_min = int(strat_n_is_min)
-        self.strat_split_side = bool(strat_split_side)
-        self.strat_weighted_centres = bool(strat_weighted_centres)
-        self.strat_envelope = bool(strat_envelope)
-        self.strat_env_n_adapt = int(strat_env_n_adapt)
-        if not 0.0 <= level_share < 1.0:
-            raise SamplerError(f"level_share: must be in [0, 1), got {level_share!r}")
-        self.level_share = float(level_share)
+    def __init__(self, importance: ImportanceSettings | None = None,
+                 stratification: StrataSettings | None = None,
+                 chains: ChainSettings | None = None) -> None:
+        self.importance = importance or ImportanceSettings()
+        self.stratification = stratification or StrataSettings()
+        self.chains = chains or ChainSettings()
+
+    @classmethod
+    def from_settings(cls, **flat: Any) -> SubsetISSampler:
+        """A sampler from flat settings (the names of ``settings()``: ``n_is``, ``alpha``,
+        ``stratify``, ``strat_envelope``, ...); the others keep their defaults."""
+        unknown = sorted(set(flat) - set(_FLAT))
+        if unknown:
+            raise SamplerError(f"subset-is: unknown setting(s) {', '.join(unknown)}; valid: "
+                               f"{', '.join(_FLAT)}")
+        parts: dict[str, dict[str, Any]] = {"importance": {}, "stratification": {},
+                                            "chains": {}}
+        for key, value in flat.items():
+            part, name, kind = _FLAT[key]
+            parts[part][name] = value if kind is str else kind(value)
+        return cls(ImportanceSettings(**parts["importance"]),
+                   StrataSettings(**parts["stratification"]), ChainSettings(**parts["chains"]))
+
+    def settings(self) -> dict[str, Any]:
+        """The flat settings (``from_settings`` takes them back)."""
+        return {"name": self.name, **{key: getattr(getattr(self, part), name)
+                                      for key, (part, name, _) in _FLAT.items()}}
 
     def _limit_state(self, problem: Problem, rng: np.random.Generator) -> LimitState:
         limit_state = region_limit_state(problem.model, problem.region, rng)
@@ -740,20 +917,20 @@ class SubsetISSampler(Sampler):
 
     def _strata(self, problem: Problem) -> tuple[list[Stratum], bool]:
         """The strata of a stratified run and whether they lie inside an envelope: with
-        ``strat_envelope`` and a region that has a half-space envelope S
+        ``StrataSettings.envelope`` and a region that has a half-space envelope S
         (``sampler.methods.envelope``, e.g. from ``ttc<3``), component x S (every stratum inside
         S, which holds the region: each P_s(A) is conditional on S, and no simulation is
         spent outside it); else component x cut-in side."""
-        if self.strat_envelope:
+        if self.stratification.envelope:
             env = find_envelope(problem.model, problem.region)
             if env is not None:
                 return halfspace_strata(problem.model, env.a, env.b, env.source), True
-        return make_strata(problem.model, self.strat_split_side), False
+        return make_strata(problem.model, self.stratification.split_side), False
 
     def _stratified(self, problem: Problem) -> bool:
-        if self.stratify == "always":
+        if self.stratification.stratify == "always":
             return True
-        if self.stratify == "never":
+        if self.stratification.stratify == "never":
             return False
         return STRATIFY_AUTO(problem)
 
@@ -765,24 +942,17 @@ class SubsetISSampler(Sampler):
         a stratified one."""
         limit_state = self._limit_state(problem, rng)
         seed = int(rng.integers(0, 2**31 - 1))
-        common = {"n_is": self.n_is, "alpha": self.alpha, "inflate": self.inflate,
-                  "adapt_rounds": self.adapt_rounds, "n_centres": self.n_centres,
-                  "max_seconds": self.max_seconds, "min_probability": self.min_probability,
-                  "level_share": self.level_share}
         if self._stratified(problem):
             strata, inside_envelope = self._strata(problem)
-            return stratified_importance(problem.model, limit_state, seed,
-                                         strata=strata,
-                                         n_per_level=self.strat_per_level,
-                                         n_adapt=(self.strat_env_n_adapt if inside_envelope
-                                                  else self.strat_n_adapt),
-                                         n_is_min=self.strat_n_is_min,
-                                         weighted_centres=self.strat_weighted_centres,
-                                         keep_runs=keep_runs,
-                                         **common)  # type: ignore[arg-type]
-        return subset_importance(problem.model, limit_state, seed,
-                                 n_per_level=self.n_per_level, n_adapt=self.n_adapt,
-                                 keep_stage=keep_stage, **common)  # type: ignore[arg-type]
+            st = self.stratification
+            per_stratum = replace(self.importance, n_per_level=st.per_level,
+                                  n_adapt=st.env_n_adapt if inside_envelope else st.n_adapt)
+            budget = StrataBudget(n_is_min=st.n_is_min, weighted_centres=st.weighted_centres)
+            return stratified_importance(problem.model, limit_state, seed, strata=strata,
+                                         settings=per_stratum, budget=budget,
+                                         keep_runs=keep_runs)
+        return subset_importance(problem.model, limit_state, seed, self.importance,
+                                 keep_stage=keep_stage)
 
     def _chains(self, stage: ImportanceStage, n: int, rng: np.random.Generator,
                 t_start: float, warnings: list[str], what: str
@@ -790,21 +960,21 @@ class SubsetISSampler(Sampler):
         """``n`` samples of the stage's restricted law from independence chains over its
         draws (more draws until the chains' ESS reaches ``ess_target * n``)."""
         while True:
-            states, acc = independence_chain(stage.log_w, rng, self.n_chains)
+            states, acc = independence_chain(stage.log_w, rng, self.chains.n_chains)
             zs = stage.z
-            tau = _tau(zs[states])  # chain (steps, chains, d)
+            tau = integrated_time(zs[states])  # chain (steps, chains, d)
             tau_max = float(tau.max())
             burn = min(math.ceil(2 * tau_max), states.shape[0] // 2)
             post = states[burn:]
             ess = post.size / tau_max
-            if ess >= self.ess_target * n:
+            if ess >= self.chains.ess_target * n:
                 break
-            if time.monotonic() - t_start > 0.8 * self.max_seconds:
+            if time.monotonic() - t_start > 0.8 * self.importance.max_seconds:
                 warnings.append(f"{what}time budget nearly spent with ESS {ess:.0f} < "
-                                f"{self.ess_target * n:.0f}: the samples are more correlated "
-                                "than asked")
+                                f"{self.chains.ess_target * n:.0f}: the samples are more "
+                                "correlated than asked")
                 break
-            need = self.ess_target * n / max(ess, 1.0) * stage.n - stage.n
+            need = self.chains.ess_target * n / max(ess, 1.0) * stage.n - stage.n
             stage.add(int(min(max(need * 1.2, 2000), 8 * stage.n)), rng)
         flat = post.reshape(-1)  # time-major: consecutive entries are different chains
         pick = flat[np.linspace(0, flat.size - 1, n).round().astype(int)]
@@ -821,7 +991,7 @@ class SubsetISSampler(Sampler):
         warnings: list[str] = []
         if not runs:
             z, ch = self._chains(stages[0], n, rng, t_start, warnings, "")
-            res = _result(stages[0], res.subset, t_start, res.n_adapt, self.inflate)
+            res = _result(stages[0], res.subset, t_start, res.n_adapt, self.importance.inflate)
             diag = {"acceptance_fraction": ch["acceptance"].tolist(),
                     "acceptance_mean": float(ch["acceptance"].mean()),
                     "tau": ch["tau"].tolist(), "tau_max": ch["tau_max"],
@@ -848,7 +1018,7 @@ class SubsetISSampler(Sampler):
             z = np.concatenate(parts, axis=0)
             # shuffled (deterministically) so that a prefix is not one stratum
             z = z[rng.permutation(z.shape[0])]
-            res = _stratified_result(runs, t_start, self.inflate)
+            res = _stratified_result(runs, t_start, self.importance.inflate)
             ess = sum(min(p["n"], p["ess_chain"]) for p in per)
             w = np.array([p["n"] for p in per], dtype=float)
             diag = {"acceptance_mean": float(np.average([p["acceptance_mean"] for p in per],
@@ -859,9 +1029,28 @@ class SubsetISSampler(Sampler):
         if progress is not None:
             progress("subset-is", n, n)
         diag = {"subset_is": res.summary(), "n_evaluations": problem.n_evals,
-                "n_chains": self.n_chains, **diag, "warnings": warnings}
+                "n_chains": self.chains.n_chains, **diag, "warnings": warnings}
         return Draw(z=np.ascontiguousarray(z), method=self.name, diagnostics=diag,
                     mc_draws=pilot.n_draws, mc_hits=pilot.n_hits, subset=res)
+
+    def estimate_p(self, run: Run, pilot: Pilot, drawn: Draw) -> PRegion:
+        return estimate_from_levels(run, pilot, drawn)
+
+    def estimate_alone(self, run: Run, pilot: Pilot) -> PRegion:
+        """P(A) without samples: a subset-is run (``run``), overruled by the pilot's exact
+        draws when it contradicts them (``PRegionEstimator.from_subset``)."""
+        run.starting("subset-is (rare-event estimate)")
+        return run.estimator.from_subset(run.problem, self.run(run.problem, run.rng),
+                                         run.bounds, pilot)
+
+    @classmethod
+    def summarise(cls, diagnostics: dict[str, Any]) -> list[str]:
+        d = diagnostics
+        r = d["subset_is"]
+        return [f"subset-is: {r['n_evaluations']} evaluations ({r['subset']['levels']} "
+                f"subset levels), CoV {r['cov']:.3f}; independence chains: "
+                f"acceptance {d['acceptance_mean']:.2f}, tau {d['tau_max']:.1f}, "
+                f"ESS {d['ess']:.0f}", *d.get("warnings", [])]
 
 
 def _apportion(n: int, weights: FloatArray) -> NDArray[np.int64]:
@@ -909,4 +1098,4 @@ def rare_probability(model: CutInGMM, constraints: Any, seed: int, *,
         constraints, lane_width=model.lane_width_ if lane_width is None else lane_width,
         physical_bounds=physical_bounds)
     problem = Problem(model, region, use_envelope=False)
-    return SubsetISSampler(**settings).run(problem, np.random.default_rng(seed))
+    return SubsetISSampler.from_settings(**settings).run(problem, np.random.default_rng(seed))

@@ -45,18 +45,21 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
 from sampler.errors import EmptyRegionError, LevelsNotConvergedError, SamplerError
-from sampler.methods.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Sampler
+from sampler.methods.problem import Draw, FloatArray, Pilot, Problem, ProgressFn, Run, Sampler
 from sampler.model.gmm import CutInGMM
 from sampler.model.support import support_margin
 from sampler.region.constraints import OPERATORS, Region
 from sampler.region.criticality import CRITICALITY_QUANTITIES, criticality_quantities
+
+if TYPE_CHECKING:  # annotations only
+    from sampler.methods.probability import PRegion
 
 __all__ = ["LimitState", "SubsetResult", "SubsetSampler", "region_limit_state",
            "subset_simulation"]
@@ -592,3 +595,36 @@ class SubsetSampler(Sampler):
                 "ess": float(min(n, z.shape[0] / (1.0 + last_gamma)))}
         return Draw(z=np.ascontiguousarray(pick), method=self.name, diagnostics=diag,
                     mc_draws=pilot.n_draws, mc_hits=pilot.n_hits, subset=res)
+
+    def estimate_p(self, run: Run, pilot: Pilot, drawn: Draw) -> PRegion:
+        return estimate_from_levels(run, pilot, drawn)
+
+    def estimate_alone(self, run: Run, pilot: Pilot) -> PRegion:
+        """P(A) without samples: a subset simulation (after the broadened search when the
+        pilot found nothing, which ends an empty region with its bound)."""
+        run.starting("subset simulation")
+        if pilot.n_hits == 0:
+            run.estimator.search(run.problem, run.rng, pilot, 1)
+        return run.estimator.from_subset(run.problem, self.run(run.problem, 1, run.rng),
+                                         run.bounds)
+
+    @classmethod
+    def summarise(cls, diagnostics: dict[str, Any]) -> list[str]:
+        sub = diagnostics["subset"]
+        return [f"subset simulation: {sub['levels']} levels of {sub['n_per_level']}, "
+                f"{sub['n_evaluations']} evaluations, CoV {sub['cov']:.2f} "
+                f"(independent levels) ... {sub['cov_upper']:.2f} (bound)"]
+
+
+def estimate_from_levels(run: Run, pilot: Pilot, drawn: Draw) -> PRegion:
+    """P(A) of a draw that carries a subset simulation's (or subset-is's) result
+    (``PRegionEstimator.from_subset``). For a criticality region the pilot's exact draws
+    may overrule it (``PRegionEstimator.contradicts``); the diagnostics then say so."""
+    p_region = run.estimator.from_subset(run.problem, drawn.subset, run.bounds,
+                                         pilot if run.problem.costly else None)
+    if p_region.method != drawn.method:  # overruled by the pilot's exact draws
+        drawn.diagnostics["overruled"] = (
+            f"{drawn.method}'s P(A) lay below the pilot's exact lower bound (99.9 %): "
+            f"P(A) is the pilot's plain estimate ({pilot.n_hits} hits); the samples "
+            "may cover only part of the region")
+    return p_region

@@ -24,7 +24,10 @@ from sampler.methods.importance import (
 from sampler.methods.probability import PRegionEstimator
 from sampler.methods.problem import Problem
 from sampler.methods.rare import (
+    ImportanceSettings,
     RareResult,
+    StrataBudget,
+    StrataSettings,
     SubsetISSampler,
     _apportion,
     rare_probability,
@@ -241,32 +244,36 @@ def test_level_share_keeps_the_levels_kernel_density() -> None:
     def g(z: np.ndarray) -> np.ndarray:
         return np.asarray(b - z @ a, dtype=np.float64)
 
-    res = [subset_importance(model, g, seed, level_share=0.3) for seed in range(REPS)]
+    res = [subset_importance(model, g, seed, ImportanceSettings(level_share=0.3))
+           for seed in range(REPS)]
     assert {r.proposal["level_share"] for r in res} == {0.3}  # reported with the result
     stages: list[ImportanceStage] = []
-    subset_importance(model, g, 0, level_share=0.3, keep_stage=stages)
+    subset_importance(model, g, 0, ImportanceSettings(level_share=0.3), keep_stage=stages)
     q = stages[0].proposal
     assert isinstance(q, KernelMixture)
     np.testing.assert_allclose(q.shares, [0.7, 0.3])
     plain: list[ImportanceStage] = []
-    subset_importance(model, g, 0, keep_stage=plain, level_share=0.0)
+    subset_importance(model, g, 0, ImportanceSettings(level_share=0.0), keep_stage=plain)
     assert isinstance(plain[0].proposal, KernelProposal)
-    assert subset_importance(model, g, 0, level_share=0.0).proposal["level_share"] == 0.0
+    no_share = ImportanceSettings(level_share=0.0)
+    assert subset_importance(model, g, 0, no_share).proposal["level_share"] == 0.0
     # without adaptation rounds there is no adapted density to mix: the levels' one alone
-    assert subset_importance(model, g, 0, adapt_rounds=0).proposal["level_share"] == 0.0
+    no_rounds = ImportanceSettings(adapt_rounds=0)
+    assert subset_importance(model, g, 0, no_rounds).proposal["level_share"] == 0.0
     # stratified: per stratum, on the strata that were adapted
     strat = stratified_importance(_sided_two_component(), g, 0)
     shares = [s["level_share"] for s in strat.proposal["strata"] if "level_share" in s]
     assert shares and set(shares) <= {0.0, 0.3} and 0.3 in shares
-    assert SubsetISSampler().level_share == 0.3  # the default (measured in docs/sampler.md)
+    # the default (measured in docs/sampler.md)
+    assert SubsetISSampler().importance.level_share == 0.3
     est = np.array([r.probability for r in res])
     cov = np.array([r.cov for r in res])
     assert np.mean(np.abs(est - p_true) <= 2.0 * cov * est) >= 0.9
     assert abs(est.mean() - p_true) <= 3.0 * est.std(ddof=1) / math.sqrt(REPS)
     with pytest.raises(SamplerError, match="level_share"):
-        SubsetISSampler(level_share=1.0)
+        SubsetISSampler.from_settings(level_share=1.0)
     with pytest.raises(SamplerError, match="level_share"):
-        subset_importance(model, g, 0, level_share=-0.1)
+        subset_importance(model, g, 0, ImportanceSettings(level_share=-0.1))
 
 
 @pytest.mark.slow
@@ -309,7 +316,7 @@ def test_time_bound_and_bad_settings() -> None:
         return np.asarray(4.0 - z[:, 0])
 
     with pytest.raises(SamplerError, match="max_seconds"):
-        subset_importance(model, g, 0, max_seconds=1e-9)
+        subset_importance(model, g, 0, ImportanceSettings(max_seconds=1e-9))
 
     def slow_after_subset(z: np.ndarray) -> np.ndarray:
         if slow_after_subset.calls > 60:  # type: ignore[attr-defined]
@@ -319,11 +326,12 @@ def test_time_bound_and_bad_settings() -> None:
 
     slow_after_subset.calls = 0  # type: ignore[attr-defined]
     with pytest.raises(SamplerError, match="max_seconds"):
-        subset_importance(model, slow_after_subset, 0, max_seconds=3.0, n_is=10**6)
+        subset_importance(model, slow_after_subset, 0,
+                          ImportanceSettings(max_seconds=3.0, n_is=10**6))
     with pytest.raises(SamplerError, match="alpha"):
-        subset_importance(model, g, 0, alpha=1.0)
+        subset_importance(model, g, 0, ImportanceSettings(alpha=1.0))
     with pytest.raises(SamplerError, match="n_is"):
-        subset_importance(model, g, 0, n_is=1)
+        subset_importance(model, g, 0, ImportanceSettings(n_is=1))
 
 
 # ---------------------------------------------------------------- stratified subset-is
@@ -419,7 +427,7 @@ def test_apportion_by_hand() -> None:
 
 
 def test_stratified_sampler_is_deterministic_and_inside(tno: CutInGMM) -> None:
-    strat = SubsetISSampler(stratify="always")
+    strat = SubsetISSampler(stratification=StrataSettings(stratify="always"))
     a = sample(tno, ["ttc<3", "btn>0.5"], 60, seed=2, method=strat)
     b = sample(tno, ["ttc<3", "btn>0.5"], 60, seed=2, method=strat)
     np.testing.assert_array_equal(a.params.to_numpy(), b.params.to_numpy())
@@ -434,7 +442,7 @@ def test_stratified_sampler_is_deterministic_and_inside(tno: CutInGMM) -> None:
     assert sum(s["contribution"] for s in strata) == pytest.approx(a.p_region.p_joint)
     assert "subset-is" in a.summary()
     with pytest.raises(SamplerError, match="stratify"):
-        SubsetISSampler(stratify="sometimes")
+        StrataSettings(stratify="sometimes")
 
 
 def test_stratified_time_bound() -> None:
@@ -444,7 +452,7 @@ def test_stratified_time_bound() -> None:
         return np.asarray(4.0 - z[:, 0])
 
     with pytest.raises(SamplerError, match="max_seconds"):
-        stratified_importance(model, g, 0, max_seconds=1e-9)
+        stratified_importance(model, g, 0, settings=ImportanceSettings(max_seconds=1e-9))
 
 
 def test_negligible_strata_are_cut_and_bounded() -> None:
@@ -463,7 +471,7 @@ def test_negligible_strata_are_cut_and_bounded() -> None:
         return np.asarray(b - z[:, 0], dtype=np.float64)
 
     r = stratified_importance(model, g, 3)
-    full = stratified_importance(model, g, 3, rel_floor=0.0)
+    full = stratified_importance(model, g, 3, budget=StrataBudget(rel_floor=0.0))
     assert abs(r.probability - 1e-5) <= 2.0 * r.cov * r.probability
     cut = [s for s in r.proposal["strata"] if "empty_reason" in s]
     assert all("cut at" in s["empty_reason"] for s in cut)
@@ -499,8 +507,8 @@ def test_dominant_stratum_found_late_gets_full_levels() -> None:
         return np.asarray(b - z[:, 0], dtype=np.float64)
 
     for seed in range(2):
-        r = stratified_importance(model, g, seed, n_probe=0, n_per_level=1000,
-                                  n_per_level_rest=200)
+        r = stratified_importance(model, g, seed, settings=ImportanceSettings(n_per_level=1000),
+                                  budget=StrataBudget(n_probe=0, n_per_level_rest=200))
         strata = r.proposal["strata"]
         assert strata[0]["stratum"] == "component 0, p_y1 > 0"
         assert strata[0]["contribution"] > 0  # it reached A first: the others start at 200
@@ -527,7 +535,7 @@ def test_auto_stratifies_mixtures(tno: CutInGMM) -> None:
                                "covariances": [tno.covariances_[k % 3].tolist()
                                                for k in range(9)]})
     assert not SubsetISSampler()._stratified(Problem(many, region, use_envelope=False))
-    assert not SubsetISSampler(stratify="never")._stratified(
+    assert not SubsetISSampler(stratification=StrataSettings(stratify="never"))._stratified(
         Problem(tno, region, use_envelope=False))
 
 
@@ -608,8 +616,9 @@ def test_envelope_strata_estimate_a_region_inside_the_envelope() -> None:
         seen.append(z @ a)
         return np.asarray(t2 - z @ a, dtype=np.float64)
 
-    n_adapt = SubsetISSampler().strat_env_n_adapt  # the sampler's setting inside S
-    res = [stratified_importance(model, g, seed, strata=strata, n_adapt=n_adapt)
+    n_adapt = SubsetISSampler().stratification.env_n_adapt  # the sampler's setting inside S
+    res = [stratified_importance(model, g, seed, strata=strata,
+                                 settings=ImportanceSettings(n_adapt=n_adapt))
            for seed in range(REPS)]
     est = np.array([r.probability for r in res])
     cov = np.array([r.cov for r in res])
@@ -635,7 +644,7 @@ def test_sampler_stratifies_inside_the_envelope(tno: CutInGMM) -> None:
     assert inside
     assert sum(s.mass for s in strata) == pytest.approx(env.mass, rel=1e-9)
     assert all("envelope" in s.label for s in strata)
-    side, inside = SubsetISSampler(strat_envelope=False)._strata(problem)
+    side, inside = SubsetISSampler(stratification=StrataSettings(envelope=False))._strata(problem)
     assert not inside
     assert sum(s.mass for s in side) == pytest.approx(1.0, abs=1e-12)
     btn = Region.from_constraints(["btn>0.5"], lane_width=tno.lane_width_)
@@ -877,13 +886,13 @@ def test_unconverged_stratum_is_retried_then_refused(monkeypatch: pytest.MonkeyP
 
     strata = make_strata(model)[:1]  # one stratum: its first levels fail once
     monkeypatch.setattr(rare, "subset_simulation", flaky)
-    r = stratified_importance(model, g, 0, strata=strata, n_probe=0)
+    r = stratified_importance(model, g, 0, strata=strata, budget=StrataBudget(n_probe=0))
     assert calls == [1000, rare.THIN_RETRY * 1000]
     assert r.probability > 0 and r.proposal["strata"][0]["n_is"] > 0
     calls.clear()
     failures["left"] = 2  # the retry fails too
     with pytest.raises(LevelsNotConvergedError, match=r"component 0.*also with 4000 points"):
-        stratified_importance(model, g, 0, strata=strata, n_probe=0)
+        stratified_importance(model, g, 0, strata=strata, budget=StrataBudget(n_probe=0))
 
 
 def test_auto_takes_the_pilots_hits_when_they_suffice() -> None:
@@ -943,7 +952,6 @@ def test_standalone_criticality_region_is_split_at_the_envelope(tno: CutInGMM) -
     the 10^7-draw reference of bench_rare). ``sample`` reports the same P(A), and a
     catalogue chunk's known P(A) is not re-estimated. With the default budget the plain
     run reaches it (``btn_bound``): within 3 combined standard errors, for two seeds."""
-    from app.domain.sampling import KnownRegion
     from sampler.sampling import estimate_p_region
 
     def est() -> PRegionEstimator:
@@ -984,23 +992,24 @@ def test_standalone_criticality_region_is_split_at_the_envelope(tno: CutInGMM) -
     parts = ss.diagnostics["split"]["parts"]
     assert parts[0]["method"] in ("envelope", "mc") and parts[1]["method"] == "subset-is"
     assert sum(q["p_joint"] for q in parts) == pytest.approx(p.p_joint)
-    known = sample(tno, ["btn>0.15"], 5, seed=5, estimator=KnownRegion(p))
+    known = sample(tno, ["btn>0.15"], 5, seed=5, known_region=p)
     assert known.p_region == p and "split" not in known.diagnostics
 
 
 def test_an_empty_part_counts_with_its_bound_and_stalled_ones_raise(
         tno: CutInGMM, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``_split_estimate``: a part whose estimate ends "empty" adds 0 with its upper bound
-    as the error; a stalled one (unreliable bound) or all parts empty raise."""
-    import sampler.sampling as ss_mod
+    """``AutoSampler.split_estimate``: a part whose estimate ends "empty" adds 0 with its
+    upper bound as the error; a stalled one (unreliable bound) or all parts empty raise."""
     from sampler import EmptyRegionError
     from sampler.methods.probability import PRegion, PRegionEstimator
+    from sampler.methods.problem import Problem, Run
+    from sampler.methods.samplers import AutoSampler, split_parts
 
     inside = PRegion(estimate=2e-5, ci_low=1.6e-5, ci_high=2.4e-5, confidence=0.95,
                      method="envelope", n_draws=1000, n_hits=100, p_bounds=0.5,
                      p_bounds_ci=(0.5, 0.5), p_joint=1e-5, cov=0.1)
     region = Region.from_constraints(["btn>0.3"], lane_width=tno.lane_width_).bind(tno)
-    parts = ss_mod._split_parts(region)
+    parts = split_parts(region)
     assert parts is not None and [p.describe() for p in parts] == [
         "btn>0.3 & ttc<3 & physical bounds", "btn>0.3 & ttc>=3 & physical bounds"]
 
@@ -1013,24 +1022,25 @@ def test_an_empty_part_counts_with_its_bound_and_stalled_ones_raise(
             return out
         return estimate
 
+    run = Run(Problem(tno, region), np.random.default_rng(0), PRegionEstimator(),
+              (0.5, 0.5, 0.5), seed=1)
     empty = EmptyRegionError("empty", n_draws=50, p_upper=3e-6)
-    monkeypatch.setattr(ss_mod, "estimate_p_region", fake([inside, empty]))
-    p, info = ss_mod._split_estimate(tno, parts, 1, PRegionEstimator(), bounds=(0.5, 0.5, 0.5),
-                                     progress=None)
+    monkeypatch.setattr(AutoSampler, "estimate_region", fake([inside, empty]))
+    p, info = AutoSampler().split_estimate(run, parts)
     z = 1.959963984540054
     # 1e-5 with error 0.1e-5, plus 0 with error 3e-6 / z
     assert p.p_joint == pytest.approx(1e-5)
     assert p.cov == pytest.approx(math.hypot(1e-6, 3e-6 / z) / 1e-5)
     assert [q["method"] for q in info] == ["envelope", "empty"]
     stalled = EmptyRegionError("stalled", p_upper=3e-6, stalled=0.15)
-    monkeypatch.setattr(ss_mod, "estimate_p_region", fake([inside, stalled]))
+    monkeypatch.setattr(AutoSampler, "estimate_region", fake([inside, stalled]))
     with pytest.raises(EmptyRegionError, match="stalled"):
-        ss_mod._split_estimate(tno, parts, 1, PRegionEstimator(), (0.5, 0.5, 0.5), None)
-    monkeypatch.setattr(ss_mod, "estimate_p_region", fake([empty, empty]))
+        AutoSampler().split_estimate(run, parts)
+    monkeypatch.setattr(AutoSampler, "estimate_region", fake([empty, empty]))
     with pytest.raises(EmptyRegionError):
-        ss_mod._split_estimate(tno, parts, 1, PRegionEstimator(), (0.5, 0.5, 0.5), None)
+        AutoSampler().split_estimate(run, parts)
     # not split: a ttr_true constraint, a kinematic envelope already, no criticality
     for cons in (["ttr_true<2"], ["btn>0.3", "ttr_true<3"], ["ttc<3", "btn>0.3"],
                  ["gap<5", "btn>0.3"], ["v_ego>30"]):
         r = Region.from_constraints(cons, lane_width=tno.lane_width_).bind(tno)
-        assert ss_mod._split_parts(r) is None, cons
+        assert split_parts(r) is None, cons

@@ -12,8 +12,9 @@ from scipy import stats
 from datasets.cutin_model import PARAM_NAMES
 from sampler import EmptyRegionError, SamplerError
 from sampler.methods.envelope import find_envelope
+from sampler.methods.mcmc import integrated_time
 from sampler.methods.probability import PRegionEstimator
-from sampler.methods.samplers import AutoSampler, MCMCSampler, Pilot, _tau
+from sampler.methods.samplers import AutoSampler, MCMCSampler, Pilot
 from sampler.model.gmm import CutInGMM
 from sampler.region.constraints import Region, derive
 from sampler.sampling import SampleSet, estimate_p_region, sample
@@ -217,9 +218,9 @@ def test_tau_of_an_ar1_process() -> None:
     e = rng.standard_normal((n_t, n_w))
     for t in range(1, n_t):
         x[t, :, 0] = phi * x[t - 1, :, 0] + e[t]
-    assert _tau(x)[0] == pytest.approx(3.0, rel=0.1)
+    assert integrated_time(x)[0] == pytest.approx(3.0, rel=0.1)
     x[:, 3, 0] = 1.0  # a stuck walker is ignored, not a division by zero
-    assert _tau(x)[0] == pytest.approx(3.0, rel=0.1)
+    assert integrated_time(x)[0] == pytest.approx(3.0, rel=0.1)
 
 
 def test_auto_cost_rule() -> None:
