@@ -19,10 +19,6 @@ from app.schemas import ApiModel
 __all__ = ["ExposureInfo", "ModelComparison", "ModelInterval", "RateEntry", "RegionRates",
            "RegionReport", "UncertainP", "catalogue_rates"]
 
-#: the rate units: key -> the words the page and the CLI use
-UNITS = {"per_hour": "per hour", "per_1e6_km": "per 10^6 km"}
-
-
 class ExposureInfo(ApiModel):
     n_events: int = Field(description="cut-ins counted in the exposure (the training rows)")
     hours: float | None = Field(description="hours driven (vehicle-hours for highD)")

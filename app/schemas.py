@@ -8,10 +8,11 @@ JSON built outside pydantic goes through :func:`app.jsonconv.dumps`.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from sampler import SAMPLER_NAMES
 from sampler.scenario import ScenarioRecord
 
 __all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord"]
@@ -23,7 +24,12 @@ SEED_MAX = 2**53 - 1
 #: the region a request gets when it names none
 DEFAULT_CONSTRAINTS: tuple[str, ...] = ("ttc<3",)
 
-SamplerName = Literal["auto", "rejection", "mcmc", "subset", "subset-is"]
+#: the ``sampler`` field's values: the sampler's registry (``sampler.SAMPLER_NAMES``), so
+#: the API's enum and its 422 list the samplers that exist
+if TYPE_CHECKING:
+    SamplerName = str
+else:
+    SamplerName = Literal[SAMPLER_NAMES]
 
 
 class ApiModel(BaseModel):
@@ -60,7 +66,3 @@ class PRegion(ApiModel):
 
     estimate: float | None = Field(description="point estimate of P(A)")
     ci: list[float | None] = Field(description="[low, high] confidence interval of P(A)")
-
-
-def p_region_of(data: dict[str, Any] | None) -> PRegion | None:
-    return None if data is None else PRegion.model_validate(data)

@@ -6,6 +6,7 @@ Public surface (docs/sampler.md)::
     Constraint, parse_constraint, Region       constraints as data
     sample, estimate_p_region -> SampleSet     constrained sampling with P(A)
     RejectionSampler, MCMCSampler, AutoSampler the sampler strategies
+    SAMPLER_NAMES                              the samplers' names (``sample(method=...)``)
     PRegion, PRegionEstimator                  P(A) with its interval
     build_scenario                             parameter vector -> ConcreteScenario
     score_vector, ScenarioRecord               one vector -> scenario -> scored record
@@ -22,7 +23,13 @@ from sampler.errors import (
     SamplerError,
 )
 from sampler.methods.probability import PRegion, PRegionEstimator
-from sampler.methods.samplers import AutoSampler, MCMCSampler, RejectionSampler, Sampler
+from sampler.methods.samplers import (
+    SAMPLER_NAMES,
+    AutoSampler,
+    MCMCSampler,
+    RejectionSampler,
+    Sampler,
+)
 from sampler.model.gmm import CutInGMM
 from sampler.region.constraints import (
     DERIVED,
@@ -42,6 +49,7 @@ __all__ = [
     "DERIVED",
     "PHYSICAL_BOUNDS",
     "QUANTITY_NAMES",
+    "SAMPLER_NAMES",
     "AutoSampler",
     "BuilderError",
     "Constraint",

@@ -3,7 +3,8 @@
 One grammar for every sub-command: the options below (``add_n``, ``add_constraints``,
 ``add_out``, ``add_quiet``, ``add_data_dir``) are the only way a sub-command takes a
 count, constraints, an output file, silence or the store, so ``-n/--n``, ``-c/--constraint``,
-``-o/--out``, ``-q/--quiet`` and ``--data-dir`` mean the same everywhere.
+``-o/--out``, ``-q/--quiet`` and ``--data-dir`` mean the same everywhere; ``add_sampler``
+gives ``--sampler``.
 """
 
 from __future__ import annotations
@@ -30,6 +31,17 @@ def add_constraints(parser: argparse.ArgumentParser, *, default_text: str) -> No
                         default=None, metavar="EXPR",
                         help="risk-region constraint such as 'ttc<3' or 'v_ego>=20' "
                         f"(repeatable; all must hold; default: {default_text})")
+
+
+#: ``--sampler``'s choices: ``sampler.SAMPLER_NAMES`` (the registry ``sampler.methods.SAMPLERS``),
+#: written out so that building the parser does not import the sampler (seconds: numba,
+#: scipy); ``tests/app/test_cli.py`` checks that the two agree
+SAMPLER_CHOICES = ("auto", "rejection", "mcmc", "subset", "subset-is")
+
+
+def add_sampler(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sampler", choices=SAMPLER_CHOICES, default="auto",
+                        help="sampling method (auto)")
 
 
 def add_out(parser: argparse.ArgumentParser, *, required: bool, help: str,

@@ -38,6 +38,7 @@ from app.cli.options import (
     add_n,
     add_out,
     add_quiet,
+    add_sampler,
     store_label,
 )
 
@@ -87,8 +88,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     add_constraints(s, default_text="none: the whole model")
     add_n(s, default=100, what="samples")
     s.add_argument("--seed", type=int, default=None, help="seed (default: fresh, reported)")
-    s.add_argument("--sampler", choices=("auto", "rejection", "mcmc", "subset", "subset-is"),
-                   default="auto", help="sampling method (auto)")
+    add_sampler(s)
     s.add_argument("--no-envelope", action="store_true",
                    help="draw from the whole model, not the region's half-space envelope")
     s.add_argument("--lane-width", type=float, default=None, help="lane width in m")

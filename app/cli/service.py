@@ -24,6 +24,7 @@ from app.cli.options import (
     add_n,
     add_out,
     add_quiet,
+    add_sampler,
     store_label,
 )
 from app.cli.sampling import StageBars
@@ -61,9 +62,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     add_constraints(create, default_text="ttc<3")
     create.add_argument("--model", default="default", help="model id (default: the "
                         "embedded data's model)")
-    create.add_argument("--sampler", default="auto",
-                        choices=["auto", "rejection", "mcmc", "subset", "subset-is"],
-                        help="sampling method (auto)")
+    add_sampler(create)
     create.add_argument("--no-score", action="store_true", help="skip the TTR risk")
     create.add_argument("--wagner-scan", action="store_true",
                         help="also alarm_time, risk_peak and Wagner's risk at the crossing "

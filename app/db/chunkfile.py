@@ -22,10 +22,11 @@ from __future__ import annotations
 import contextlib
 import gzip
 import json
-import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
+
+from app.atomic import write_atomic
 
 __all__ = ["clear_progress", "clear_stage", "encode", "progress_dir", "read_at",
            "read_progress", "read_scenarios", "read_stage", "relative_path", "write_progress",
@@ -92,13 +93,10 @@ def write_stage(folder: str | Path, name: str, done: int | None = None,
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename, so a reader sees
-    the old or the new content; best effort (a folder that cannot be written is skipped)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}")
+    """``app.atomic.write_atomic`` (a reader sees the old or the new content), best effort:
+    a folder that cannot be written is skipped; not synced (progress, rewritten often)."""
     with contextlib.suppress(OSError):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(text)
-        os.replace(tmp, path)
+        write_atomic(path, text, fsync=False)
 
 
 def read_stage(folder: Path) -> dict[str, Any] | None:

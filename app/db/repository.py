@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io
 import math
-import os
 import shutil
 import uuid
 from collections.abc import Collection, Iterator, Sequence
@@ -24,6 +23,7 @@ from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from app.atomic import write_atomic
 from app.db import chunkfile
 from app.db.models import CatalogueRow, ChunkRow, DatasetRow, ModelRow, ScenarioRow, utcnow
 from app.errors import NotFound
@@ -33,16 +33,6 @@ ACTIVE = ("queued", "running")
 
 def new_id(prefix: str) -> str:
     return f"{prefix}-{uuid.uuid4().hex[:12]}"
-
-
-def write_file_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 # --------------------------------------------------------------------------- datasets
@@ -107,7 +97,7 @@ def store_chunk(session: Session, data_dir: Path, catalogue_id: str, index: int,
     rel = None
     if blob is not None:
         rel = chunkfile.relative_path(catalogue_id, index)
-        write_file_atomic(data_dir / rel, blob)
+        write_atomic(data_dir / rel, blob)
     try:
         with session.begin_nested():
             session.add(ChunkRow(catalogue_id=catalogue_id, chunk_index=index,

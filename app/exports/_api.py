@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from app import __version__
+from app.atomic import atomic_path
 from app.exports._common import (
     ExportError,
     Row,
@@ -296,9 +297,8 @@ def export_catalogue(
         raise ExportError(f"out: directory {str(out_path.parent)!r} does not exist")
     if out_path.is_dir():
         raise ExportError(f"out: {str(out_path)!r} is a directory, expected a file path")
-    tmp = out_path.with_name(f".{out_path.name}.partial")
     checked = _checked_items(items)
-    try:
+    with atomic_path(out_path) as tmp:
         if fmt == "jsonl":
             from app.exports._jsonl import write_jsonl
 
@@ -319,10 +319,6 @@ def export_catalogue(
             from app.exports._xosc import check_mode, write_xosc_zip
 
             write_xosc_zip(checked, manifest_clean, tmp, check_mode(mode or "test"))
-        os.replace(tmp, out_path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return out_path
 
 

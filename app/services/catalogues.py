@@ -24,9 +24,8 @@ from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
 from app.rates import catalogue_rates
 from riskcore import ConcreteScenario
+from sampler import SAMPLER_NAMES
 from sampler.scenario import SCORE_FIELDS, ScenarioRecord
-
-SAMPLER_METHODS = ("auto", "rejection", "mcmc", "subset", "subset-is")
 
 
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
@@ -36,9 +35,9 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     limit = ctx.settings.catalogue_n_limit
     if not 1 <= n <= limit:
         raise InvalidInput(f"n must be between 1 and {limit}, got {n}", field="body.n")
-    if method not in SAMPLER_METHODS:
+    if method not in SAMPLER_NAMES:
         raise InvalidInput(f"unknown sampler {method!r}; choose one of "
-                           f"{', '.join(SAMPLER_METHODS)}", field="body.sampler")
+                           f"{', '.join(SAMPLER_NAMES)}", field="body.sampler")
     size = chunk_size or ctx.settings.chunk_size
     if size < 1:
         raise InvalidInput("chunk_size must be at least 1", field="body.chunk_size")

@@ -16,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 
 from app import domain
+from app.atomic import atomic_path, write_atomic
 from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.models import DatasetRow, ModelRow
@@ -57,10 +58,8 @@ def _embedded_table(ctx: ServiceContext) -> tuple[pd.DataFrame, str]:
     if not table_path.exists():
         log.info("extracting the embedded TNO cut-ins (first start for this data)")
         fresh = domain.embedded_parameter_table()
-        table_path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = table_path.with_name(f".{table_path.name}.tmp")
-        fresh.to_parquet(tmp, index=False)
-        tmp.replace(table_path)
+        with atomic_path(table_path) as tmp:
+            fresh.to_parquet(tmp, index=False)
     return pd.read_parquet(table_path), table_rel
 
 
@@ -93,7 +92,7 @@ def register_defaults(ctx: ServiceContext) -> None:
                  "%d cut-ins (a few seconds; cached afterwards)", data_hash[:12], len(table))
         fitted = fit_model(table, options, source=EMBEDDED_ID)
         cache.parent.mkdir(parents=True, exist_ok=True)
-        repo.write_file_atomic(cache, fitted.model_json.encode())
+        write_atomic(cache, fitted.model_json.encode())
         log.info("fitted %d components; cached at %s", fitted.n_components, cache)
     model_id = f"default-{key[:12]}" + (key[16:] if options else "")
     with ctx.db.session() as s:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import log_ndtr, logsumexp, ndtri_exp
+from scipy.special import log_ndtr, ndtri_exp
 
 from sampler.methods.envelope import component_projections  # the components' masses in a half-space
 from sampler.methods.problem import FloatArray
@@ -155,17 +155,3 @@ def halfspace_strata(model: CutInGMM, a: FloatArray, b: float, source: str = "")
     where = f"{source} envelope" if source else "envelope"
     return [Stratum(model, k, a.copy(), float(b), float(log_pk[k]), f"component {k}, {where}")
             for k in range(model.n_components_) if model.weights_[k] > 0]
-
-
-def stratum_shares(strata: list[Stratum], z: FloatArray, log_w: FloatArray) -> FloatArray:
-    """Each stratum's share of a weighted sample of the model restricted to a region (e.g.
-    importance draws inside A with ``log_w = log p - log q``): ``sum_i w_i P(s | z_i) /
-    sum_i w_i``, ``P(s | z)`` the component's posterior responsibility times the side's
-    indicator. Estimates ``pi_s P_s(A) / P(A)``."""
-    if z.shape[0] == 0:
-        return np.zeros(len(strata))
-    comp = np.stack([s.log_density_z(z) + s.log_mass for s in strata])
-    lr = comp - logsumexp(comp, axis=0)
-    lw = np.asarray(log_w, dtype=np.float64) - float(np.max(log_w))
-    s = np.exp(lr + lw[None, :]).sum(axis=1)
-    return np.asarray(s / s.sum(), dtype=np.float64)

@@ -44,7 +44,12 @@ from riskcore.criticality import CriticalitySettings
 from riskcore.criticality import kernels as _ck
 from sampler.errors import SamplerError
 from sampler.region.kinematics import crossing_kinematics
-from sampler.scenario.builder import MAX_DURATION
+from sampler.scenario.builder import (
+    DEFAULT_DT,
+    DEFAULT_LEAD_IN,
+    DEFAULT_VEHICLE_SIZE,
+    MAX_DURATION,
+)
 
 jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
@@ -64,9 +69,10 @@ CRITICALITY_QUANTITIES: dict[str, tuple[str, str]] = {
     "none_collision": ("-", "1 if the ego at constant speed hits the cutter, else 0"),
 }
 
-_LEAD_IN = 2.5  # the builder's defaults
-_DT = 0.1
-_SIZE = (4.5, 1.8)
+# the builder's defaults (numba reads module globals as compile-time constants)
+_LEAD_IN = DEFAULT_LEAD_IN
+_DT = DEFAULT_DT
+_SIZE = DEFAULT_VEHICLE_SIZE
 _MAX_DURATION = MAX_DURATION
 
 

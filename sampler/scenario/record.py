@@ -139,14 +139,6 @@ class ScenarioRecord(BaseModel):
         default=None, description="the concrete scenario (scengen.concrete-scenario/1) when "
         "asked for")
 
-    def support_fields(self) -> dict[str, Any]:
-        """The data-support fields (``SUPPORT_FIELDS``) as a flat dict (the outside
-        parameters as plain dicts)."""
-        out: dict[str, Any] = {name: getattr(self, name) for name in SUPPORT_FIELDS}
-        if self.support_outside is not None:
-            out["support_outside"] = [o.model_dump() for o in self.support_outside]
-        return out
-
     def scores(self) -> dict[str, float | bool | str | None]:
         """The score fields (``SCORE_FIELDS``, the criticality record) as a flat dict."""
         return {name: getattr(self, "class_" if name == "class" else name)

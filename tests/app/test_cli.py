@@ -40,3 +40,36 @@ def test_user_errors_and_bugs_end_differently(monkeypatch: pytest.MonkeyPatch,
     monkeypatch.setattr("app.cli.data._describe", handler)  # `scengen data describe` runs it
     assert main(["data", "describe"]) == code
     assert capsys.readouterr().err == text
+
+
+def test_the_lists_of_samplers_are_the_registry() -> None:
+    """Issue 26 item 7: which samplers exist is written once, in ``sampler.methods.SAMPLERS``.
+    The CLI's ``--sampler`` choices (written out so that the parser does not import the
+    sampler), the API's enum, the catalogue check and the docs' usage line must name the
+    same samplers in the same order; the dashboard offers a subset of them."""
+    import re
+    import typing
+    from pathlib import Path
+
+    from app.cli import build_parser
+    from app.cli.options import SAMPLER_CHOICES
+    from app.schemas import SamplingRequest
+    from sampler import SAMPLER_NAMES
+    from sampler.methods import SAMPLERS
+
+    assert SAMPLER_NAMES == ("auto", "rejection", "mcmc", "subset", "subset-is")
+    assert tuple(SAMPLERS) == SAMPLER_NAMES
+    assert all(cls.name == name for name, cls in SAMPLERS.items())
+    assert SAMPLER_CHOICES == SAMPLER_NAMES
+    for argv in (["sample", "m.json"], ["catalogue", "create", "-n", "10"]):
+        args = build_parser().parse_args([*argv, "--sampler", "subset-is"])
+        assert args.sampler == "subset-is"
+    field = SamplingRequest.model_fields["sampler"].annotation
+    assert typing.get_args(field) == SAMPLER_NAMES
+    root = Path(__file__).resolve().parents[2]
+    usage = re.search(r"--sampler ([a-z|-]+)\]", (root / "docs/sampler.md").read_text())
+    assert usage is not None and tuple(usage.group(1).split("|")) == SAMPLER_NAMES
+    html = (root / "app/static/dashboard.html").read_text()
+    offered = re.findall(r'<option value="([a-z-]+)">', html.split('id="sampler-select"')[1]
+                         .split("</select>")[0])
+    assert offered and set(offered) <= set(SAMPLER_NAMES)
