@@ -6,9 +6,10 @@ longest parameter lists.
     .venv/bin/python scripts/code_metrics.py sampler --top 15 --limit 50
 
 A function's length is its source lines from ``def`` (decorators excluded) to its last
-line, docstring and comments included; its parameters are every name it takes
-(``self``/``cls`` excluded, ``*args``/``**kwargs`` counted once each). Nested functions
-count as functions of their own (and inside their parent's length).
+line, docstring and comments included (and, in brackets, without its docstring); its
+parameters are every name it takes (``self``/``cls`` excluded, ``*args``/``**kwargs``
+counted once each). Nested functions count as functions of their own (and inside their
+parent's length).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ class Function:
     name: str  # qualified within its module
     lines: int
     params: int
+    code: int  # lines without the docstring
 
 
 def _params(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
@@ -49,8 +51,15 @@ def functions(path: Path) -> list[Function]:
             if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef):
                 name = f"{prefix}{child.name}"
                 end = child.end_lineno or child.lineno
-                out.append(Function(f"{rel}:{child.lineno}", name, end - child.lineno + 1,
-                                    _params(child)))
+                lines = end - child.lineno + 1
+                doc = child.body[0]
+                if (isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant)
+                        and isinstance(doc.value.value, str)):
+                    lines_doc = (doc.end_lineno or doc.lineno) - doc.lineno + 1
+                else:
+                    lines_doc = 0
+                out.append(Function(f"{rel}:{child.lineno}", name, lines, _params(child),
+                                    lines - lines_doc))
                 visit(child, f"{name}.")
             elif isinstance(child, ast.ClassDef):
                 visit(child, f"{prefix}{child.name}.")
@@ -70,11 +79,13 @@ def main(argv: list[str] | None = None) -> None:
     for pkg in args.packages:
         found = [f for p in sorted((ROOT / pkg).rglob("*.py")) for f in functions(p)]
         long_ = [f for f in found if f.lines > args.limit]
-        print(f"== {pkg}: {len(found)} functions, {len(long_)} over {args.limit} lines, "
-              f"max parameters {max((f.params for f in found), default=0)}")
+        long_code = [f for f in found if f.code > args.limit]
+        print(f"== {pkg}: {len(found)} functions, {len(long_)} over {args.limit} lines "
+              f"({len(long_code)} without docstrings), max parameters "
+              f"{max((f.params for f in found), default=0)}")
         print("  longest:")
         for f in sorted(found, key=lambda f: (-f.lines, f.where))[: args.top]:
-            print(f"    {f.lines:4d} lines  {f.name}  ({f.where})")
+            print(f"    {f.lines:4d} lines ({f.code:3d} code)  {f.name}  ({f.where})")
         print("  most parameters:")
         for f in sorted(found, key=lambda f: (-f.params, f.where))[: args.top]:
             print(f"    {f.params:4d} params {f.name}  ({f.where})")
