@@ -23,7 +23,7 @@ Before/after (issue 13), measured in the same run, in this process, one core:
 * scoring 100 sampled vectors: the old path (build, full Wagner run over every step and
   its summary) against ``sampler.scenario.record.score_vector`` (build + criticality record);
 * sampling one catalogue chunk: the old chunk (its own P(B) and a P(A) it threw away)
-  against the catalogue-level estimate reused (``KnownRegion``);
+  against the catalogue-level estimate reused (``sample(known_region=...)``);
 * the status statistics of the ``--rows`` catalogue: the old code (every value loaded and
   sorted in Python, kept below as the baseline) against the SQL of
   ``repository.summary_statistics``.
