@@ -319,6 +319,80 @@ class _Sub:
         self.width = obs.width[idx]
 
 
+class TTRAEB(_Base):
+    """An emergency brake on Wagner's r_dep of the current scene, computed online.
+
+    Every ``period`` s (whole steps of the update period) the scene "the ego at constant
+    speed over riskcore's horizon, the object's current state" is scored by riskcore's
+    engine (the criticality record's compiled one-object path; the object's yaw rate
+    from its last two observed headings); once r_dep >= ``threshold`` it brakes at
+    ``a_aeb`` until the gap stops closing. Otherwise it keeps its speed. Costly: one
+    Monte-Carlo scene (~1 ms) per run and period while an object is near.
+    """
+
+    name = "ttr_aeb"
+
+    def reset(self, n: int, seeds: NDArray[np.uint64]) -> None:
+        super().reset(n, seeds)
+        self.firing = np.zeros(n, dtype=np.bool_)
+        self.prev_psi: FloatArray | None = None
+        self.prev_t: FloatArray | None = None
+        self.next_t = np.zeros(n)
+        from riskcore.evasion import MANOEUVRES
+        from riskcore.scene import _Engine, default_surfaces
+        from riskcore.settings import RiskSettings
+
+        self._rs = RiskSettings()
+        self._surf = default_surfaces()
+        self._eng = _Engine(self._rs, self._surf, MANOEUVRES)
+        self._man = MANOEUVRES
+
+    def act(self, obs: Observations) -> FloatArray:
+        from riskcore.criticality import kernels as _ck
+
+        p = self.params
+        t = obs.t
+        psi = obs.psi[:, 0]
+        if self.prev_psi is None or self.prev_t is None:
+            w0 = np.zeros_like(psi)
+        else:
+            dt = np.where(t > self.prev_t, t - self.prev_t, 1.0)
+            w0 = (psi - self.prev_psi) / dt
+        self.prev_psi, self.prev_t = psi.copy(), t.copy()
+        has, _, vl = _leader(obs)
+        clos = obs.ego_v - vl
+        self.firing &= ~(has & (clos <= 0.0))
+        near = (obs.present[:, 0] & ~self.firing & (t >= self.next_t - 1e-9)
+                & (obs.dx[:, 0] > -obs.length[:, 0]) & (obs.dx[:, 0] < p["reach"])
+                & (np.abs(obs.dy[:, 0]) < 2.0 * obs.lane_width))
+        rs = self._rs
+        n_h = rs.n_steps
+        off = np.arange(n_h + 1, dtype=np.float64) * rs.dt
+        eng = self._eng
+        for i in np.flatnonzero(near):
+            v = float(obs.ego_v[i])
+            ex = np.asarray(v * off, dtype=np.float64)
+            ev = np.full(n_h + 1, v)
+            zeros = np.zeros(n_h + 1)
+            man_a = np.empty((n_h, len(self._man)))
+            man_w = np.empty((n_h, len(self._man)))
+            for j, man in enumerate(self._man):
+                man_a[:, j], man_w[:, j] = man.inputs(ev[:n_h], rs)
+            ov = float(obs.v[i, 0])
+            ma, sa = self._surf.accel.at(ov, float(obs.a[i, 0]))
+            mw, sw = self._surf.turn.at(ov, float(w0[i]))
+            r = _ck.scene_risk(float(obs.dx[i, 0]), float(obs.dy[i, 0]), float(psi[i]), ov,
+                               float(ma), float(sa), float(mw), float(sw), eng._za, eng._zw,
+                               eng._weight, 0.5 * float(obs.length[i, 0]),
+                               0.5 * float(obs.width[i, 0]), ex, zeros, zeros.copy(), ev,
+                               0.5 * obs.ego_length, 0.5 * obs.ego_width, man_a, man_w,
+                               rs.dt, rs.t_pnr, rs.t_max, rs.m)
+            if r >= p["threshold"]:
+                self.firing[i] = True
+        self.next_t = np.where(near, t + p["period"], self.next_t)
+        return np.where(self.firing, -p["a_aeb"], 0.0)
+
+
 @dataclass(frozen=True)
 class SutSpec:
     """A built-in SUT: its name, a one-line summary, its parameters (name -> (default,
@@ -397,6 +471,14 @@ _AEB_PARAMS: dict[str, tuple[float, str, str]] = {
 }
 
 
+_TTR_PARAMS: dict[str, tuple[float, str, str]] = {
+    "threshold": (0.5, "-", "brake once r_dep of the current scene reaches this"),
+    "a_aeb": (9.0, "m/s²", "brake deceleration (held until the gap stops closing)"),
+    "period": (0.1, "s", "r_dep is computed at most this often per run (cost)"),
+    "reach": (100.0, "m", "only objects with dx below this are scored"),
+}
+
+
 def _spec(name: str, summary: str, parameters: dict[str, tuple[float, str, str]],
           source: str, cls: type[_Base]) -> SutSpec:
     return SutSpec(name, summary, parameters, source, _factory(cls, name, parameters))
@@ -427,6 +509,10 @@ BUILTIN_SUTS: Mapping[str, SutSpec] = {
               "(TNO)", ACC),
         _spec("acc_aeb", "acc plus an emergency brake at TTC < ttc", _AEB_PARAMS,
               "acc above; the AEB threshold is our choice", ACCWithAEB),
+        _spec("ttr_aeb", "keeps its speed; emergency brake once Wagner's online r_dep of the "
+              "current scene reaches a threshold", _TTR_PARAMS,
+              "Wagner et al. (seed 000) risk as an online monitor; riskcore's engine and "
+              "defaults (Table II)", TTRAEB),
     )
 }
 

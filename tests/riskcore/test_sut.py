@@ -275,3 +275,29 @@ def test_the_compiled_path_equals_the_step_loop(name: str) -> None:
         s = SimSettings(update_period=period)
         assert _bytes(simulate(make_sut(name), b, seeds=5, settings=s)) == _bytes(
             simulate(_Hidden(name), b, seeds=5, settings=s))
+
+
+def test_ttr_aeb_brakes_on_the_online_risk_and_avoids_what_none_hits() -> None:
+    from riskcore import EgoFuture, ObjectState, RiskSettings, evaluate_scene
+
+    # 20 m/s behind a 10 m/s leader, 40 m gap: none hits it at t = 4 s
+    b = leader_batch([40.0], [10.0], [20.0], duration=10.0)
+    none = simulate(make_sut("none"), b, seeds=0)
+    assert none.t_contact[0] == pytest.approx(4.0, abs=1e-9)
+    r = simulate(make_sut("ttr_aeb"), b, seeds=0)
+    assert not r.collided[0] and r.min_gap[0] > 0.0
+    t_fire = r.t_brake_rel_tp[0]  # t_p = 0
+    assert 0.0 < t_fire < 4.0
+    # independently: riskcore's scene evaluation, the ego at constant speed
+    rs = RiskSettings()
+    off = np.arange(rs.n_steps + 1) * rs.dt
+
+    def r_dep(t: float) -> float:
+        gap = 40.0 - 10.0 * t
+        z = np.zeros(off.shape[0])
+        ego = EgoFuture(x=np.asarray(20.0 * off, dtype=np.float64), y=z, psi=z, v=z + 20.0, length=EL, width=EW)
+        obj = ObjectState(id="c", x=gap + EL, y=0.0, psi=0.0, v=10.0, a0=0.0, omega0=0.0,
+                          length=EL, width=EW)
+        return float(evaluate_scene(ego, [obj]).r_dep)
+
+    assert r_dep(t_fire) >= 0.5 > r_dep(t_fire - 0.1)
