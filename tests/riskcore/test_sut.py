@@ -295,7 +295,8 @@ def test_ttr_aeb_brakes_on_the_online_risk_and_avoids_what_none_hits() -> None:
     def r_dep(t: float) -> float:
         gap = 40.0 - 10.0 * t
         z = np.zeros(off.shape[0])
-        ego = EgoFuture(x=np.asarray(20.0 * off, dtype=np.float64), y=z, psi=z, v=z + 20.0, length=EL, width=EW)
+        ego = EgoFuture(x=np.asarray(20.0 * off, dtype=np.float64), y=z, psi=z, v=z + 20.0,
+                        length=EL, width=EW)
         obj = ObjectState(id="c", x=gap + EL, y=0.0, psi=0.0, v=10.0, a0=0.0, omega0=0.0,
                           length=EL, width=EW)
         return float(evaluate_scene(ego, [obj]).r_dep)
