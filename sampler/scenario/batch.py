@@ -74,6 +74,7 @@ class CutInTracks(NamedTuple):
     cpsi: FloatArray
     cv: FloatArray
     ca: FloatArray
+    c_yaw_rate: FloatArray
     t_p: FloatArray
     t_cross: FloatArray
     t_end: FloatArray
@@ -119,7 +120,7 @@ def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no co
 @numba.njit(cache=True)
 def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
          ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
-         cpsi: FloatArray, cv: FloatArray, ca: FloatArray
+         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray
          ) -> tuple[int, float, float, float, float]:  # pragma: no cover - jit
     """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end)."""
     nan = math.nan
@@ -242,8 +243,10 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
         cy[k] = y_start + yr
         if 0.0 <= tau <= end:
             cpsi[k] = amp * (1.0 - math.cos(math.pi * tau / p_t))
+            cw[k] = p_y1 * math.sin(math.pi * tau / p_t)
         else:
             cpsi[k] = 0.0
+            cw[k] = 0.0
         cv[k] = v
         ca[k] = p_a1 if (p_a2 <= tau < p_a2 + p_a3) else 0.0
     # t_p: the centre has moved wz towards the ego (riskcore.criticality's rule, on the
@@ -267,11 +270,12 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
 @numba.njit(cache=True)
 def _all(params: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
          ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
-         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, status: NDArray[np.int64],
-         out: FloatArray) -> None:  # pragma: no cover - jit
+         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray,
+         status: NDArray[np.int64], out: FloatArray) -> None:  # pragma: no cover - jit
     for i in range(params.shape[0]):
         s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width, ego_len,
-                                         cut_len, wz, cx[i], cy[i], cpsi[i], cv[i], ca[i])
+                                         cut_len, wz, cx[i], cy[i], cpsi[i], cv[i], ca[i],
+                                         cw[i])
         status[i] = s
         out[i, 0] = v_ego
         out[i, 1] = t_c
@@ -330,14 +334,14 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                            field="duration")
     t = _time_grid(n_steps, dt)
     shape = (n, t.shape[0])
-    cx, cy, cpsi, cv, ca = (np.zeros(shape) for _ in range(5))
+    cx, cy, cpsi, cv, ca, cw = (np.zeros(shape) for _ in range(6))
     status = np.zeros(n, dtype=np.int64)
     out = np.full((n, 4), np.nan)
     _all(x, t, float(lead_in), lane_width, ego_length, cutter_length, float(wandering_zone),
-         cx, cy, cpsi, cv, ca, status, out)
+         cx, cy, cpsi, cv, ca, cw, status, out)
     ok = status == _OK
     return CutInTracks(t=t, ego_v0=out[:, 0], cx=cx, cy=cy, cpsi=cpsi, cv=cv, ca=ca,
-                       t_p=out[:, 2], t_cross=out[:, 1], t_end=out[:, 3], ok=ok,
+                       c_yaw_rate=cw, t_p=out[:, 2], t_cross=out[:, 1], t_end=out[:, 3], ok=ok,
                        status=status)
 
 
@@ -367,4 +371,5 @@ def cutin_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                       cy=tr.cy, cpsi=tr.cpsi, cv=tr.cv, ca=tr.ca,
                       c_length=np.full(tr.ego_v0.shape[0], float(cutter_length)),
                       c_width=np.full(tr.ego_v0.shape[0], float(cutter_width)),
-                      t_p=tr.t_p, t_cross=tr.t_cross, t_end=tr.t_end)
+                      t_p=tr.t_p, t_cross=tr.t_cross, t_end=tr.t_end,
+                      c_yaw_rate=tr.c_yaw_rate)

@@ -35,7 +35,7 @@ def _check_rows(x: np.ndarray, lane_width: float = 3.75) -> int:
         m = min(sc.t.shape[0], tr.t.shape[0])
         assert np.array_equal(sc.t[:m], tr.t[:m])
         for mine, ref in ((tr.cx, c.x), (tr.cy, c.y), (tr.cpsi, c.psi), (tr.cv, c.v),
-                          (tr.ca, c.a)):
+                          (tr.ca, c.a), (tr.c_yaw_rate, c.yaw_rate)):
             assert ref is not None
             assert np.max(np.abs(mine[i, :m] - ref[:m])) <= 1e-9
         assert sc.ego.v is not None
@@ -106,7 +106,7 @@ def test_cutin_batch_equals_the_batch_of_built_scenarios() -> None:
     ref = CutInBatch.from_scenarios(
         [build_scenario(dict(zip(PARAM_NAMES, r.tolist(), strict=True))) for r in x])
     m = min(mine.t.shape[0], ref.t.shape[0])
-    for name in ("cx", "cy", "cpsi", "cv", "ca"):
+    for name in ("cx", "cy", "cpsi", "cv", "ca", "c_yaw_rate"):
         assert np.max(np.abs(getattr(mine, name)[:, :m] - getattr(ref, name)[:, :m])) <= 1e-9
     for name in ("ego_v0", "t_p", "t_cross", "c_length", "c_width"):
         assert np.allclose(getattr(mine, name), getattr(ref, name), rtol=0, atol=1e-9), name
