@@ -34,6 +34,7 @@ from riskcore.scenario import ConcreteScenario  # noqa: E402
 from riskcore.sut import (  # noqa: E402
     CutInBatch,
     Observation,
+    SimSettings,
     make_sut,
     per_run,
     simulate,
@@ -94,6 +95,8 @@ def main() -> None:
     ap.add_argument("--scenarios", type=int, default=400)
     ap.add_argument("--baseline", type=int, default=200)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--dt", type=float, nargs="+", default=[0.01, 0.05],
+                    help="simulation steps to measure (s; 0.01 is the default setting)")
     args = ap.parse_args()
     t0 = time.perf_counter()
     scs = scenarios(args.scenarios, args.seed)
@@ -103,27 +106,31 @@ def main() -> None:
     print(f"batch: {batch.n} runs ({base.n} distinct cut-ins, grid {batch.t.size} x "
           f"{batch.dt} s), built in {time.perf_counter() - t0:.1f} s")
     small = base.subset(np.arange(min(8, base.n)))
-    for name, plain in (("idm", PlainIDM), ("acc", PlainACC)):
-        simulate(make_sut(name), small, seeds=0)  # compile / warm the kernels
-        t = time.perf_counter()
-        runs = simulate(make_sut(name), batch, seeds=args.seed)
-        wall = time.perf_counter() - t
-        rate = batch.n / wall
-        sub = base.subset(np.arange(min(args.baseline, base.n)))
-        t = time.perf_counter()
-        ref = simulate(per_run(plain, f"plain_{name}"), sub, seeds=args.seed)
-        wall_b = time.perf_counter() - t
-        rate_b = sub.n / wall_b
-        fast_sub = simulate(make_sut(name), sub, seeds=args.seed)
-        same = bool(np.array_equal(fast_sub.collided, ref.collided) and np.allclose(
-            fast_sub.impact_speed, ref.impact_speed, atol=1e-9))
-        steps = float(np.nanmean(runs.end_time)) / 0.01
-        print(f"{name}: {rate:,.0f} runs/s per core ({wall:.2f} s for {batch.n}; mean "
-              f"{steps:.0f} steps of 0.01 s per run; collisions {int(runs.collided.sum())}"
-              f"); per-run adapter baseline {rate_b:,.0f} runs/s ({sub.n} runs) -> "
-              f"{rate / rate_b:.0f}x; same outcomes as the baseline: {same}; "
-              f"target 20,000: {'met' if rate >= 20_000 else 'NOT met'}")
-
+    print(f"load average before: {os.getloadavg()[0]:.1f} (2-core machine shared)")
+    for dt in args.dt:
+        st = SimSettings(dt=dt)
+        for name, plain in (("idm", PlainIDM), ("acc", PlainACC)):
+            simulate(make_sut(name), small, seeds=0, settings=st)  # compile / warm
+            simulate(per_run(plain, "warm"), small.subset(np.arange(2)), seeds=0, settings=st)
+            t = time.perf_counter()
+            runs = simulate(make_sut(name), batch, seeds=args.seed, settings=st)
+            wall = time.perf_counter() - t
+            rate = batch.n / wall
+            sub = base.subset(np.arange(min(args.baseline, base.n)))
+            t = time.perf_counter()
+            ref = simulate(per_run(plain, f"plain_{name}"), sub, seeds=args.seed, settings=st)
+            wall_b = time.perf_counter() - t
+            rate_b = sub.n / wall_b
+            fast_sub = simulate(make_sut(name), sub, seeds=args.seed, settings=st)
+            same = bool(np.array_equal(fast_sub.collided, ref.collided) and np.allclose(
+                fast_sub.impact_speed, ref.impact_speed, atol=1e-9))
+            steps = float(np.nanmean(runs.end_time)) / dt
+            print(f"dt {dt} s, {name}: {rate:,.0f} runs/s per core ({wall:.2f} s for "
+                  f"{batch.n}; mean {steps:.0f} steps per run; collisions "
+                  f"{int(runs.collided.sum())}); per-run adapter {rate_b:,.1f} runs/s "
+                  f"({sub.n} runs) -> {rate / rate_b:,.0f}x; same outcomes: {same}; "
+                  f"target 20,000: {'met' if rate >= 20_000 else 'NOT met'}; load "
+                  f"{os.getloadavg()[0]:.1f}")
 
 if __name__ == "__main__":
     main()
