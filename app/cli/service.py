@@ -220,12 +220,42 @@ def _resume(args: argparse.Namespace) -> int:
         ctx.close()
 
 
+#: what ``catalogue status`` prints first (issue 25 item 6: the 100 bootstrap replicates
+#: of P(A) came before everything a user looks for)
+STATUS_FIRST = ("id", "status", "progress", "scenarios_done", "n", "constraints", "classes",
+                "support", "rates", "stage", "error")
+
+
+def status_for_reading(info: dict[str, Any]) -> dict[str, Any]:
+    """The catalogue status in reading order (``STATUS_FIRST``, then the rest, P(A) last)
+    with P(A)'s bootstrap replicates counted, not listed (``GET /catalogues/{id}`` has
+    them)."""
+    out = {k: info[k] for k in STATUS_FIRST if k in info}
+    out.update({k: v for k, v in info.items() if k not in out and k != "p_region"})
+    p_region = info.get("p_region")
+    if isinstance(p_region, dict):
+        p_region = dict(p_region)
+        mi = p_region.get("model_interval")
+        if isinstance(mi, dict) and "replicates" in mi:
+            p_region["model_interval"] = {k: v for k, v in mi.items() if k != "replicates"}
+        out["p_region"] = p_region
+    return out
+
+
 def _status(args: argparse.Namespace) -> int:
     from app.services import catalogues
 
     ctx = _context(load_defaults=False)
     try:
-        print(json.dumps(catalogues.describe(ctx, args.id), indent=2))
+        info = catalogues.describe(ctx, args.id)
+        print(json.dumps(status_for_reading(info), indent=2))
+        p_region = info.get("p_region") or {}
+        if p_region.get("mc_ci") and p_region.get("model_ci"):
+            from sampler.rates import report_text  # both intervals, each with its reading
+
+            print(report_text({"p_region": p_region, "rates": info.get("rates"),
+                               "model_interval": p_region.get("model_interval")}),
+                  file=sys.stderr)
     except LookupError as exc:
         raise _in_store(exc) from None
     finally:

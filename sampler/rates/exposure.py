@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -48,8 +48,9 @@ from sampler.errors import ModelError, SamplerError
 from sampler.model.memo import MODEL_SEED, memoised
 from sampler.rates.bootstrap_interval import pooled_interval
 
-__all__ = ["TNO_HOURS", "Exposure", "cutin_rate", "highd_exposure", "model_interval",
-           "region_rates", "region_report", "report_text", "tno_exposure", "uncertainty_report"]
+__all__ = ["INTERVAL_READINGS", "TNO_HOURS", "Exposure", "cutin_rate", "highd_exposure",
+           "model_interval", "model_wider", "region_rates", "region_report", "report_text",
+           "tno_exposure", "uncertainty_report"]
 
 #: hours of driving of the TNO cut-in data (de Gelder et al. 2021, N_HOUR in uncertainty.py)
 TNO_HOURS = 63.0
@@ -295,6 +296,30 @@ def region_report(model: Any, sample_set: Any, n_plain: int = 8192,
                               confidence=confidence)
 
 
+#: one line each on what the two intervals of P(A) and of a rate mean (issue 25 item 3)
+INTERVAL_READINGS = {
+    "model": "model interval: where P(A) could lie under another fit equally supported by "
+             "the real cut-ins (bootstrap refits): the data's uncertainty, which more "
+             "sampling does not narrow",
+    "mc": "Monte Carlo interval: the sampler's own uncertainty about P(A) under this one "
+          "fitted model: more draws narrow it",
+}
+
+
+def model_wider(fig: Mapping[str, Any]) -> bool:
+    """Is the figure's model interval wider than its Monte Carlo one (in ratio of ends, as
+    both are on a log scale; an unknown model interval is not wider)?"""
+    mc, model = fig.get("mc_ci"), fig.get("model_ci")
+    if not mc or not model:
+        return False
+
+    def spread(v: Sequence[float]) -> float:
+        lo, hi = float(v[0]), float(v[1])
+        return math.inf if lo <= 0.0 < hi else (hi / lo if lo > 0 else 1.0)
+
+    return spread(model) > spread(mc)
+
+
 def report_text(report: Mapping[str, Any]) -> str:
     """One line per figure: P(A) and the rates with both intervals."""
     mi = report.get("model_interval") or {}
@@ -307,22 +332,29 @@ def report_text(report: Mapping[str, Any]) -> str:
                else zero if model and v[0] == 0.0 else f"{v[0]:.3g}")
         return f"[{low}, {v[1]:.3g}]"
 
+    def both(fig: Mapping[str, Any], zero: str = "< 1e-14") -> str:
+        # the wider interval first: it is the one that limits what the figure says
+        mc = f"Monte Carlo {iv(fig['mc_ci'])}"
+        model = f"model {iv(fig['model_ci'], True, zero)}"
+        return f"{model}  {mc}" if model_wider(fig) else f"{mc}  {model}"
+
     p = report["p_region"]
-    lines = [f"P(A) {p['estimate']:.3g}  Monte Carlo {iv(p['mc_ci'])}  "
-             f"model {iv(p['model_ci'], True)}"]
+    lines = [f"P(A) {p['estimate']:.3g}  {both(p)}"]
     rates = report.get("rates")
     if rates:
         for unit, label in (("per_hour", "per hour"), ("per_1e6_km", "per 10^6 km")):
-            if unit in rates:
-                r = rates[unit]
-                lines.append(f"rate {label} {r['estimate']:.3g}  Monte Carlo {iv(r['mc_ci'])}"
-                             f"  model {iv(r['model_ci'], True, '≈ 0')}")
+            if rates.get(unit):
+                lines.append(f"rate {label} {rates[unit]['estimate']:.3g}  "
+                             f"{both(rates[unit], '≈ 0')}")
         e = rates["exposure"]
         lines.append(f"exposure: {e['n_events']} cut-ins in "
                      + " and ".join(x for x in (
                          f"{e['hours']:.4g} h" if e["hours"] else "",
                          f"{e['km']:.4g} km" if e["km"] else "") if x)
                      + f" ({e['source']})")
+    if p.get("model_ci"):
+        lines.extend(INTERVAL_READINGS[k] for k in (("model", "mc") if model_wider(p)
+                                                     else ("mc", "model")))
     if mi.get("note"):
         lines.append("model interval: " + str(mi["note"]))
     return "\n".join(lines)

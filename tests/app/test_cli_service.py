@@ -24,6 +24,16 @@ def test_create_status_list_export(store: Path, tmp_path: Path,
     assert main(["catalogue", "status", cid]) == 0
     status = json.loads(capsys.readouterr().out)
     assert status["scenarios_stored"] == 4 and status["constraints"] == ["ttc<3"]
+    # issue 25 item 6: what a user looks for first, P(A) last, its replicates not listed
+    assert list(status)[:6] == ["id", "status", "progress", "scenarios_done", "n",
+                                "constraints"]
+    assert list(status)[-1] == "p_region"
+    assert "replicates" not in status["p_region"].get("model_interval", {})
+    # issue 25 item 3: both intervals, the wider (the model's, for ttc<3) first, each read
+    main(["catalogue", "status", cid])
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("P(A) ") and err[0].index("model [") < err[0].index("Monte Carlo")
+    assert any(line.startswith("model interval: where P(A) could lie") for line in err)
     assert main(["catalogue", "list"]) == 0
     assert cid in capsys.readouterr().out
     target = tmp_path / "out.csv"

@@ -394,3 +394,20 @@ def test_model_interval_takes_the_rare_path_for_a_thin_plain_run(
     for p, region in ((thin, btn), (frequent, btn), (thin, Region.from_constraints(["ttc<1"]))):
         exposure.uncertainty_report(model, p, region)
     assert asked == [True, False, False]
+
+
+def test_report_text_puts_the_wider_interval_first_and_reads_each() -> None:
+    """Issue 25 item 3: the model interval (a factor 14 for ttc<3) went after the Monte
+    Carlo one (±3 %) with no word on either; the wider comes first, each with a reading."""
+    from sampler.rates.exposure import INTERVAL_READINGS, report_text
+
+    wide_model = {"p_region": {"estimate": 1.1e-3, "mc_ci": [1.07e-3, 1.13e-3],
+                               "model_ci": [1.73e-4, 2.84e-3]}}
+    lines = report_text(wide_model).splitlines()
+    assert lines[0] == "P(A) 0.0011  model [0.000173, 0.00284]  Monte Carlo [0.00107, 0.00113]"
+    assert lines[1:] == [INTERVAL_READINGS["model"], INTERVAL_READINGS["mc"]]
+    narrow_model = {"p_region": {"estimate": 1e-3, "mc_ci": [5e-4, 2e-3],
+                                 "model_ci": [9e-4, 1.1e-3]}}
+    lines = report_text(narrow_model).splitlines()
+    assert lines[0] == "P(A) 0.001  Monte Carlo [0.0005, 0.002]  model [0.0009, 0.0011]"
+    assert lines[1:] == [INTERVAL_READINGS["mc"], INTERVAL_READINGS["model"]]
