@@ -40,6 +40,8 @@ lock: | $(VENV)/bin/python
 	touch $(RUN_STAMP) $(STAMP)
 
 # host/port/store: SCENGEN_HOST, SCENGEN_PORT, SCENGEN_DATA_DIR (read by scengen serve)
+# shared with others: SCENGEN_API_KEY=$$(openssl rand -hex 24) SCENGEN_HOST=0.0.0.0 make run
+# (clients send the key in X-API-Key; SCENGEN_TRUSTED_HOSTS lists the names they use)
 run: install-run
 	$(BIN)/scengen serve
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -131,8 +132,29 @@ def _serve(args: argparse.Namespace) -> int:
     if not 1 <= port <= 65535:
         raise CliError(f"--port: must be between 1 and 65535, got {port}")
     _logging()
+    key = settings.api_key.get_secret_value() if settings.api_key is not None else ""
+    if not _is_loopback(host) and not key:
+        print(f"scengen serve: WARNING: listening on {host}, beyond this machine's loopback, "
+              "with no API key: anyone who can reach it may start and delete jobs. Set "
+              "SCENGEN_API_KEY (e.g. SCENGEN_API_KEY=$(openssl rand -hex 24)) or bind to "
+              "127.0.0.1", file=sys.stderr, flush=True)
+    os.environ["SCENGEN_HOST"] = host  # the app's settings (trusted hosts) see the bind
+    get_settings.cache_clear()
     uvicorn.run("app.main:app", host=host, port=port, log_level=args.log_level)
     return 0
+
+
+def _is_loopback(host: str) -> bool:
+    """Whether a bind address is only reachable from this machine."""
+    import ipaddress
+
+    name = host.strip().strip("[]").lower()
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:
+        return False
 
 
 def _logging() -> None:

@@ -182,6 +182,30 @@ def test_risk_into_a_closed_pipe_is_quiet() -> None:
     assert proc.returncode == 0
 
 
+@pytest.mark.parametrize(("host", "key", "warned"), [
+    ("0.0.0.0", None, True), ("192.168.1.5", None, True), ("::", None, True),
+    ("0.0.0.0", "k3y", False), ("127.0.0.1", None, False), ("localhost", None, False),
+    ("::1", None, False), ("127.0.0.2", None, False)])
+def test_serve_beyond_loopback_without_a_key_warns(
+        no_store_env: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str], host: str, key: str | None,
+        warned: bool) -> None:
+    import uvicorn
+
+    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: None)
+    monkeypatch.setenv("SCENGEN_HOST", "127.0.0.1")  # recorded, so serve's change is undone
+    if key is None:
+        monkeypatch.delenv("SCENGEN_API_KEY", raising=False)
+    else:
+        monkeypatch.setenv("SCENGEN_API_KEY", key)
+    get_settings.cache_clear()
+    assert main(["serve", "--host", host]) == 0
+    err = capsys.readouterr().err
+    assert ("WARNING" in err and "SCENGEN_API_KEY" in err) is warned, err
+    assert get_settings().host == host  # the app's settings (trusted hosts) see the bind
+    get_settings.cache_clear()
+
+
 # --------------------------------------------------------------------------- item 5
 def test_serve_honours_scengen_host_and_port(no_store_env: Path,
                                              monkeypatch: pytest.MonkeyPatch) -> None:
