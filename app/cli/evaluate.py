@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.options import add_constraints, add_data_dir, add_quiet
+from app.cli.options import CliError, add_constraints, add_data_dir, add_quiet
 
 #: the summary's keys printed first, in this order (the rest follow as the campaign gives)
 FIRST_KEYS = ("sut", "p_collision", "rate_per_hour", "runs", "collisions", "ess",
@@ -76,7 +76,7 @@ def _pairs(items: list[str], option: str) -> dict[str, Any]:
     for item in items:
         key, sep, raw = item.partition("=")
         if not sep or not key.strip():
-            raise ValueError(f"{option}: expected KEY=VALUE, got {item!r}")
+            raise CliError(f"{option}: expected KEY=VALUE, got {item!r}")
         try:
             value: Any = json.loads(raw)
         except json.JSONDecodeError:
@@ -119,10 +119,10 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(json.dumps(jsonconv.encode(suts.list_suts()), indent=1))
         return 0
     if args.sut is None:
-        raise ValueError("--sut: give the system under test (a registered name, see "
+        raise CliError("--sut: give the system under test (a registered name, see "
                          "--list-suts, or module:Class)")
     if args.workers < 0:
-        raise ValueError(f"--workers: must be >= 0, got {args.workers}")
+        raise CliError(f"--workers: must be >= 0, got {args.workers}")
     entry = suts.resolve(args.sut, allow_import=True, field="--sut")
     factory = suts.make_factory(entry, _pairs(args.sut_params, "--sut-param"),
                                 field="--sut-param")
@@ -136,7 +136,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     runner = service.runner_for(None, factory, spec.settings)
     model = _load_model(args.model)
     if args.runs is not None and not Path(args.runs).parent.is_dir():
-        raise ValueError(f"--runs: directory {str(Path(args.runs).parent)!r} does not exist")
+        raise CliError(f"--runs: directory {str(Path(args.runs).parent)!r} does not exist")
     pool = None
     if args.workers > 0:
         from app.jobs.executors import LocalPoolExecutor
