@@ -155,9 +155,10 @@ def scenario_row(record: ScenarioRecord, chunk_index: int) -> dict[str, Any]:
         "support": record.support,
         "support_distance": record.support_distance,
         "support_excess": record.support_excess,
-        "support_detail": None if record.support is None else jsonconv.encode(
-            {k: v for k, v in record.support_fields().items()
-             if k in ("support_nearest", "density_pct", "support_outside")}),
+        "support_detail": None if record.support is None else jsonconv.encode({
+            "support_nearest": record.support_nearest, "density_pct": record.density_pct,
+            "support_outside": None if record.support_outside is None
+            else [o.model_dump() for o in record.support_outside]}),
     }
 
 
