@@ -115,7 +115,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def one_line(exc: BaseException) -> str:
-    """The first line of an error's message (its type name when it has none)."""
+    """The first line of an error's message (its type name when it has none); a file
+    system error as "<file>: <what>" in words, not Python's "[Errno 2] ..." (issue 25)."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
+        what = {FileNotFoundError: "no such file", IsADirectoryError: "is a directory, "
+                "not a file", PermissionError: "permission denied"}.get(
+                    type(exc), exc.strerror.lower())
+        return f"{exc.filename}: {what}"
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
 

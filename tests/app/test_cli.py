@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from app.cli import main
@@ -73,3 +75,14 @@ def test_the_lists_of_samplers_are_the_registry() -> None:
     offered = re.findall(r'<option value="([a-z-]+)">', html.split('id="sampler-select"')[1]
                          .split("</select>")[0])
     assert offered and set(offered) <= set(SAMPLER_NAMES)
+
+
+def test_a_missing_file_is_named_in_words_not_errno(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 25 item 6: 'scengen risk' on a missing file printed a raw errno line."""
+    from app.cli import main
+
+    missing = tmp_path / "nope.json"
+    assert main(["risk", str(missing), "--summary"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"scengen: error: {missing}: no such file"
