@@ -76,10 +76,25 @@ def _run(args: argparse.Namespace) -> int:
     out = ({**report["summary"], "criticality": report["criticality"]} if args.summary
            else report)
     text = jsonconv.dumps(out)
-    if args.pretty:
+    if args.summary:  # a page to read (issue 25 item 6): one field a line, no float noise
+        text = json.dumps(readable(json.loads(text)), indent=2)
+    elif args.pretty:
         text = json.dumps(json.loads(text), indent=2)
     if args.output == "-":
         sys.stdout.write(text + "\n")
     else:
         Path(args.output).write_text(text + "\n", encoding="utf-8")
     return 0
+
+
+def readable(value: Any) -> Any:
+    """``value`` with every float rounded to 12 significant digits, which removes binary
+    noise such as ``0.30000000000000004`` (a 0.1 s grid times 3) and keeps far more digits
+    than any of the summary's quantities is known to."""
+    if isinstance(value, float):
+        return float(f"{value:.12g}")
+    if isinstance(value, dict):
+        return {k: readable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [readable(v) for v in value]
+    return value

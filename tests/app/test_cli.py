@@ -86,3 +86,12 @@ def test_a_missing_file_is_named_in_words_not_errno(tmp_path: Path,
     assert main(["risk", str(missing), "--summary"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"scengen: error: {missing}: no such file"
+
+
+def test_readable_summary_rounds_float_noise_only() -> None:
+    """Issue 25 item 6: 'risk --summary' printed min_ttr 0.30000000000000004."""
+    from app.cli.risk import readable
+
+    assert readable({"min_ttr": 0.1 * 3, "x": [0.6000000000000001, 2], "s": "a",
+                     "b": True, "tiny": 1.2345678901234567e-7}) == {
+        "min_ttr": 0.3, "x": [0.6, 2], "s": "a", "b": True, "tiny": 1.23456789012e-7}
