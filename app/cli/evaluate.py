@@ -45,6 +45,9 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     p.add_argument("--setting", action="append", default=[], metavar="KEY=VALUE",
                    dest="settings", help="a simulator setting (riskcore.sut.SimSettings, "
                    "repeatable; e.g. perception_delay=0.2)")
+    p.add_argument("--risk", action="store_true",
+                   help="also compute Wagner's TTR risk of the SUT's own drive per run "
+                   "(r_dep_peak, r_ind_peak, r_dep_time_above in --runs; costly)")
     p.add_argument("--list-suts", action="store_true",
                    help="print the registered SUTs as JSON and exit")
     add_constraints(p, default_text="none: the model's whole distribution")
@@ -131,9 +134,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         n=args.n, rhw=0.3 if args.rhw is None else float(args.rhw),
         max_runs=args.max_runs or service.DEFAULT_MAX_RUNS, seed=args.seed,
         batch_size=args.batch_size or service.DEFAULT_BATCH,
-        settings=_pairs(args.settings, "--setting") or None)
+        settings=_pairs(args.settings, "--setting") or None, risk=bool(args.risk))
     service.check_spec(spec, limit=10**9, where="")
-    runner = service.runner_for(None, factory, spec.settings)
+    runner = service.runner_for(None, factory, spec.settings, spec.risk)
     model = _load_model(args.model)
     if args.runs is not None and not Path(args.runs).parent.is_dir():
         raise CliError(f"--runs: directory {str(Path(args.runs).parent)!r} does not exist")

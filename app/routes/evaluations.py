@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app import jsonconv
 from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
+from app.quotas import client_of
 from app.schemas import SEED_MAX, ApiModel
 from app.services import evaluations as service
 from app.services import suts
@@ -54,6 +55,9 @@ class EvaluationRequest(BaseModel):
     settings: dict[str, Any] | None = Field(default=None, description="simulator settings "
                                             "(riskcore.sut.SimSettings fields: dt, "
                                             "a_brake_max, perception_delay, ...)")
+    risk: bool = Field(default=False, description="also compute Wagner's TTR risk (r_dep, "
+                       "r_ind) of the SUT's own drive in every run: r_dep_peak, r_ind_peak, "
+                       "r_dep_time_above (null without it; several times the simulation cost)")
 
 
 class EvaluationCreated(ApiModel):
@@ -144,13 +148,17 @@ def list_suts() -> SutList:
 
 @router.post("/evaluations", status_code=202, response_model=EvaluationCreated,
              summary="Start an evaluation of a system under test; answers with its id")
-def create_evaluation(body: EvaluationRequest, ctx: ContextDep,
+def create_evaluation(body: EvaluationRequest, request: Request, ctx: ContextDep,
                       jobs: JobsDep) -> EvaluationCreated:
-    row = service.create(ctx, sut=body.sut, sut_params=body.sut_params, model=body.model,
-                         constraints=body.constraints, n=body.n, rhw=body.rhw,
-                         max_runs=body.max_runs, seed=body.seed, batch_size=body.batch_size,
-                         settings=body.settings)
-    jobs.submit(row.id)
+    # the client's quota counts the runs it may have queued (app.quotas)
+    cost = body.n if body.n is not None else (body.max_runs or service.DEFAULT_MAX_RUNS)
+    with jobs.quotas.hold(client_of(request), cost, ctx.settings) as quota:
+        row = service.create(ctx, sut=body.sut, sut_params=body.sut_params, model=body.model,
+                             constraints=body.constraints, n=body.n, rhw=body.rhw,
+                             max_runs=body.max_runs, seed=body.seed,
+                             batch_size=body.batch_size, settings=body.settings,
+                             risk=body.risk)
+    jobs.submit(row.id, quota=quota)
     return EvaluationCreated(id=row.id, status=row.status, href=f"/evaluations/{row.id}")
 
 

@@ -73,9 +73,10 @@ def _campaign_face() -> Any:
     return importlib.import_module("sampler.campaign")
 
 
-def default_runner(factory: Any, settings: dict[str, Any] | None) -> Any:
+def default_runner(factory: Any, settings: dict[str, Any] | None, risk: bool = False) -> Any:
     """``sampler.campaign.sut_runner`` with the careful driver beside the SUT (for
-    ``vs_careful``); ``settings`` are ``riskcore.sut.SimSettings`` fields."""
+    ``vs_careful``); ``settings`` are ``riskcore.sut.SimSettings`` fields; ``risk``: Wagner's
+    r_dep / r_ind of the SUT's drive per run."""
     import importlib
 
     sim = None
@@ -89,13 +90,16 @@ def default_runner(factory: Any, settings: dict[str, Any] | None) -> Any:
     if not hasattr(face, "sut_runner"):
         raise ServiceError("evaluations need sampler.campaign.sut_runner, which this "
                            "version does not have yet")
-    return face.sut_runner(factory, settings=sim, careful=True, name=factory.name)
+    return face.sut_runner(factory, settings=sim, careful=True, name=factory.name,
+                           risk=risk)
 
 
 def runner_for(ctx: ServiceContext | None, factory: Any,
-               settings: dict[str, Any] | None) -> Any:
+               settings: dict[str, Any] | None, risk: bool = False) -> Any:
     maker: RunnerMaker | None = getattr(ctx, "campaign_runner", None) if ctx else None
-    return (maker or default_runner)(factory, settings)
+    if maker is not None:  # a runner injected by the caller (tests): it knows its fields
+        return maker(factory, settings)
+    return default_runner(factory, settings, risk) if risk else default_runner(factory, settings)
 
 
 def check_settings(settings: Mapping[str, Any] | None, field: str) -> None:
@@ -126,12 +130,14 @@ class CampaignSpec:
     seed: int
     batch_size: int
     settings: dict[str, Any] | None
+    risk: bool = False  # r_dep / r_ind of the SUT's drive per run (costly)
 
     def to_dict(self) -> dict[str, Any]:
         return {"sut": self.sut, "sut_params": self.sut_params,
                 "constraints": self.constraints, "n": self.n, "rhw": self.rhw,
                 "max_runs": self.max_runs, "seed": self.seed,
-                "batch_size": self.batch_size, "settings": self.settings}
+                "batch_size": self.batch_size, "settings": self.settings,
+                "risk": self.risk}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
@@ -139,7 +145,7 @@ class CampaignSpec:
                    constraints=list(d.get("constraints") or []), n=d.get("n"),
                    rhw=float(d.get("rhw", 0.3)), max_runs=int(d["max_runs"]),
                    seed=int(d.get("seed", 0)), batch_size=int(d["batch_size"]),
-                   settings=d.get("settings"))
+                   settings=d.get("settings"), risk=bool(d.get("risk", False)))
 
     @property
     def planned(self) -> int:
@@ -173,7 +179,7 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
            model: str | None = None, constraints: Sequence[str] = (), n: int | None = None,
            rhw: float = 0.3, max_runs: int | None = None, seed: int = 0,
            batch_size: int | None = None,
-           settings: Mapping[str, Any] | None = None) -> EvaluationRow:
+           settings: Mapping[str, Any] | None = None, risk: bool = False) -> EvaluationRow:
     """Validate and store a queued evaluation job; the caller submits it. ``sut`` must be a
     registered name (a request never names a module)."""
     entry = suts.resolve(sut, allow_import=False, field="body.sut")
@@ -182,7 +188,7 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
                         max_runs=int(max_runs or min(DEFAULT_MAX_RUNS,
                                                      ctx.settings.catalogue_n_limit)),
                         seed=int(seed), batch_size=int(batch_size or DEFAULT_BATCH),
-                        settings=dict(settings) if settings else None)
+                        settings=dict(settings) if settings else None, risk=bool(risk))
     check_spec(spec, ctx.settings.catalogue_n_limit)
     model_id = ctx.resolve_model_id(model)
     fitted = ctx.model(model_id)  # 404 before anything is stored
@@ -324,7 +330,7 @@ def run_job(ctx: ServiceContext, evaluation_id: str, *, cancel: threading.Event 
         model = ctx.model(model_id)
         entry = suts.resolve(spec.sut, allow_import=False, field="sut")
         factory = suts.make_factory(entry, spec.sut_params, field="sut_params")
-        runner = runner_for(ctx, factory, spec.settings)
+        runner = runner_for(ctx, factory, spec.settings, spec.risk)
         stored = stored_chunks(ctx, evaluation_id)
         with ctx.db.session() as s:  # drop what a gap made unusable, and its runs
             s.execute(sql_delete(EvaluationChunkRow).where(

@@ -84,6 +84,7 @@ class SutRunner:
     name: str
     lane_width: float | None
     vehicle_size: tuple[float, float] = DEFAULT_VEHICLE_SIZE
+    risk: bool = False  # Wagner's r_dep / r_ind of the SUT's own drive (riskcore.sut)
 
     def _sut(self) -> SystemUnderTest:
         return self.factory()
@@ -100,7 +101,8 @@ class SutRunner:
         if rows.size:
             batch = cutin_batch(x[rows], lane_width=lane, ego_length=length,
                                 ego_width=width, cutter_length=length, cutter_width=width)
-            runs = simulate(self._sut(), batch, seeds=seeds[rows], settings=self.settings)
+            runs = simulate(self._sut(), batch, seeds=seeds[rows], settings=self.settings,
+                            risk=self.risk)
             arrays = _full(runs, rows, n)
             vs = np.full(n, "", dtype="<U6")
             if self.careful:
@@ -132,7 +134,8 @@ class _Fixed:
 def sut_runner(sut: SystemUnderTest | Callable[[], SystemUnderTest], *,
                settings: SimSettings | None = None, careful: bool = True,
                lane_width: float | None = None, name: str | None = None,
-               vehicle_size: tuple[float, float] = DEFAULT_VEHICLE_SIZE) -> SutRunner:
+               vehicle_size: tuple[float, float] = DEFAULT_VEHICLE_SIZE,
+               risk: bool = False) -> SutRunner:
     """A campaign runner driving ``sut`` (a SUT object, or a zero-argument factory that
     makes a fresh one per call: use a picklable factory with a process pool, and never
     share one SUT object between threads).
@@ -140,7 +143,9 @@ def sut_runner(sut: SystemUnderTest | Callable[[], SystemUnderTest], *,
     ``careful``: also drive the same runs with ``r157_cc`` (UN R157's careful driver,
     JRC-FSM rule) for ``vs_careful`` (doubles the simulation cost). ``lane_width`` (m):
     None takes the campaign's (``evaluate`` sets its region's, the model's
-    ``lane_width_``; 3.75 m when called directly).
+    ``lane_width_``; 3.75 m when called directly). ``risk``: also compute Wagner's r_dep
+    and r_ind of the SUT's own drive (``r_dep_peak``, ``r_ind_peak``, ``r_dep_time_above``;
+    ``riskcore.sut.simulate(risk=True)``: costly, NaN without it).
     """
     if hasattr(sut, "act") and hasattr(sut, "reset"):
         factory: Callable[[], SystemUnderTest] = _Fixed(sut)  # type: ignore[arg-type]
@@ -150,4 +155,4 @@ def sut_runner(sut: SystemUnderTest | Callable[[], SystemUnderTest], *,
         label = name or str(getattr(sut, "name", None) or getattr(sut, "__name__", "sut"))
     return SutRunner(factory=factory, settings=settings, careful=bool(careful), name=label,
                      lane_width=None if lane_width is None else float(lane_width),
-                     vehicle_size=vehicle_size)
+                     vehicle_size=vehicle_size, risk=bool(risk))

@@ -64,3 +64,27 @@ def test_a_campaign_with_a_sut_is_deterministic() -> None:
     assert one.summary()["sut_runs"] > 30
     rec = one.records()[0]
     assert {"collided", "min_ttc", "must_avoid", "violation", "vs_careful", "weight"} <= set(rec)
+
+
+def test_risk_of_the_suts_own_drive_is_opt_in() -> None:
+    """``risk=True`` passes through to riskcore's simulator: the SUT's r_dep peak per run
+    (equal to a direct ``simulate(risk=True)`` of the same batch); without it the risk
+    fields are NaN and the outcomes are the same."""
+    from riskcore.sut import simulate
+    from sampler.scenario import cutin_batch
+
+    x = _critical_rows(6, 3)
+    seeds = np.arange(6, dtype=np.uint64)
+    plain = sut_runner(lambda: make_sut("acc"), careful=False, lane_width=3.75)(x, seeds)
+    risky = sut_runner(lambda: make_sut("acc"), careful=False, lane_width=3.75,
+                       risk=True)(x, seeds)
+    assert np.isnan(plain.r_dep_peak).all()
+    ok = risky.buildable
+    assert ok.sum() >= 4
+    assert np.isfinite(risky.r_dep_peak[ok]).all()
+    assert ((risky.r_dep_peak[ok] >= 0) & (risky.r_dep_peak[ok] <= 1)).all()
+    assert risky.collided.tolist() == plain.collided.tolist()
+    rows = np.flatnonzero(ok)
+    direct = simulate(make_sut("acc"), cutin_batch(x[rows], lane_width=3.75), seeds=seeds[rows],
+                      risk=True)
+    assert risky.r_dep_peak[rows].tolist() == direct.r_dep_peak.tolist()
