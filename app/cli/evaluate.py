@@ -102,7 +102,7 @@ class _Bar:
             from tqdm import tqdm
 
             self.bar = tqdm(total=total, desc="draws", unit="run", file=sys.stderr,
-                            leave=False)
+                            leave=False, smoothing=0)
         self.bar.n = min(done, total)
         self.bar.refresh()
 
@@ -146,6 +146,9 @@ def _evaluate(args: argparse.Namespace) -> int:
 
         pool = LocalPoolExecutor(args.workers)
     bar = _Bar(args.quiet)
+    # the bar starts now, at 0 of the planned draws, so its rate is draws per second of
+    # simulation (it advances after each chunk of --batch-size draws)
+    bar("runs", 0, spec.planned)
     try:
         result = service.campaign(model, factory, spec, runner=runner, progress=bar,
                                   executor=None if pool is None else pool.futures_executor())

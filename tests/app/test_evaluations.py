@@ -9,6 +9,7 @@ simulator end to end."""
 from __future__ import annotations
 
 import json
+import re
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -299,6 +300,10 @@ def test_cli_evaluate_prints_the_summary_and_writes_every_run(
     est = sum(x["weight"] for x in hits) / len(lines)
     assert est == pytest.approx(summary["p_collision"]["estimate"], rel=1e-9)
     assert "draws" in out.err  # the progress bar
+    # it starts before any draw is simulated, so its rate is draws per second of the
+    # campaign: it once appeared only when done and said "171196081.63run/s"
+    rates = [float(r) for r in re.findall(r"([0-9.]+)run/s", out.err)]
+    assert rates and max(rates) < 1e7
 
 
 def test_cli_evaluate_is_deterministic(store: Path, cli_runner: CountingRunner,
