@@ -118,6 +118,7 @@ class CatalogueStatus(ApiModel):
              summary="Start a catalogue job; answers with its id")
 def create_catalogue(body: CatalogueRequest, request: Request, ctx: ContextDep,
                      jobs: JobsDep) -> CatalogueCreated:
+    service.check_n(ctx, body.n)  # an oversized request is a 422, not a 429
     with jobs.quotas.hold(client_of(request), body.n, ctx.settings) as quota:
         row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
                              model=body.model, method=body.sampler, score=body.score,

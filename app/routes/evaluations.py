@@ -152,6 +152,8 @@ def create_evaluation(body: EvaluationRequest, request: Request, ctx: ContextDep
                       jobs: JobsDep) -> EvaluationCreated:
     # the client's quota counts the runs it may have queued (app.quotas)
     cost = body.n if body.n is not None else (body.max_runs or service.DEFAULT_MAX_RUNS)
+    if cost > ctx.settings.catalogue_n_limit:  # the size limit answers first (422)
+        cost = ctx.settings.catalogue_n_limit
     with jobs.quotas.hold(client_of(request), cost, ctx.settings) as quota:
         row = service.create(ctx, sut=body.sut, sut_params=body.sut_params, model=body.model,
                              constraints=body.constraints, n=body.n, rhw=body.rhw,

@@ -28,13 +28,19 @@ from sampler import SAMPLER_NAMES
 from sampler.scenario import SCORE_FIELDS, ScenarioRecord
 
 
+def check_n(ctx: ServiceContext, n: int) -> None:
+    """A catalogue's size within ``catalogue_n_limit`` (422 naming ``body.n``): checked
+    before the client's quota, so an oversized request is the client's error, not a 429."""
+    limit = ctx.settings.catalogue_n_limit
+    if not 1 <= n <= limit:
+        raise InvalidInput(f"n must be between 1 and {limit}, got {n}", field="body.n")
+
+
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
            model: str | None = None, method: str = "auto", score: bool = True,
            chunk_size: int | None = None, wagner_scan: bool = False) -> CatalogueRow:
     """Validate and store a new catalogue job (status ``queued``); the caller runs it."""
-    limit = ctx.settings.catalogue_n_limit
-    if not 1 <= n <= limit:
-        raise InvalidInput(f"n must be between 1 and {limit}, got {n}", field="body.n")
+    check_n(ctx, n)
     if method not in SAMPLER_NAMES:
         raise InvalidInput(f"unknown sampler {method!r}; choose one of "
                            f"{', '.join(SAMPLER_NAMES)}", field="body.sampler")
