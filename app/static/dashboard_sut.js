@@ -9,6 +9,12 @@
 
 (function () {
   const S = window.scengen;
+
+  // peak r_dep of the SUT's drive: NaN (or "NaN") when the evaluation did not ask for risk
+  function riskCell(x) {
+    const v = typeof x === "string" ? Number(x) : x;
+    return v === null || v === undefined || Number.isNaN(v) ? "not computed" : S.fmt(v);
+  }
   const $ = (id) => document.getElementById(id);
   const SUT = "#c62828";
   const CAREFUL = "#2e7d32";
@@ -145,7 +151,7 @@
                   "dv [m/s]", "gap [m]", "weight"];
     const body = view.failures.map((r) => "<tr data-run=\"" + r.run + "\"><td><a href=\"#\">" +
       r.run + "</a></td><td>" + S.esc(S.fmt(r.impact_speed)) + "</td><td>" +
-      S.esc(S.fmt(r.r_dep_peak)) + "</td><td>" + S.esc(r.vs_careful || "–") + "</td><td>" +
+      S.esc(riskCell(r.r_dep_peak)) + "</td><td>" + S.esc(r.vs_careful || "–") + "</td><td>" +
       S.esc(S.fmt(r.p_v0)) + "</td><td>" + S.esc(S.fmt(r.dv)) + "</td><td>" +
       S.esc(S.fmt(r.gap)) + "</td><td>" + S.esc(S.fmt(r.weight)) + "</td></tr>").join("");
     box.innerHTML = "<p class=\"note\">" + view.failures_total + " failing runs, highest " +

@@ -78,6 +78,8 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
             assert points == shown
             rows = page.locator("#sut-failures tr[data-run]")
             assert rows.count() == len(view["failures"])
+            # an evaluation without `risk` has no r_dep: the table says so, not "NaN"
+            assert "NaN" not in page.locator("#sut-failures").inner_text()
             if view["failures"]:
                 page.wait_for_selector("#sut-run-plot[data-rendered='1']", timeout=TIMEOUT_MS)
                 first = view["failures"][0]["run"]
