@@ -64,7 +64,8 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings = _settings_of(app)
     ctx = store.open_context(settings)
     jobs = JobManager(ctx.runner(), kinds={"eval": JobKind(
-        run=evaluations.job(ctx), pending=lambda: evaluations.active_ids(ctx))})
+        run=evaluations.job(ctx), pending=lambda: evaluations.active_ids(ctx))},
+        running_limit=settings.running_jobs_limit)
     jobs.start(resume=settings.resume_jobs)
     if settings.warm_start:
         ctx.warm_start()  # in the background: the first request need not wait

@@ -94,6 +94,11 @@ class Settings(BaseSettings):
     client_queued_scenarios_limit: int = Field(
         default=200_000, ge=1, description="most scenarios one client may have in its "
         "queued and running jobs together (about 40 min of work on 2 cores)")
+    running_jobs_limit: int = Field(
+        default=8, ge=1, description="most jobs the service runs at once (each client's "
+        "oldest first, the client with the fewest running first); the running jobs share "
+        "the workers chunk by chunk, a free worker going to the client with the fewest "
+        "chunks in flight (app/jobs/fair.py), so a huge job does not hold the others back")
     quota_retry_after: int = Field(
         default=60, ge=1, description="seconds a client over a quota is told to wait "
         "(Retry-After)")

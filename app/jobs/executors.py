@@ -20,6 +20,7 @@ from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExe
 from typing import Any, Protocol, TypeVar
 
 from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk, warm_worker
+from app.jobs.fair import Share
 from app.jobs.lifeline import die_with_parent, pool_keeper_thread
 
 log = logging.getLogger("scengen.jobs")
@@ -38,7 +39,10 @@ class ChunkExecutor(Protocol):
     name: str
 
     def run(self, spec: CatalogueSpec, indices: Iterable[int],
-            cancel: Flag | None = None) -> Iterator[ChunkResult]: ...
+            cancel: Flag | None = None, share: Share | None = None
+            ) -> Iterator[ChunkResult]: ...
+
+    def capacity(self) -> int: ...
 
     def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]: ...
 
@@ -60,11 +64,26 @@ class InlineExecutor:
         self.fn = fn
 
     def run(self, spec: CatalogueSpec, indices: Iterable[int],
-            cancel: Flag | None = None) -> Iterator[ChunkResult]:
+            cancel: Flag | None = None, share: Share | None = None
+            ) -> Iterator[ChunkResult]:
+        """Each chunk in turn; with ``share``, each waits for the job's turn first."""
         for i in indices:
             if cancel is not None and cancel.is_set():
                 return
-            yield self.fn(spec, i)
+            if share is None:
+                yield self.fn(spec, i)
+                continue
+            if not share.acquire(cancel):
+                return
+            try:
+                result = self.fn(spec, i)
+            finally:
+                share.release()
+            yield result
+
+    def capacity(self) -> int:
+        """Chunks in flight at once: one."""
+        return 1
 
     def map(self, fn: Callable[..., T], *args: Sequence[Any]) -> list[T]:
         """``fn`` over zipped ``args`` in this thread, results in order."""
@@ -116,10 +135,17 @@ class FuturesExecutor:
                 self._executor = self._make()
             return self._executor
 
+    def capacity(self) -> int:
+        """Chunks in flight at once that keep every worker busy (the window)."""
+        return self._window()
+
     def run(self, spec: CatalogueSpec, indices: Iterable[int],
-            cancel: Flag | None = None) -> Iterator[ChunkResult]:
+            cancel: Flag | None = None, share: Share | None = None
+            ) -> Iterator[ChunkResult]:
         """Yield each chunk's result as it finishes (any order); stop submitting when
-        ``cancel`` is set and cancel what has not started."""
+        ``cancel`` is set and cancel what has not started. With ``share`` (the job's
+        handle on the service's ``FairSlots``) each chunk waits for the job's turn:
+        blocking when the job has nothing in flight, else only if a slot is free now."""
         executor = self._get()
         window = self._window()
         pending: set[Future[ChunkResult]] = set()
@@ -131,11 +157,25 @@ class FuturesExecutor:
                     if cancel is not None and cancel.is_set():
                         exhausted = True
                         break
+                    if share is not None and not (share.try_acquire() if pending
+                                                  else share.acquire(cancel)):
+                        exhausted = not pending  # cancelled while waiting
+                        break
                     i = next(todo, None)
                     if i is None:
                         exhausted = True
+                        if share is not None:
+                            share.release()
                         break
-                    pending.add(executor.submit(self.fn, spec, i))
+                    try:
+                        fut = executor.submit(self.fn, spec, i)
+                    except BaseException:
+                        if share is not None:
+                            share.release()
+                        raise
+                    if share is not None:
+                        share.release_when_done(fut)
+                    pending.add(fut)
                 if not pending:
                     return
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)

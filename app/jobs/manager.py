@@ -1,12 +1,19 @@
-"""The service's job queue: one background thread runs jobs one at a time (each job
-already uses every worker of the executor): catalogues (``CatalogueRunner``) and the other
-kinds given as ``kinds`` (id prefix -> ``JobKind``: how to run one, which to resume), e.g.
-the evaluations of ``app.services.evaluations``."""
+"""The service's job queue: jobs of different clients run side by side and share the
+workers chunk by chunk (``app.jobs.fair``), so one client's huge job does not hold
+everyone else's behind it.
+
+Up to ``running_limit`` jobs run at once, each in its own thread; the next to start is
+the oldest queued job of the client with the fewest jobs running (then of the client
+whose last job started longest ago). What they share is the
+executor's capacity (``FairSlots``, one slot per chunk in flight): a free slot goes to
+the waiting client with the fewest slots in use. Catalogues run through
+``CatalogueRunner``; the other kinds are given as ``kinds`` (id prefix -> ``JobKind``: how
+to run one, which to resume), e.g. the evaluations of ``app.services.evaluations``."""
 
 from __future__ import annotations
 
+import itertools
 import logging
-import queue
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -14,33 +21,56 @@ from dataclasses import dataclass
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow
+from app.jobs.fair import FairSlots, Share
 from app.jobs.runner import CatalogueRunner
 from app.quotas import ClientQuotas, QuotaToken
+
+#: the client of a job resumed at start-up (it has no request)
+RESUMED = "(resumed)"
+#: jobs running at once unless told otherwise
+RUNNING_LIMIT = 8
 
 log = logging.getLogger("scengen.jobs")
 
 
 @dataclass(frozen=True)
 class JobKind:
-    """A kind of job besides catalogues: ``run(id, cancel, stop)`` -> final status, and
+    """A kind of job besides catalogues: ``run(id, cancel, stop, share)`` -> final
+    status (``share``: the job's turn on the workers, ``app.jobs.fair``), and
     ``pending()`` -> the ids to resume at start."""
 
-    run: Callable[[str, threading.Event, threading.Event], str]
+    run: Callable[[str, threading.Event, threading.Event, Share], str]
     pending: Callable[[], list[str]]
+
+
+@dataclass(frozen=True)
+class _Queued:
+    job_id: str
+    client: str
+    seq: int
 
 
 class JobManager:
     def __init__(self, runner: CatalogueRunner,
-                 kinds: Mapping[str, JobKind] | None = None) -> None:
+                 kinds: Mapping[str, JobKind] | None = None, *,
+                 running_limit: int = RUNNING_LIMIT, slots: int | None = None) -> None:
+        if running_limit < 1:
+            raise ValueError(f"running_limit: need at least 1, got {running_limit}")
         self.runner = runner
         self.kinds = dict(kinds or {})
-        self._queue: queue.Queue[str | None] = queue.Queue()
+        self.running_limit = running_limit
+        #: the workers' capacity shared between clients, chunk by chunk
+        self.fair = FairSlots(slots or max(1, runner.executor.capacity()))
+        self._queued: list[_Queued] = []
+        self._running: dict[str, tuple[threading.Thread, str]] = {}
         self._cancel: dict[str, threading.Event] = {}
         #: per-client quotas of every job kind (``app.quotas``), released as jobs end
         self.quotas = ClientQuotas()
         self._tokens: dict[str, QuotaToken] = {}
         self._lock = threading.Lock()
-        self._thread: threading.Thread | None = None
+        self._seq = itertools.count(1)
+        self._last_start: dict[str, int] = {}  # client -> seq of its last start
+        self._started = False
         self._stop = threading.Event()
 
     @property
@@ -48,8 +78,9 @@ class JobManager:
         return self.runner.db
 
     def start(self, resume: bool = True) -> None:
-        self._thread = threading.Thread(target=self._loop, name="scengen-jobs", daemon=True)
-        self._thread.start()
+        with self._lock:
+            self._started = True
+            self._dispatch()
         if resume:
             with self.db.session() as s:
                 ids = [r.id for r in repo.list_catalogues(s) if r.status in repo.ACTIVE]
@@ -61,54 +92,100 @@ class JobManager:
                     log.info("resuming unfinished %s job %s", prefix, jid)
                     self.submit(jid)
 
-    def submit(self, catalogue_id: str, quota: QuotaToken | None = None) -> None:
-        """Queue a job; ``quota`` (from ``self.quotas``) is released when it ends."""
+    def submit(self, job_id: str, quota: QuotaToken | None = None,
+               client: str | None = None) -> None:
+        """Queue a job for ``client`` (default: the quota's client; a job without either
+        is a resumed one); ``quota`` (from ``self.quotas``) is released when it ends."""
+        who = client if client is not None else quota.client if quota is not None else RESUMED
         with self._lock:
-            self._cancel[catalogue_id] = threading.Event()
+            self._cancel[job_id] = threading.Event()
             if quota is not None:
-                self._tokens[catalogue_id] = quota
-        self._queue.put(catalogue_id)
+                self._tokens[job_id] = quota
+            self._queued.append(_Queued(job_id, who, next(self._seq)))
+            self._dispatch()
 
-    def cancel(self, catalogue_id: str) -> None:
+    def cancel(self, job_id: str) -> None:
+        """Stop a job: a queued one never starts (its quota is given back now), a running
+        one stops its chunks."""
+        token = None
         with self._lock:
-            event = self._cancel.get(catalogue_id)
-        if event is not None:
-            event.set()
+            event = self._cancel.get(job_id)
+            if event is not None:
+                event.set()
+            queued = [q for q in self._queued if q.job_id == job_id]
+            if queued:
+                self._queued.remove(queued[0])
+                self._cancel.pop(job_id, None)
+                token = self._tokens.pop(job_id, None)
+        self.quotas.release(token)
+
+    def running(self) -> dict[str, str]:
+        """The running jobs and their clients."""
+        with self._lock:
+            return {j: c for j, (_, c) in self._running.items()}
+
+    def queued(self) -> list[str]:
+        with self._lock:
+            return [q.job_id for q in self._queued]
+
+    def idle(self) -> bool:
+        with self._lock:
+            return not self._running and not self._queued
 
     def stop(self) -> None:
         """Stop after the chunks in flight; unfinished jobs stay resumable."""
         self._stop.set()
-        self._queue.put(None)
-        if self._thread is not None:
-            self._thread.join(timeout=60)
+        with self._lock:
+            threads = [t for t, _ in self._running.values()]
+        for thread in threads:
+            thread.join(timeout=60)
         # the executor belongs to the ServiceContext, which closes it
 
     def _kind_of(self, job_id: str) -> JobKind | None:
         prefix = job_id.partition("-")[0]
         return self.kinds.get(prefix)
 
-    def _loop(self) -> None:
-        while True:
-            cid = self._queue.get()
-            if cid is None or self._stop.is_set():
+    def _dispatch(self) -> None:
+        """Start queued jobs while fewer than ``running_limit`` run (hold ``_lock``): the
+        oldest job of the client with the fewest jobs running goes first, of those the
+        client whose last job started longest ago."""
+        if not self._started:
+            return
+        while (self._queued and len(self._running) < self.running_limit
+               and not self._stop.is_set()):
+            counts: dict[str, int] = {}
+            for _, who in self._running.values():
+                counts[who] = counts.get(who, 0) + 1
+            nxt = min(self._queued, key=lambda q: (counts.get(q.client, 0),
+                                                   self._last_start.get(q.client, 0), q.seq))
+            self._queued.remove(nxt)
+            self._last_start[nxt.client] = next(self._seq)
+            thread = threading.Thread(target=self._run_one, args=(nxt.job_id, nxt.client),
+                                      name=f"scengen-job-{nxt.job_id}", daemon=True)
+            self._running[nxt.job_id] = (thread, nxt.client)
+            thread.start()
+
+    def _run_one(self, job_id: str, client: str) -> None:
+        with self._lock:
+            event = self._cancel.get(job_id, threading.Event())
+        share = self.fair.share(client)
+        try:
+            if event.is_set() or self._stop.is_set():
                 return
+            kind = self._kind_of(job_id)
+            if kind is not None:
+                kind.run(job_id, event, self._stop, share)
+                return
+            with self.db.session() as s:
+                if s.get(CatalogueRow, job_id) is None:
+                    return
+            self.runner.run(job_id, cancel=event, stop=self._stop, share=share)
+        except Exception:  # keep the service alive whatever one job does
+            log.exception("job %s crashed", job_id)
+        finally:
             with self._lock:
-                event = self._cancel.get(cid, threading.Event())
-            try:
-                if event.is_set():
-                    continue
-                kind = self._kind_of(cid)
-                if kind is not None:
-                    kind.run(cid, event, self._stop)
-                    continue
-                with self.db.session() as s:
-                    if s.get(CatalogueRow, cid) is None:
-                        continue
-                self.runner.run(cid, cancel=event, stop=self._stop)
-            except Exception:  # keep the loop alive whatever one job does
-                log.exception("job %s crashed", cid)
-            finally:
-                with self._lock:
-                    self._cancel.pop(cid, None)
-                    token = self._tokens.pop(cid, None)
-                self.quotas.release(token)
+                self._running.pop(job_id, None)
+                self._cancel.pop(job_id, None)
+                token = self._tokens.pop(job_id, None)
+                self._dispatch()
+            self.quotas.release(token)

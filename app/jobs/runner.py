@@ -10,11 +10,12 @@ because chunk i depends only on (spec, i).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
 from app.jobs.chunk import CatalogueSpec, region_seed
 from app.jobs.executors import ChunkExecutor
+from app.jobs.fair import JobCancelled, Share
 
 log = logging.getLogger("scengen.jobs")
 
@@ -33,6 +35,16 @@ Progress = Callable[[int, int], None]  # (scenarios done, scenarios in total)
 Stage = Callable[[str, int, int], None]
 #: seconds between two writes of the same stage's counts (a new stage is written at once)
 STAGE_EVERY = 0.5
+
+
+@contextlib.contextmanager
+def _turn(share: Share | None, halt: _Either) -> Iterator[None]:
+    """Hold one of the job's slots for the block (nothing without a share)."""
+    if share is None:
+        yield
+        return
+    with share.slot(halt):
+        yield
 
 
 class _Either:
@@ -200,13 +212,16 @@ class CatalogueRunner:
 
     def run(self, catalogue_id: str, *, cancel: threading.Event | None = None,
             stop: threading.Event | None = None, progress: Progress | None = None,
-            note: Callable[[str], None] | None = None, stage: Stage | None = None) -> str:
+            note: Callable[[str], None] | None = None, stage: Stage | None = None,
+            share: Share | None = None) -> str:
         """Finish the catalogue; return its final status (done, failed, cancelled,
         deleted, or interrupted when ``stop`` was set: the service is shutting down and
         the job stays ``running``, to be resumed at the next start). Errors of the job
         end in status ``failed`` with the message kept. ``progress`` hears the scenarios
         done, ``stage`` the stages of the P(A) estimate, ``note`` why the job is still
-        running after its scenarios are stored."""
+        running after its scenarios are stored. ``share``: the job's turn on the workers
+        (``app.jobs.fair``; the service's jobs share them chunk by chunk), also held for
+        the P(A) estimate and its refinement."""
         halt = _Either(cancel, stop)
         with self.db.session() as s:
             row = repo.get_catalogue(s, catalogue_id)
@@ -228,7 +243,8 @@ class CatalogueRunner:
         try:
             if need_region:
                 stages.estimating("starting", 0, 1)
-                p_region = self.region(spec, stages.estimating)
+                with _turn(share, halt):
+                    p_region = self.region(spec, stages.estimating)
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region
@@ -238,7 +254,7 @@ class CatalogueRunner:
             for i in todo:  # what an interrupted run reported is redone from 0
                 chunkfile.clear_progress(folder, i)
             stages("sampling and scoring")
-            for result in self.executor.run(spec, todo, halt):
+            for result in self.executor.run(spec, todo, halt, share):
                 with self.db.session() as s:
                     ok = repo.store_chunk(s, self.data_dir, catalogue_id, result.index,
                                           result.rows, result.blob, result.sha256,
@@ -258,8 +274,11 @@ class CatalogueRunner:
                 missing = total - len(repo.stored_chunk_indices(s, catalogue_id))
             if missing:
                 return self._finish(catalogue_id, "failed", f"{missing} chunks missing")
-            self._refine_region(catalogue_id, spec, note, stages)
+            with _turn(share, halt):
+                self._refine_region(catalogue_id, spec, note, stages)
             return self._finish(catalogue_id, "done", None)
+        except JobCancelled:
+            return self._halted(catalogue_id, cancel)
         except Exception as exc:
             if not self._exists(catalogue_id):  # deleted under the job: not a failure
                 log.info("catalogue %s deleted while its job ran (%s)", catalogue_id,
@@ -291,6 +310,16 @@ class CatalogueRunner:
         if refined is not None:
             with self.db.session() as s:
                 repo.get_catalogue(s, catalogue_id).p_region = refined
+
+    def _halted(self, catalogue_id: str, cancel: threading.Event | None) -> str:
+        """The status of a job stopped before its end: deleted, cancelled or (the service
+        stops) interrupted, left ``running`` to resume at the next start."""
+        if not self._exists(catalogue_id):
+            return "deleted"
+        if cancel is not None and cancel.is_set():
+            return self._finish(catalogue_id, "cancelled", None)
+        log.info("catalogue %s interrupted by shutdown; resumes at next start", catalogue_id)
+        return "interrupted"
 
     def _exists(self, catalogue_id: str) -> bool:
         with self.db.session() as s:

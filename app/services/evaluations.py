@@ -39,6 +39,7 @@ from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.models import EvaluationChunkRow, EvaluationRow, EvaluationRunRow, utcnow
 from app.errors import Conflict, InvalidInput, NotFound, ServiceError
+from app.jobs.fair import FairExecutor, JobCancelled, Share
 from app.limits import check_constraints
 from app.services import suts
 from datasets import PARAM_NAMES
@@ -313,10 +314,11 @@ def campaign(model: Any, factory: Any, spec: CampaignSpec, *, runner: Any,
 
 def run_job(ctx: ServiceContext, evaluation_id: str, *, cancel: threading.Event | None = None,
             stop: threading.Event | None = None,
-            progress: ProgressFn | None = None) -> str:
+            progress: ProgressFn | None = None, share: Share | None = None) -> str:
     """Run (or resume) an evaluation to its end; its final status (done, failed, cancelled,
     deleted, or interrupted when ``stop`` was set: it stays running and resumes at the
-    next start)."""
+    next start). ``share``: the job's turn on the workers (``app.jobs.fair``): each part
+    of a chunk waits for it, and a cancelled job submits no more parts."""
     with ctx.db.session() as s:
         row = s.get(EvaluationRow, evaluation_id)
         if row is None:
@@ -360,11 +362,13 @@ def run_job(ctx: ServiceContext, evaluation_id: str, *, cancel: threading.Event 
                 progress(stage, done, total)
             halt()
 
+        executor = ctx.executor.futures_executor()
+        if executor is not None and share is not None:
+            executor = FairExecutor(executor, share, _AnyOf(cancel, stop))
         result = campaign(model, factory, spec, runner=runner, progress=tell,
-                          on_chunk=on_chunk, stored=stored,
-                          executor=ctx.executor.futures_executor())
+                          on_chunk=on_chunk, stored=stored, executor=executor)
         summary = jsonconv.encode(result.summary())
-    except Cancelled:
+    except (Cancelled, JobCancelled):
         if not _exists(ctx, evaluation_id):
             return "deleted"
         if cancel is not None and cancel.is_set():
@@ -377,6 +381,16 @@ def run_job(ctx: ServiceContext, evaluation_id: str, *, cancel: threading.Event 
         msg = getattr(exc, "message", None) or str(exc)
         return _finish(ctx, evaluation_id, "failed", f"{type(exc).__name__}: {msg}")
     return _finish(ctx, evaluation_id, "done", None, summary=summary)
+
+
+class _AnyOf:
+    """Set when any of the events is."""
+
+    def __init__(self, *events: threading.Event | None) -> None:
+        self.events = [e for e in events if e is not None]
+
+    def is_set(self) -> bool:
+        return any(e.is_set() for e in self.events)
 
 
 def _exists(ctx: ServiceContext, evaluation_id: str) -> bool:
@@ -399,9 +413,10 @@ def _finish(ctx: ServiceContext, evaluation_id: str, status: str, error: str | N
     return status
 
 
-def job(ctx: ServiceContext) -> Callable[[str, threading.Event, threading.Event], str]:
+def job(ctx: ServiceContext) -> Callable[[str, threading.Event, threading.Event, Share], str]:
     """The job manager's entry for evaluations."""
-    return lambda eid, cancel, stop: run_job(ctx, eid, cancel=cancel, stop=stop)
+    return lambda eid, cancel, stop, share: run_job(ctx, eid, cancel=cancel, stop=stop,
+                                                    share=share)
 
 
 def active_ids(ctx: ServiceContext) -> list[str]:
