@@ -111,8 +111,9 @@ class CutInBatch:
                 raise SutError(f"{name}: must be finite")
             object.__setattr__(self, name, arr)
         for name in ("c_length", "c_width", "t_p", "t_cross"):
-            arr = np.ascontiguousarray(np.broadcast_to(getattr(self, name), (n,)),
-                                       dtype=np.float64)
+            # a writable copy: a read-only view (broadcast_to) would give the compiled
+            # loops a second signature to compile
+            arr = np.array(np.broadcast_to(getattr(self, name), (n,)), dtype=np.float64)
             object.__setattr__(self, name, arr)
         if np.any(~(self.c_length > 0)) or np.any(~(self.c_width > 0)):
             raise SutError("c_length, c_width: must be > 0 m")

@@ -36,6 +36,9 @@ from riskcore.sut.settings import SimSettings
 
 __all__ = ["simulate"]
 
+#: compiled loops of the built-ins by ``simulate(engine=...)``
+_ENGINES = {"fused": _k.run_builtin, "stepwise": _k.run_builtin_stepwise}
+
 
 def _seeds(seeds: ArrayLike | int | None, n: int) -> NDArray[np.uint64]:
     if seeds is None:
@@ -112,7 +115,7 @@ def _drive(sut: SystemUnderTest, batch: CutInBatch, s: SimSettings, n_steps: int
 def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
              settings: SimSettings | None = None, profiles: bool = False,
              risk: bool = False, must_avoid_variant: str = "6",
-             fast_path: bool = True) -> RunBatch:
+             engine: str = "fused") -> RunBatch:
     """Drive the ego of every run of ``batch`` with ``sut`` (module docstring).
 
     Parameters
@@ -132,10 +135,14 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
         Monte-Carlo scene per step of the batch's grid and run); NaN when False.
     must_avoid_variant : "6" or "2.4"
         The regulation's deceleration for ``must_avoid``.
-    fast_path : bool
+    engine : "fused", "stepwise" or "loop"
         Built-in SUTs with a compiled policy (none, idm, acc, acc_aeb) run through one
-        compiled loop, run after run, when there is no perception delay and no profile is
-        asked for; False: through the step loop every SUT takes (same results, slower).
+        compiled loop, run after run, when there is no perception delay and no profile or
+        risk is asked for: "fused" (default; ``kernels.run_builtin``, the run's state in
+        local variables) or "stepwise" (``kernels.run_builtin_stepwise``, one compiled
+        step function per step: the previous fast path, kept as the speed baseline).
+        "loop": the Python step loop every SUT takes. All three give bit-identical
+        results (tested); other SUTs always take the loop.
 
     Returns
     -------
@@ -146,6 +153,9 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
         raise SutError(f"batch: expected a CutInBatch, got {type(batch).__name__}")
     if not isinstance(s, SimSettings):
         raise SutError(f"settings: expected SimSettings, got {type(s).__name__}")
+    kernel = _ENGINES.get(engine) if isinstance(engine, str) else None
+    if engine != "loop" and kernel is None:
+        raise SutError(f"engine: expected 'fused', 'stepwise' or 'loop', got {engine!r}")
     n = batch.n
     seed_arr = _seeds(seeds, n)
     sut.reset(n, seed_arr)
@@ -174,16 +184,17 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
     cutter = (batch.cx, batch.cy, batch.cpsi, batch.cv, batch.ca, batch.c_length,
               batch.c_width)
     # built-ins run through a compiled loop (the same steps; tests prove equality)
-    compiled = getattr(sut, "compiled", None) if fast_path else None
+    compiled = getattr(sut, "compiled", None) if kernel is not None else None
     fast = (compiled(batch.ego_v0) if callable(compiled) and s.delay_steps == 0
             and not profiles and not risk else None)
     upd = s.update_steps
     keep: list[NDArray[np.float64]] | None = [] if profiles or risk else None
     if fast is not None:
         kind, q, v_des = fast
-        _k.run_builtin(kind, q, v_des, upd, n_steps, -s.a_brake_max, s.a_accel_max, x, v, a,
-                       batch.cx, batch.cy, batch.cpsi, batch.cv, batch.ca, batch.c_length,
-                       batch.c_width, batch.t_p, batch.t_end, prm, out, end_code, collided)
+        assert kernel is not None
+        kernel(kind, q, v_des, upd, n_steps, -s.a_brake_max, s.a_accel_max, x, v, a,
+               batch.cx, batch.cy, batch.cpsi, batch.cv, batch.ca, batch.c_length,
+               batch.c_width, batch.t_p, batch.t_end, prm, out, end_code, collided)
     else:
         _drive(sut, batch, s, n_steps, x, v, a, active, hist, prm, out, end_code, collided,
                cutter, keep)

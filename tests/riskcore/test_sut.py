@@ -263,18 +263,50 @@ class _Hidden:
         return self._sut.act(obs)
 
 
+def _wide_sample(n: int, seed: int) -> list:
+    """Generated cut-ins over typical highway ranges (closing and opening, near and far:
+    benchmarks/bench_sut.py's batch)."""
+    from sampler import BuilderError, build_scenario
+
+    rng = np.random.default_rng(seed)
+    out: list = []
+    while len(out) < n:
+        p = {"p_y1": rng.choice([-1, 1]) * rng.uniform(0.05, 0.2),
+             "p_t": rng.uniform(1.5, 3.0), "p_a1": rng.uniform(-3.0, 1.0),
+             "p_a2": rng.uniform(-1.0, 3.0), "p_a3": rng.uniform(0.0, 3.0),
+             "p_v0": rng.uniform(15.0, 35.0), "dv": rng.uniform(-2.0, 10.0),
+             "gap": rng.uniform(2.0, 40.0)}
+        try:
+            out.append(build_scenario(p))
+        except BuilderError:
+            continue
+    return out
+
+
+@pytest.mark.parametrize("engine", ["fused", "stepwise"])
 @pytest.mark.parametrize("name", ["none", "idm", "acc", "acc_aeb"])
-def test_the_compiled_path_equals_the_step_loop(name: str) -> None:
+def test_the_compiled_path_equals_the_step_loop(name: str, engine: str) -> None:
+    """Both compiled loops give the bytes of the Python step loop (the slow, straightforward
+    reference: the SUT's numpy act on the batch's observations, one step at a time), on a
+    ttc < 3 sample and a wide one, every step and with a held command."""
     from tests.riskcore.test_sut_reference import _ttc3_sample
 
-    b = CutInBatch.from_scenarios(_ttc3_sample(40, 3))
-    fast = simulate(make_sut(name), b, seeds=5)
-    slow = simulate(_Hidden(name), b, seeds=5)
-    assert _bytes(fast) == _bytes(slow)
-    for period in (0.05,):
-        s = SimSettings(update_period=period)
-        assert _bytes(simulate(make_sut(name), b, seeds=5, settings=s)) == _bytes(
-            simulate(_Hidden(name), b, seeds=5, settings=s))
+    b = CutInBatch.from_scenarios(_ttc3_sample(40, 3) + _wide_sample(40, 11))
+    for s in (SimSettings(), SimSettings(update_period=0.05)):
+        fast = simulate(make_sut(name), b, seeds=5, settings=s, engine=engine)
+        slow = simulate(_Hidden(name), b, seeds=5, settings=s)
+        assert _bytes(fast) == _bytes(slow)
+        assert _bytes(simulate(make_sut(name), b, seeds=5, settings=s,
+                               engine="loop")) == _bytes(slow)
+        if name != "none" and s.update_period is None:
+            assert fast.collided.any() and not fast.collided.all()
+            assert np.isfinite(fast.min_gap).any() and np.isfinite(fast.t_brake_rel_tp).any()
+
+
+def test_an_unknown_engine_is_refused() -> None:
+    b = leader_batch([20.0], [20.0], [25.0], duration=2.0)
+    with pytest.raises(SutError, match="engine"):
+        simulate(make_sut("idm"), b, seeds=0, engine="turbo")
 
 
 def test_ttr_aeb_brakes_on_the_online_risk_and_avoids_what_none_hits() -> None:
