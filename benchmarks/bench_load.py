@@ -260,6 +260,11 @@ def main() -> None:
             results["ratio_small_done_fair_over_baseline"] = (
                 f["small_catalogues_done"] / b["small_catalogues_done"]
                 if b["small_catalogues_done"] else None)
+            for r in (f, b):
+                r["all_scenarios_stored"] = (r["small_scenarios_stored"]
+                                             + r["flood_scenarios_stored"])
+            results["ratio_all_scenarios_fair_over_baseline"] = round(
+                f["all_scenarios_stored"] / max(1, b["all_scenarios_stored"]), 2)
             results["ratio_small_scenarios_fair_over_baseline"] = (
                 f["small_scenarios_stored"] / b["small_scenarios_stored"]
                 if b["small_scenarios_stored"] else None)

@@ -207,6 +207,16 @@ def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
                                 if show_progress else None, stage=stages)
     except LookupError as exc:
         raise _in_store(exc) from None
+    except KeyboardInterrupt:
+        # Ctrl-C: the catalogue says "cancelled" (not a stale "running") and how to go on
+        stored, n = catalogues.mark_cancelled(ctx, catalogue_id)
+        if bar is not None:
+            bar.close()
+            bar = None
+        print(f"scengen: catalogue {catalogue_id} cancelled with {stored} of {n} scenarios "
+              f"stored; resume it with: scengen catalogue resume {catalogue_id}",
+              file=sys.stderr)
+        return 130
     finally:
         stages.close()
         if bar is not None:

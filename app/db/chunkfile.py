@@ -15,6 +15,12 @@ The runner also keeps ``stage.json`` there while the job runs: what it is doing 
 (estimating P(A), with the sampler's own stage and counts; sampling and scoring; refining
 the model interval), so that the status says why the progress stays at 0 during a
 P(A) estimate of half a minute.
+
+A cancelled job (``DELETE``, the CLI's Ctrl-C) leaves a ``stop`` file there
+(``request_stop``); the workers computing its chunks look for it (and for the folder
+having been removed, which a deletion does) every quarter second (``stop_requested``) and
+give their chunk up, so that a cancelled job stops within a moment instead of finishing
+the chunks in flight. A worker on another machine sees neither and finishes its chunk.
 """
 
 from __future__ import annotations
@@ -28,11 +34,12 @@ from typing import Any
 
 from app.atomic import write_atomic
 
-__all__ = ["clear_progress", "clear_stage", "encode", "progress_dir", "read_at",
-           "read_progress", "read_scenarios", "read_stage", "relative_path", "write_progress",
-           "write_stage"]
+__all__ = ["clear_progress", "clear_stage", "clear_stop", "encode", "progress_dir", "read_at",
+           "read_progress", "read_scenarios", "read_stage", "relative_path", "request_stop",
+           "stop_requested", "write_progress", "write_stage"]
 
 STAGE_FILE = "stage.json"
+STOP_FILE = "stop"
 
 
 def relative_path(catalogue_id: str, index: int) -> str:
@@ -70,8 +77,32 @@ def progress_dir(data_dir: Path, catalogue_id: str) -> Path:
 
 def write_progress(folder: str | Path, index: int, done: int) -> None:
     """Record that ``done`` scenarios of chunk ``index`` are computed (best effort: a
-    folder that cannot be written is skipped)."""
-    _write_atomic(Path(folder) / f"progress_{index:06d}", str(int(done)))
+    folder that cannot be written is skipped, and a folder that is gone is not made
+    again: the catalogue was deleted)."""
+    if Path(folder).is_dir():
+        _write_atomic(Path(folder) / f"progress_{index:06d}", str(int(done)))
+
+
+def request_stop(folder: Path) -> None:
+    """Ask the workers computing the catalogue's chunks to give them up (when the folder
+    exists: a queued job has none and nothing in flight)."""
+    if folder.is_dir():
+        _write_atomic(folder / STOP_FILE, "stop")
+
+
+def clear_stop(folder: Path) -> None:
+    """Forget a stop request (the job is run again)."""
+    with contextlib.suppress(OSError):
+        (folder / STOP_FILE).unlink()
+
+
+def stop_requested(folder: str | Path, existed: bool) -> bool:
+    """Whether the chunks of the catalogue whose folder this is should stop: it has a
+    ``stop`` file, or it ``existed`` when the chunk started and is gone now (deleted)."""
+    path = Path(folder)
+    if (path / STOP_FILE).exists():
+        return True
+    return existed and not path.is_dir()
 
 
 def read_progress(folder: Path) -> dict[int, int]:

@@ -121,6 +121,11 @@ def scenario_provenance(spec: CatalogueSpec, idx: int) -> dict[str, Any]:
             "constraints": list(spec.constraints), "sampler": spec.method}
 
 
+class ChunkStopped(Exception):
+    """A chunk given up because its job was cancelled or its catalogue deleted
+    (``chunkfile.stop_requested``)."""
+
+
 @dataclass
 class ChunkResult:
     """A computed chunk, ready to be stored in one transaction."""
@@ -178,6 +183,10 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
     rows: list[dict[str, Any]] = []
     scenarios: list[dict[str, Any] | None] = []
     reported = time.monotonic()
+    folder_existed = spec.progress_dir is not None and os.path.isdir(spec.progress_dir)
+    if spec.progress_dir is not None and chunkfile.stop_requested(spec.progress_dir,
+                                                                  folder_existed):
+        raise ChunkStopped(f"chunk {index}: the job was cancelled")
     for record, _ in score_rows(
             drawn.params, start=start, exposure_weights=weights, lane_width=drawn.lane_width,
             seed=spec.seed, provenance=lambda idx: scenario_provenance(spec, idx),
@@ -187,6 +196,8 @@ def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
         rows.append(scenario_row(record, index))
         scenarios.append(record.scenario)  # None: the builder refused the vector
         if spec.progress_dir is not None and time.monotonic() - reported >= PROGRESS_EVERY:
+            if chunkfile.stop_requested(spec.progress_dir, folder_existed):
+                raise ChunkStopped(f"chunk {index}: the job was cancelled")
             chunkfile.write_progress(spec.progress_dir, index, len(rows))
             reported = time.monotonic()
     blob = chunkfile.encode(scenarios) if spec.store_trajectories else None

@@ -26,6 +26,8 @@ from app.jobs.lifeline import die_with_parent, pool_keeper_thread
 log = logging.getLogger("scengen.jobs")
 
 ChunkFn = Callable[[CatalogueSpec, int], ChunkResult]
+#: seconds between two looks at a job's cancel flag while its chunks run
+CANCEL_POLL = 0.25
 T = TypeVar("T")
 
 
@@ -178,7 +180,8 @@ class FuturesExecutor:
                     pending.add(fut)
                 if not pending:
                     return
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                # a bounded wait: a cancel is seen while long chunks run
+                done, _ = wait(pending, timeout=CANCEL_POLL, return_when=FIRST_COMPLETED)
                 for fut in done:
                     pending.discard(fut)
                     yield fut.result()

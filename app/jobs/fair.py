@@ -24,7 +24,8 @@ from concurrent.futures import Executor, Future
 from contextlib import contextmanager
 from typing import Any, Protocol, TypeVar
 
-__all__ = ["FairExecutor", "FairSlots", "JobCancelled", "Share", "next_client"]
+__all__ = ["FairExecutor", "FairSlots", "InlineFutures", "JobCancelled", "Share",
+           "next_client"]
 
 T = TypeVar("T")
 
@@ -161,17 +162,35 @@ class Share:
         future.add_done_callback(lambda _f: self.release())
 
 
-class FairExecutor(Executor):
-    """An executor whose ``submit`` first waits for the job's turn (``Share``): the
-    campaign of an evaluation submits its parts through it. ``JobCancelled`` from
-    ``submit`` when the job is cancelled while it waits."""
+class InlineFutures(Executor):
+    """Runs each submitted call at once in the calling thread (a finished future)."""
 
-    def __init__(self, inner: Executor, share: Share, cancel: Flag | None = None) -> None:
+    def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
+        future: Future[T] = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # the caller sees it from result(), as with a pool
+            future.set_exception(exc)
+        return future
+
+
+class FairExecutor(Executor):
+    """An executor whose ``submit`` first waits for the job's turn (``Share``; none:
+    no waiting) and refuses to start anything once the job is cancelled
+    (``JobCancelled``): the campaign of an evaluation submits its parts through it, so a
+    cancelled evaluation stops after the parts in flight, not at the end of its chunk."""
+
+    def __init__(self, inner: Executor, share: Share | None,
+                 cancel: Flag | None = None) -> None:
         self.inner = inner
         self.share = share
         self.cancel = cancel
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
+        if self.cancel is not None and self.cancel.is_set():
+            raise JobCancelled()
+        if self.share is None:
+            return self.inner.submit(fn, *args, **kwargs)
         if not self.share.acquire(self.cancel):
             raise JobCancelled()
         try:

@@ -112,6 +112,8 @@ class JobManager:
             event = self._cancel.get(job_id)
             if event is not None:
                 event.set()
+            if job_id in self._running and self._kind_of(job_id) is None:
+                self.runner.request_stop(job_id)  # its chunks in flight stop too
             queued = [q for q in self._queued if q.job_id == job_id]
             if queued:
                 self._queued.remove(queued[0])

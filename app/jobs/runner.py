@@ -24,7 +24,7 @@ from app.db import chunkfile
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
-from app.jobs.chunk import CatalogueSpec, region_seed
+from app.jobs.chunk import CatalogueSpec, ChunkStopped, region_seed
 from app.jobs.executors import ChunkExecutor
 from app.jobs.fair import JobCancelled, Share
 
@@ -238,13 +238,20 @@ class CatalogueRunner:
         log.info("catalogue %s: %d of %d chunks stored, running the rest on %s",
                  catalogue_id, len(done), total, self.executor.name)
         folder = chunkfile.progress_dir(self.data_dir, catalogue_id)
+        chunkfile.clear_stop(folder)  # a job cancelled before is run again
         meter = _Meter(spec, folder, done, progress)
         stages = _StageFile(folder, stage)
+
+        def estimating(name: str, done: int, total: int) -> None:
+            stages.estimating(name, done, total)
+            if halt.is_set():  # cancelled (or shutting down) during the P(A) estimate
+                raise JobCancelled()
+
         try:
             if need_region:
                 stages.estimating("starting", 0, 1)
                 with _turn(share, halt):
-                    p_region = self.region(spec, stages.estimating)
+                    p_region = self.region(spec, estimating)
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
                     row.p_region = p_region
@@ -277,8 +284,8 @@ class CatalogueRunner:
             with _turn(share, halt):
                 self._refine_region(catalogue_id, spec, note, stages)
             return self._finish(catalogue_id, "done", None)
-        except JobCancelled:
-            return self._halted(catalogue_id, cancel)
+        except (JobCancelled, ChunkStopped):
+            return self._halted(catalogue_id, stop)
         except Exception as exc:
             if not self._exists(catalogue_id):  # deleted under the job: not a failure
                 log.info("catalogue %s deleted while its job ran (%s)", catalogue_id,
@@ -311,15 +318,22 @@ class CatalogueRunner:
             with self.db.session() as s:
                 repo.get_catalogue(s, catalogue_id).p_region = refined
 
-    def _halted(self, catalogue_id: str, cancel: threading.Event | None) -> str:
-        """The status of a job stopped before its end: deleted, cancelled or (the service
-        stops) interrupted, left ``running`` to resume at the next start."""
+    def request_stop(self, catalogue_id: str) -> None:
+        """Have the workers give up the catalogue's chunks in flight (its job was
+        cancelled): ``chunkfile.request_stop``; the next ``run`` forgets it."""
+        chunkfile.request_stop(chunkfile.progress_dir(self.data_dir, catalogue_id))
+
+    def _halted(self, catalogue_id: str, stop: threading.Event | None) -> str:
+        """The status of a job stopped before its end: deleted, interrupted (the service
+        stops: left ``running``, to resume at the next start) or cancelled."""
         if not self._exists(catalogue_id):
+            log.info("catalogue %s deleted while its job ran (stopped)", catalogue_id)
             return "deleted"
-        if cancel is not None and cancel.is_set():
-            return self._finish(catalogue_id, "cancelled", None)
-        log.info("catalogue %s interrupted by shutdown; resumes at next start", catalogue_id)
-        return "interrupted"
+        if stop is not None and stop.is_set():
+            log.info("catalogue %s interrupted by shutdown; resumes at next start",
+                     catalogue_id)
+            return "interrupted"
+        return self._finish(catalogue_id, "cancelled", None)
 
     def _exists(self, catalogue_id: str) -> bool:
         with self.db.session() as s:

@@ -17,7 +17,7 @@ from app import domain, jsonconv
 from app.context import ServiceContext
 from app.db import chunkfile
 from app.db import repository as repo
-from app.db.models import CatalogueRow, ScenarioRow
+from app.db.models import CatalogueRow, ScenarioRow, utcnow
 from app.errors import Conflict, InvalidInput, NotFound, ServiceError
 from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from app.jobs.runner import scenarios_done
@@ -105,6 +105,19 @@ def run(ctx: ServiceContext, catalogue_id: str, *,
     ``progress(done, total)`` per scenario, ``note(text)`` for messages, ``stage(name,
     done, total)`` for the P(A) estimate's stages (``CatalogueRunner.run``)."""
     return ctx.runner().run(catalogue_id, progress=progress, note=note, stage=stage)
+
+
+def mark_cancelled(ctx: ServiceContext, catalogue_id: str) -> tuple[int, int]:
+    """Record that the job running in this process was stopped by its user (the CLI's
+    Ctrl-C): status ``cancelled`` unless it ended meanwhile; its chunks stay stored and
+    ``run`` resumes it. Returns (scenarios stored, n)."""
+    with ctx.db.session() as s:
+        row = repo.get_catalogue(s, catalogue_id)
+        if row.status in repo.ACTIVE:
+            row.status = "cancelled"
+            row.updated_at = utcnow()
+        stored = repo.count_scenarios(s, catalogue_id)
+        return stored, int(row.n)
 
 
 def get_catalogue(ctx: ServiceContext, catalogue_id: str) -> CatalogueRow:

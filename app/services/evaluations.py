@@ -39,7 +39,7 @@ from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.models import EvaluationChunkRow, EvaluationRow, EvaluationRunRow, utcnow
 from app.errors import Conflict, InvalidInput, NotFound, ServiceError
-from app.jobs.fair import FairExecutor, JobCancelled, Share
+from app.jobs.fair import FairExecutor, InlineFutures, JobCancelled, Share
 from app.limits import check_constraints
 from app.services import suts
 from datasets import PARAM_NAMES
@@ -362,9 +362,10 @@ def run_job(ctx: ServiceContext, evaluation_id: str, *, cancel: threading.Event 
                 progress(stage, done, total)
             halt()
 
-        executor = ctx.executor.futures_executor()
-        if executor is not None and share is not None:
-            executor = FairExecutor(executor, share, _AnyOf(cancel, stop))
+        # parts of each chunk go through the fair executor (inline without a pool): each
+        # waits for the job's turn, and none starts once the job is cancelled
+        executor = FairExecutor(ctx.executor.futures_executor() or InlineFutures(), share,
+                                _AnyOf(cancel, stop))
         result = campaign(model, factory, spec, runner=runner, progress=tell,
                           on_chunk=on_chunk, stored=stored, executor=executor)
         summary = jsonconv.encode(result.summary())
