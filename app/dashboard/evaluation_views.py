@@ -38,16 +38,43 @@ def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
 
 def careful_evaluation(ctx: ServiceContext, model_id: str,
                        constraints: list[str]) -> dict[str, Any] | None:
-    """The latest finished evaluation of the careful driver on the same model and region."""
+    """The latest finished evaluation of the careful driver on the same model and region
+    (``status`` "done", its ``figures``); else the latest one still queued or running
+    (``figures`` null, its progress); else None."""
     best = None
+    pending = None
     for row in service.list_all(ctx):
         spec = row.spec or {}
-        if (row.sut == CAREFUL and row.status == "done" and row.model_id == model_id
+        if (row.sut == CAREFUL and row.model_id == model_id
                 and list(spec.get("constraints", [])) == list(constraints)):
-            best = row
-    if best is None:
-        return None
-    return {"id": best.id, "figures": _figures(jsonconv.decode(best.summary or {}))}
+            if row.status == "done":
+                best = row
+            elif row.status in ("queued", "running"):
+                pending = row
+    if best is not None:
+        return {"id": best.id, "status": best.status,
+                "figures": _figures(jsonconv.decode(best.summary or {}))}
+    if pending is not None:
+        return {"id": pending.id, "status": pending.status, "figures": None,
+                "runs_done": pending.runs_done, "runs_planned": pending.runs_planned}
+    return None
+
+
+def careful_request(st: dict[str, Any]) -> dict[str, Any]:
+    """The body of ``POST /evaluations`` that evaluates the careful driver where the
+    evaluation ``st`` (``service.describe``) was made: the same model, region, seed, number
+    of draws or stop rule, and simulator settings."""
+    spec = st["spec"]
+    body: dict[str, Any] = {"sut": CAREFUL, "model": st["model"],
+                            "constraints": list(st["constraints"]), "seed": int(st["seed"])}
+    if spec.get("n") is not None:
+        body["n"] = int(spec["n"])
+    else:
+        body["rhw"] = float(spec["rhw"])
+        body["max_runs"] = int(spec["max_runs"])
+    if spec.get("settings"):
+        body["settings"] = dict(spec["settings"])
+    return body
 
 
 def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
@@ -88,6 +115,7 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
                                           "progress", "collisions_so_far", "error")},
         "figures": _figures(st["summary"]),
         "careful": careful_evaluation(ctx, st["model"], list(st["constraints"])),
+        "careful_request": careful_request(st),
         "failures_total": failures_total,
         "failures": jsonconv.encode(failures),
         "scatter": jsonconv.plot_values(scatter),

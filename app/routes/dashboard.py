@@ -182,7 +182,13 @@ class EvaluationOverview(ApiModel):
     evaluation: dict[str, Any]
     figures: dict[str, Any] | None
     careful: dict[str, Any] | None = Field(description="the latest finished evaluation of "
-                                           "r157_cc on the same model and region, or null")
+                                           "r157_cc on the same model and region (status "
+                                           "done, figures), else the latest queued or "
+                                           "running one (figures null, runs_done, "
+                                           "runs_planned), or null")
+    careful_request: dict[str, Any] = Field(description="the POST /evaluations body that "
+                                            "evaluates r157_cc on the same model, region, "
+                                            "seed, runs and simulator settings")
     failures_total: int
     failures: list[dict[str, Any]]
     scatter: dict[str, Any]

@@ -19,6 +19,7 @@
   const SUT = "#c62828";
   const CAREFUL = "#2e7d32";
   let poll = null;
+  let carefulPoll = null;
 
   function interval(ci) {
     if (!ci) return "–";
@@ -83,7 +84,8 @@
       const made = await S.api("/evaluations", {
         method: "POST", headers: { "Content-Type": "application/json" },
         body: JSON.stringify({ sut: $("sut-select").value, n: n,
-                               model: $("model-select").value || "default" }),
+                               model: $("model-select").value || "default",
+                               risk: $("eval-risk").checked }),
       });
       await loadLists(made.id);
       await show(made.id);
@@ -95,6 +97,8 @@
   async function show(id) {
     const note = $("sut-note");
     if (poll) { clearTimeout(poll); poll = null; }
+    if (carefulPoll) { clearTimeout(carefulPoll); carefulPoll = null; }
+    $("sut-careful").textContent = "";
     if (!id) {
       note.textContent = "No evaluation yet: pick a system under test and press Evaluate " +
         "(or run 'scengen evaluate', POST /evaluations).";
@@ -129,16 +133,74 @@
       view.figures.runs + " importance-sampled cut-ins (" + region + ", seed " + ev.seed +
       "); rates with the Monte Carlo interval and the model interval (the data's " +
       "uncertainty, from the bootstrap refits).";
-    const rows = figureRows(ev.sut, view.figures);
-    if (view.careful) rows.push(...figureRows("r157_cc (careful driver)", view.careful.figures));
-    else rows.push(["r157_cc (careful driver)", "–", "–", "–",
-                    "no finished evaluation of r157_cc on this model and region yet"]);
-    $("sut-table").innerHTML = grid(["", "estimate", "95 % interval", "model 95 %", ""], rows);
+    drawTable(view);
     drawFailures(view);
     await drawScatter(view);
     note.dataset.state = "done";
     if (view.failures.length) await openRun(ev.id, view.failures[0].run);
     else S.clearPlot($("sut-run-plot"), "No failing run to show.");
+  }
+
+  // the SUT's rates and the careful driver's beside them; without a finished careful
+  // evaluation on this model and region, how to get one (a button that starts it) or its
+  // progress (polled until it is done)
+  function drawTable(view) {
+    const ev = view.evaluation;
+    const rows = figureRows(ev.sut, view.figures);
+    const box = $("sut-careful");
+    const c = view.careful;
+    if (carefulPoll) { clearTimeout(carefulPoll); carefulPoll = null; }
+    box.textContent = "";
+    if (c && c.figures) {
+      rows.push(...figureRows("r157_cc (careful driver)", c.figures));
+      box.dataset.state = "done";
+    } else if (c) {
+      rows.push(["r157_cc (careful driver)", "–", "–", "–", "evaluation " + c.id + " " +
+                 c.status + ": " + c.runs_done + " of " + c.runs_planned + " runs…"]);
+      box.textContent = "The careful driver's rate appears here when its evaluation " +
+        c.id + " is done.";
+      box.dataset.state = "running";
+      carefulPoll = setTimeout(() => refreshCareful(ev.id), 2000);
+    } else {
+      rows.push(["r157_cc (careful driver)", "–", "–", "–",
+                 "no evaluation of r157_cc on this model and region yet"]);
+      const req = view.careful_request;
+      box.append("The careful driver's rate needs its own evaluation on the same model, " +
+                 "region, seed and runs: ");
+      const btn = document.createElement("button");
+      btn.id = "careful-button";
+      btn.type = "button";
+      btn.textContent = "Evaluate r157_cc here";
+      btn.addEventListener("click", () => startCareful(ev.id, req, btn));
+      box.append(btn, " (or POST /evaluations " + JSON.stringify(req) + ").");
+      box.dataset.state = "none";
+    }
+    $("sut-table").innerHTML = grid(["", "estimate", "95 % interval", "model 95 %", ""], rows);
+  }
+
+  async function refreshCareful(id) {
+    carefulPoll = null;
+    if ($("eval-select").value !== id) return;  // the user went on to another evaluation
+    try {
+      drawTable(await S.api("/dashboard/api/evaluations/" + encodeURIComponent(id)));
+    } catch (e) {
+      S.reportError("the careful driver's evaluation (section 7)", e);
+    }
+  }
+
+  async function startCareful(id, req, btn) {
+    btn.disabled = true;
+    try {
+      await S.api("/evaluations", {
+        method: "POST", headers: { "Content-Type": "application/json" },
+        body: JSON.stringify(req),
+      });
+      await loadLists(id);
+      await refreshCareful(id);
+    } catch (e) {
+      btn.disabled = false;
+      S.reportError("start the careful driver's evaluation (section 7)", e);
+    }
   }
 
   function drawFailures(view) {

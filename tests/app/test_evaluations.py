@@ -392,3 +392,38 @@ def test_dashboard_views_of_an_evaluation(eval_client: Any) -> None:
     page = eval_client.get("/dashboard")
     assert page.status_code == 200 and "view-sut" in page.text
     assert eval_client.get("/dashboard/static/dashboard_sut.js").status_code == 200
+
+
+def test_the_dashboard_says_how_to_get_the_careful_drivers_rate(eval_client: Any) -> None:
+    """Without a careful evaluation on the model and region, the view gives the request
+    that makes one; a queued one is shown with its progress, a finished one with its
+    figures."""
+    ctx = eval_client.app.state.ctx
+    eid = eval_client.post("/evaluations", json={
+        "sut": "acc", "n": 50, "seed": 3, "constraints": ["v_ego>25"],
+        "settings": {"dt": 0.02}}).json()["id"]
+    _done(eval_client, eid)
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    model = view["evaluation"]["model"]
+    assert view["careful"] is None
+    req = view["careful_request"]
+    assert req == {"sut": "r157_cc", "model": model, "constraints": ["v_ego>25"], "seed": 3,
+                   "n": 50, "settings": {"dt": 0.02}}
+    row = service.create(ctx, **req)  # stored, not yet run
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    assert view["careful"] == {"id": row.id, "status": "queued", "figures": None,
+                               "runs_done": 0, "runs_planned": 50}
+    assert service.run_job(ctx, row.id) == "done"
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    careful = eval_client.get(f"/evaluations/{row.id}").json()
+    assert view["careful"]["id"] == row.id and view["careful"]["status"] == "done"
+    assert view["careful"]["figures"]["collisions"] == careful["summary"]["collisions"]
+    assert view["careful"]["figures"]["runs"] == careful["summary"]["runs"]
+    # the stop rule's request when the SUT's evaluation used it
+    eid2 = eval_client.post("/evaluations", json={
+        "sut": "acc", "rhw": 0.5, "max_runs": 40, "seed": 4,
+        "constraints": ["v_ego>26"]}).json()["id"]
+    _done(eval_client, eid2)
+    req2 = eval_client.get(f"/dashboard/api/evaluations/{eid2}").json()["careful_request"]
+    assert req2 == {"sut": "r157_cc", "model": model, "constraints": ["v_ego>26"], "seed": 4,
+                    "rhw": 0.5, "max_runs": 40}

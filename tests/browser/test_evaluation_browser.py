@@ -1,12 +1,16 @@
 """The dashboard's section 7 (a system under test) in headless Chromium: two evaluations
 made with the real simulator (the SUT ``acc`` and the careful driver ``r157_cc``) are
 shown; the table holds both rates, the failures list and the scatter hold what the view's
-JSON says, and clicking a failing run drives it again. Screenshot:
-``test-artifacts/dashboard/sut.png``."""
+JSON says, and clicking a failing run drives it again; the Evaluate button passes the
+"score the drive with TTR risk" checkbox as ``risk``. Without a careful evaluation the
+section says how to get one and its button starts it. Screenshots:
+``test-artifacts/dashboard/sut.png``, ``sut-no-careful.png``."""
 
 from __future__ import annotations
 
+import json
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,27 +28,51 @@ ARTIFACTS = ROOT / "test-artifacts" / "dashboard"
 TIMEOUT_MS = 180_000
 
 
-@pytest.fixture(scope="module")
-def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, dict[str, str]]]:
+def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str, ...],
+           n: int) -> Iterator[tuple[str, dict[str, str]]]:
+    """A service over a data dir holding finished evaluations of ``suts`` (n draws each)."""
     from app.services import evaluations as service
     from app.services.store import open_context
 
-    data_dir = prepare_data_dir(tmp_path_factory.mktemp("sut-browser"))
+    data_dir = prepare_data_dir(tmp_path_factory.mktemp(name))
     ctx = open_context(make_settings(data_dir))
     ids = {}
     try:
-        for sut in ("r157_cc", "acc"):
-            row = service.create(ctx, sut=sut, n=400, seed=1, batch_size=200)
+        for sut in suts:
+            row = service.create(ctx, sut=sut, n=n, seed=1, batch_size=200)
             assert service.run_job(ctx, row.id) == "done"
             ids[sut] = row.id
     finally:
         ctx.close()
     env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0",
                SCENGEN_RESUME_JOBS="false", SCENGEN_WARM_START="0")
-    for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
-        env.pop(name, None)
+    for var in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
+        env.pop(var, None)
     with uvicorn_service(env, data_dir / "uvicorn.log") as base:
         yield base, ids
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, dict[str, str]]]:
+    yield from _serve(tmp_path_factory, "sut-browser", ("r157_cc", "acc"), 400)
+
+
+@pytest.fixture(scope="module")
+def served_alone(tmp_path_factory: pytest.TempPathFactory
+                 ) -> Iterator[tuple[str, dict[str, str]]]:
+    """Only the SUT's evaluation: no careful driver's on this model and region."""
+    yield from _serve(tmp_path_factory, "sut-browser-alone", ("acc",), 200)
+
+
+def _finished(base: str, eid: str) -> dict:
+    """GET /evaluations/{eid} once it is no longer queued or running (bounded polling)."""
+    deadline = time.monotonic() + TIMEOUT_MS / 1000
+    while time.monotonic() < deadline:
+        st = httpx.get(f"{base}/evaluations/{eid}", timeout=60).json()
+        if st["status"] not in ("queued", "running"):
+            return st
+        time.sleep(1.0)
+    raise AssertionError(f"evaluation {eid} did not finish in time")
 
 
 def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> None:
@@ -94,9 +122,87 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
                     assert f"Run {second}:" in page.locator("#sut-run-info").inner_text()
                 # speed and acceleration of both drivers at least
                 assert page.locator("#sut-run-plot .scatterlayer .trace").count() >= 4
+            assert page.locator("#sut-careful").get_attribute("data-state") == "done"
             ARTIFACTS.mkdir(parents=True, exist_ok=True)
             page.locator("#view-sut").screenshot(path=str(ARTIFACTS / "sut.png"))
+            # Evaluate passes the risk checkbox (default off) as "risk"
+            risk_box = page.locator("#eval-risk")
+            assert risk_box.is_visible() and not risk_box.is_checked()
+            assert "score the drive with TTR risk" in page.locator("#eval-form").inner_text()
+            made = {}
+            for checked in (False, True):
+                risk_box.set_checked(checked)
+                page.select_option("#sut-select", "acc")
+                page.fill("#eval-n", "6")
+                before = page.locator("#eval-select option").count()
+                with page.expect_request(lambda r: r.url == f"{base}/evaluations"
+                                         and r.method == "POST") as req:
+                    page.click("#eval-button")
+                body = json.loads(req.value.post_data or "{}")
+                assert body["risk"] is checked and body["sut"] == "acc" and body["n"] == 6
+                # the list is reloaded with the new evaluation selected
+                page.wait_for_function(
+                    f"document.querySelectorAll('#eval-select option').length > {before}",
+                    timeout=TIMEOUT_MS)
+                made[checked] = page.locator("#eval-select").input_value()
+            assert made[False] != made[True]
+            for checked, eid in made.items():
+                st = _finished(base, eid)
+                assert st["status"] == "done" and st["spec"]["risk"] is checked
+                runs = httpx.get(f"{base}/evaluations/{eid}/runs", params={"limit": 50},
+                                 timeout=60).json()["runs"]
+                peaks = [r["r_dep_peak"] for r in runs]
+                assert peaks
+                # with risk every simulated run has its peak r_dep; without it none has
+                if checked:
+                    assert all(isinstance(p, float) and 0.0 <= p <= 1.0 for p in peaks)
+                else:
+                    assert all(p is None or p == "NaN" for p in peaks)
             assert errors == []
             assert outside == []
+        finally:
+            browser.close()
+
+
+def test_without_a_careful_evaluation_the_section_says_how_and_starts_one(
+        served_alone: tuple[str, dict[str, str]]) -> None:
+    base, ids = served_alone
+    view = httpx.get(f"{base}/dashboard/api/evaluations/{ids['acc']}", timeout=120).json()
+    assert view["careful"] is None
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1300, "height": 1000})
+            errors: list[str] = []
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(f"{base}/dashboard#view-sut")
+            page.wait_for_selector("#sut-note[data-state=done]", timeout=TIMEOUT_MS)
+            table = page.locator("#sut-table").inner_text()
+            assert "acc · collisions per hour" in table
+            assert "no evaluation of r157_cc on this model and region yet" in table
+            box = page.locator("#sut-careful")
+            assert box.get_attribute("data-state") == "none"
+            how = box.inner_text()
+            assert "Evaluate r157_cc here" in how and "POST /evaluations" in how
+            assert json.dumps(view["careful_request"], separators=(",", ":")) in how
+            ARTIFACTS.mkdir(parents=True, exist_ok=True)
+            page.locator("#view-sut").screenshot(path=str(ARTIFACTS / "sut-no-careful.png"))
+            with page.expect_request(lambda r: r.url == f"{base}/evaluations"
+                                     and r.method == "POST") as req:
+                page.click("#careful-button")
+            assert json.loads(req.value.post_data or "{}") == view["careful_request"]
+            # its progress, then its rate beside the SUT's (the section polls it)
+            page.wait_for_selector("#sut-careful[data-state=running], "
+                                   "#sut-careful[data-state=done]", state="attached",
+                                   timeout=TIMEOUT_MS)
+            page.wait_for_selector("#sut-careful[data-state=done]", state="attached",
+                                   timeout=TIMEOUT_MS)
+            table = page.locator("#sut-table").inner_text()
+            assert "r157_cc (careful driver) · collisions per hour" in table
+            assert "no evaluation of r157_cc" not in table
+            # the SUT's evaluation stays the one shown
+            assert page.locator("#eval-select").input_value() == ids["acc"]
+            assert errors == []
         finally:
             browser.close()
