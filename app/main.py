@@ -15,6 +15,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from app import __version__
+from app.budget import BudgetGuard
 from app.docs_offline import install_offline_docs
 from app.errors import install_error_handlers
 from app.guards import RequestGuards
@@ -101,6 +102,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_offline_docs(application)
     install_openapi_extras(application)
 
+    application.add_middleware(BudgetGuard, settings=lambda: _settings_of(application))
     application.add_middleware(RequestGuards, settings=lambda: _settings_of(application))
 
     for router in ROUTERS:

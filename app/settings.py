@@ -94,6 +94,11 @@ class Settings(BaseSettings):
     client_queued_scenarios_limit: int = Field(
         default=200_000, ge=1, description="most scenarios one client may have in its "
         "queued and running jobs together (about 40 min of work on 2 cores)")
+    sync_budget_seconds: float = Field(
+        default=10.0, gt=0, description="longest a synchronous request may sample or "
+        "estimate (POST /scenarios, GET /models/compare, the dashboard's shift and rates): "
+        "past it the request is stopped and answered 422 saying how to get the work as a "
+        "job (app/budget.py); a client that disconnects stops its work the same way")
     running_jobs_limit: int = Field(
         default=8, ge=1, description="most jobs the service runs at once (each client's "
         "oldest first, the client with the fewest running first); the running jobs share "

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session
 
-from app import domain, jsonconv
+from app import budget, domain, jsonconv
 from app.context import ServiceContext
 from app.db import chunkfile
 from app.db import repository as repo
@@ -52,7 +52,7 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     check_constraints(constraints, ctx.settings)
     parsed = domain.parse_constraints(constraints)
     # 422 for an empty region now rather than a job that fails (a P(A) estimate: < 1 s)
-    domain.estimate_region(fitted, parsed, seed)
+    budget.precheck(lambda: domain.estimate_region(fitted, parsed, seed))
     spec = {"constraints": list(constraints), "method": method, "score": bool(score),
             "wagner_scan": bool(score and wagner_scan),
             "store_trajectories": bool(ctx.settings.store_trajectories)}

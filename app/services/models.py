@@ -24,7 +24,7 @@ from typing import Any
 
 import pandas as pd
 
-from app import domain, jsonconv
+from app import budget, domain, jsonconv
 from app.context import ServiceContext
 from app.db import repository as repo
 from app.db.models import ModelRow
@@ -117,6 +117,7 @@ def fit_on_dataset(ctx: ServiceContext, dataset_id: str,
     fitted = fit_model(table, options, source=dataset.id,
                        exposure=jsonconv.decode(exposure) if exposure else None)
     row = model_row(repo.new_id("mdl"), dataset.id, fitted, options)
+    budget.check_client()  # a client that gave up stores nothing
     with ctx.db.session() as s:
         s.add(row)
     return row, fitted.model

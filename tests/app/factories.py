@@ -37,6 +37,9 @@ def make_settings(data_dir: Path, **overrides: Any) -> Settings:
     values: dict[str, Any] = {"data_dir": data_dir, "local_workers": 0, "chunk_size": 5,
                               "default_model_options": TEST_MODEL_OPTIONS,
                               "warm_start": False,
+                              # a loaded test machine must not turn slow requests into
+                              # 422s; the budget has its own tests (test_budget.py)
+                              "sync_budget_seconds": 600.0,
                               # TestClient's requests carry Host: testserver
                               "trusted_hosts": ["localhost", "127.0.0.1", "::1",
                                                 "testserver"]}

@@ -284,6 +284,7 @@ def test_status_of_a_running_catalogue_counts_the_workers_reports(client: Any) -
     with ctx.db.session() as s:
         repo.get_catalogue(s, row.id).status = "running"
     folder = chunkfile.progress_dir(ctx.data_dir, row.id)
+    folder.mkdir(parents=True, exist_ok=True)  # the runner's stage file makes it
     chunkfile.write_progress(folder, 1, 3)  # 3 of chunk 1 (idx 5..9) done, none stored
     status = client.get(f"/catalogues/{row.id}").json()
     assert status["scenarios_done"] == 3 and status["scenarios_stored"] == 0

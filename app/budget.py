@@ -1,0 +1,191 @@
+"""A time budget for synchronous requests (issue 27 item 3).
+
+A request may hold a worker thread for at most ``sync_budget_seconds`` (SCENGEN_SYNC_
+BUDGET_SECONDS, default 10 s) of sampling or estimating; past that it is refused with a
+422 that says how to get the same work as a job (``POST /catalogues``) or a cheaper
+request. And a client that has gone away stops its work: nothing it started is stored.
+
+``BudgetGuard`` (ASGI middleware) gives every HTTP request a ``Budget`` in a context
+variable; Starlette runs a synchronous route in a worker thread with a copy of that
+context, so the sampler's progress callbacks (``app.domain.sampling`` wraps each one in
+``checked``) and the last step before something is stored (``check``) see the request's
+budget without any parameter passed around. Work outside a request (jobs, the CLI) has
+no budget. The checks sit where the sampler reports progress: the estimators report every
+fraction of a second (``benchmarks/bench_regions.py`` lists the gaps), so a refusal comes
+within about half a second of the budget.
+"""
+
+from __future__ import annotations
+
+import contextvars
+import time
+from collections.abc import Awaitable, Callable, MutableMapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import anyio
+import anyio.from_thread
+
+from app.errors import InvalidInput, ServiceError
+from app.settings import Settings
+
+__all__ = ["BUDGET", "Budget", "BudgetGuard", "ClientGone", "OverBudget", "check",
+           "check_client", "checked", "precheck"]
+
+Scope = MutableMapping[str, Any]
+Message = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+#: how to get work that does not fit the budget
+AS_A_JOB = ("ask for it as a job: POST /catalogues with the same model and constraints "
+            "(its status carries P(A), its intervals and the rates; scengen catalogue "
+            "create on the command line), or narrow the request (fewer samples, a less "
+            "rare region)")
+
+
+class OverBudget(InvalidInput):
+    """The request's work would take longer than the synchronous budget (422)."""
+
+
+class ClientGone(ServiceError):
+    """The client closed the connection: its work stops, nothing is stored."""
+
+    status = 499
+
+
+@dataclass
+class Budget:
+    seconds: float
+    started: float = field(default_factory=time.monotonic)
+    #: asks whether the client has gone (from a worker thread); None: never
+    gone: Callable[[], bool] | None = None
+    what: str = "this request"
+
+    def left(self) -> float:
+        return self.seconds - (time.monotonic() - self.started)
+
+    def check_client(self) -> None:
+        """Raise ``ClientGone`` when the client has closed the connection."""
+        if self.gone is not None and self.gone():
+            raise ClientGone("the client closed the connection; the work was stopped and "
+                             "nothing was stored")
+
+    def check(self) -> None:
+        """Raise ``ClientGone`` or ``OverBudget`` when the work should stop."""
+        self.check_client()
+        if self.left() < 0:
+            raise OverBudget(
+                f"{self.what} takes longer than the synchronous budget of {self.seconds:g} s "
+                f"(SCENGEN_SYNC_BUDGET_SECONDS), so it was stopped; {AS_A_JOB}")
+
+
+BUDGET: contextvars.ContextVar[Budget | None] = contextvars.ContextVar("scengen_budget",
+                                                                      default=None)
+
+
+def check() -> None:
+    """Check the current request's budget (nothing outside a request)."""
+    budget = BUDGET.get()
+    if budget is not None:
+        budget.check()
+
+
+def check_client() -> None:
+    """Raise ``ClientGone`` when the current request's client has gone (work that has no
+    cheaper form, such as a model fit, is not refused for its time, only for that)."""
+    budget = BUDGET.get()
+    if budget is not None:
+        budget.check_client()
+
+
+#: seconds a job's request may spend checking its region before the job is queued
+PRECHECK_SECONDS = 2.0
+
+
+def precheck(work: Callable[[], object]) -> None:
+    """Run ``work`` (a quick check before a job is stored, e.g. that its region is not
+    empty) for at most ``PRECHECK_SECONDS`` of the request's budget; work that takes
+    longer is left to the job, which fails with the same message if the check would have."""
+    outer = BUDGET.get()
+    if outer is None:
+        work()
+        return
+    inner = Budget(min(PRECHECK_SECONDS, max(outer.left(), 0.0)), gone=outer.gone,
+                   what=outer.what)
+    token = BUDGET.set(inner)
+    try:
+        work()
+    except OverBudget:
+        pass
+    finally:
+        BUDGET.reset(token)
+
+
+def checked(progress: Callable[[str, int, int], None] | None
+            ) -> Callable[[str, int, int], None] | None:
+    """``progress`` with the request's budget checked at each call (``progress`` itself
+    when there is no budget)."""
+    budget = BUDGET.get()
+    if budget is None:
+        return progress
+
+    def call(name: str, done: int, total: int) -> None:
+        budget.check()
+        if progress is not None:
+            progress(name, done, total)
+
+    return call
+
+
+class BudgetGuard:
+    """Gives each HTTP request its ``Budget`` (``settings().sync_budget_seconds``)."""
+
+    def __init__(self, app: ASGIApp, settings: Callable[[], Settings]) -> None:
+        self.app = app
+        self.settings = settings
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers = dict(scope.get("headers", []))
+        no_body = (headers.get(b"content-length", b"0").strip() in (b"", b"0")
+                   and b"transfer-encoding" not in headers)
+        # a request without a body: the route never reads it, so polling may start at once
+        state = {"body_done": no_body, "gone": False}
+
+        async def tracked() -> Message:
+            msg = await receive()
+            if msg["type"] == "http.request" and not msg.get("more_body", False):
+                state["body_done"] = True
+            elif msg["type"] == "http.disconnect":
+                state["gone"] = True
+            return msg
+
+        async def poll() -> bool:
+            # once the body is read nobody else waits on receive() during the route: a
+            # receive that is cancelled at once sees a disconnect that has arrived
+            if state["gone"] or not state["body_done"]:
+                return bool(state["gone"])
+            with anyio.CancelScope() as scope_:
+                scope_.cancel()
+                msg = await receive()
+                if msg.get("type") == "http.disconnect":
+                    state["gone"] = True
+            return bool(state["gone"])
+
+        def gone() -> bool:
+            try:
+                return bool(anyio.from_thread.run(poll))
+            except RuntimeError:  # not in a worker thread of this event loop
+                return bool(state["gone"])
+
+        what = f"{scope.get('method', 'GET')} {scope.get('path', '')}"
+        token = BUDGET.set(Budget(float(self.settings().sync_budget_seconds), gone=gone,
+                                  what=what))
+        try:
+            await self.app(scope, tracked, send)
+        finally:
+            BUDGET.reset(token)
