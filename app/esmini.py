@@ -223,19 +223,20 @@ class EsminiLibrary:
             cls._loaded[path] = cls(path)
         return cls._loaded[path]
 
-    def open(self, xosc: Path) -> tuple[int, int]:
+    def open(self, xosc: Path, ego_name: str, cutter_name: str) -> tuple[int, int]:
         """Load a scenario (collision detection on); returns the ids of ego and cutter."""
         self.lib.SE_SetLogFilePath(b"")
         if self.lib.SE_Init(str(xosc).encode(), 0, 0, 0, 0) != 0:
             raise EsminiError(f"scenarios: esmini could not load {xosc.name}",
                               field="scenarios", problem="rejected by esmini")
         self.lib.SE_CollisionDetection(True)
-        ego = self.lib.SE_GetIdByName(b"ego")
-        cutter = self.lib.SE_GetIdByName(b"cutter")
+        ego = self.lib.SE_GetIdByName(ego_name.encode())
+        cutter = self.lib.SE_GetIdByName(cutter_name.encode())
         if ego < 0 or cutter < 0:
             self.lib.SE_Close()
-            raise EsminiError(f"scenarios: {xosc.name} has no 'ego' and 'cutter'",
-                              field="scenarios", problem="no ego or cutter")
+            raise EsminiError(f"scenarios: esmini finds no {ego_name!r} and {cutter_name!r} "
+                              f"in {xosc.name}", field="scenarios",
+                              problem="no ego or cutter")
         return ego, cutter
 
     def state(self, obj: int, with_acc: bool = False) -> VehicleState:
@@ -562,7 +563,9 @@ def simulate_esmini(sut: SystemUnderTest, scenarios: Sequence[ConcreteScenario],
         Reset once per run with that run's seed (``reset(1, seeds[i:i + 1])``).
     scenarios : sequence of ConcreteScenario
         Cut-ins as :meth:`riskcore.sut.CutInBatch.from_scenarios` accepts them (the same
-        step, ego size and lane width; the ego straight at constant speed).
+        step, ego size and lane width; the ego straight at constant speed). The cutter is
+        the object ``"cutter"``, else the first (as there); other objects are played by
+        esmini but neither observed nor checked for contact (K = 1, as the simulator).
     seeds : int or array of shape (N,)
         As :func:`riskcore.sut.simulate` (an int gives the same per-run seeds).
     settings : SimSettings, optional
@@ -611,7 +614,10 @@ def _simulate(sut: SystemUnderTest, scenarios: list[ConcreteScenario], batch: Cu
     with _LOCK:
         lib = EsminiLibrary.load(path)
         for i, xosc in enumerate(files):
-            run, d, bad, k, p = _one(lib, xosc, sut, batch, i, seeds[i:i + 1], s, profiles)
+            sc = scenarios[i]
+            cutter = next((o.id for o in sc.objects if o.id == "cutter"), sc.objects[0].id)
+            run, d, bad, k, p = _one(lib, xosc, (sc.ego.id, cutter), sut, batch, i,
+                                     seeds[i:i + 1], s, profiles)
             runs.append(run)
             drift[i], disagree[i], steps[i] = d, bad, k
             prof.append(p)
@@ -647,8 +653,8 @@ def _simulate(sut: SystemUnderTest, scenarios: list[ConcreteScenario], batch: Cu
     return EsminiResult(out, EsminiDiagnostics(drift, disagree, steps))
 
 
-def _one(lib: EsminiLibrary, xosc: Path, sut: SystemUnderTest, batch: CutInBatch, i: int,
-         seed: NDArray[np.uint64], s: SimSettings, profiles: bool
+def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnderTest,
+         batch: CutInBatch, i: int, seed: NDArray[np.uint64], s: SimSettings, profiles: bool
          ) -> tuple[_Run, float, int, int, NDArray[np.float64]]:
     """Run i in esmini (module docstring); returns its record, the ego's largest drift
     from the vehicle model, the flag/box disagreements, the steps and the profile."""
@@ -665,7 +671,7 @@ def _one(lib: EsminiLibrary, xosc: Path, sut: SystemUnderTest, batch: CutInBatch
     intrude_at = 0.5 * batch.lane_width - INTRUSION_DEPTH
     name = str(getattr(sut, "name", "sut"))
     run = _Run()
-    ego_id, cut_id = lib.open(xosc)
+    ego_id, cut_id = lib.open(xosc, *names)
     try:
         sut.reset(1, seed)
         e0 = lib.state(ego_id)

@@ -16,6 +16,7 @@ checkout; the tests marked ``esmini`` skip without it):
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
 import math
 import os
@@ -284,6 +285,16 @@ def test_same_verdicts_and_gaps_as_scengens_simulator(library: Path, sut: str) -
     hit = ours.collided
     assert np.all(np.abs(theirs.t_contact[hit] - ours.t_contact[hit]) <= 1e-3)
     assert list(theirs.end) == list(ours.end)
+
+
+@pytest.mark.esmini
+def test_the_cutter_is_found_by_its_name_or_as_the_first_object(library: Path) -> None:
+    scenarios = _scenarios()[:2]
+    renamed = [dataclasses.replace(s, objects=(dataclasses.replace(s.objects[0], id="car 7"),))
+               for s in scenarios]
+    ours = simulate_esmini(make_sut("acc_aeb"), scenarios, seeds=2, library=library).runs
+    theirs = simulate_esmini(make_sut("acc_aeb"), renamed, seeds=2, library=library).runs
+    _same_runs(ours, theirs, 0.0)
 
 
 class _Recorder:
