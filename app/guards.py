@@ -10,8 +10,9 @@
   before the body is read. A body without ``Content-Length`` (chunked) is counted as it
   arrives.
 * **API key** (optional): when ``api_key`` is set, every mutating request (POST, PUT,
-  PATCH, DELETE) needs it in the ``X-API-Key`` header (or ``Authorization: Bearer``);
-  else 401. Reads stay open.
+  PATCH, DELETE) and every costly read (``COSTLY_READS``: sampling, estimating or building
+  files, seconds of work each) needs it in the ``X-API-Key`` header (or ``Authorization:
+  Bearer``); else 401. Reads of what is stored (a status, a page of scenarios) stay open.
 * **Cross-site requests**: a browser on another site can POST a form (multipart, urlencoded
   or text/plain) to the service without asking first (no CORS pre-flight). A mutating
   request that a browser marks as cross-site (``Sec-Fetch-Site: cross-site``) or whose
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import hmac
 import json
+import re
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 from urllib.parse import urlsplit
@@ -40,6 +42,20 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 MUTATING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+#: reads that cost seconds of work (they sample, estimate, or build files): with an API
+#: key set they need it like the writes (issue 27 item 4)
+COSTLY_READS = tuple(re.compile(p) for p in (
+    r"/models/compare",
+    r"/dashboard/api/models/[^/]+/(shift|rates|fit)",
+    r"/dashboard/api/catalogues/[^/]+/shift",
+    r"/(catalogues|evaluations)/[^/]+/export",
+))
+
+
+def costly_read(method: str, path: str) -> bool:
+    """Whether a request is a read that ``COSTLY_READS`` lists."""
+    stripped = path.rstrip("/") or "/"
+    return method in ("GET", "HEAD") and any(p.fullmatch(stripped) for p in COSTLY_READS)
 #: the upload route (multipart, its own larger limit)
 UPLOAD_PATH = "/datasets"
 
@@ -126,14 +142,16 @@ class RequestGuards:
             await _send_error(send, 400, f"host {host_name(host or '')!r} is not one this "
                               "service answers to (SCENGEN_TRUSTED_HOSTS)", "header.host")
             return
-        if scope.get("method", "GET") not in MUTATING:
+        method = scope.get("method", "GET")
+        costly = costly_read(method, scope.get("path", ""))
+        if method not in MUTATING and not costly:
             await self.app(scope, receive, send)
             return
         # cross-site browser requests
         fetch_site = _header(scope, b"sec-fetch-site")
         origin = _header(scope, b"origin")
-        if fetch_site == "cross-site" or (origin is not None
-                                          and not _same_origin(scope, origin)):
+        if not costly and (fetch_site == "cross-site" or (origin is not None
+                                                          and not _same_origin(scope, origin))):
             await _send_error(send, 403, "cross-site request refused: this service "
                               "accepts changes only from its own pages and from clients "
                               "that are not browsers", "header.origin")
@@ -150,6 +168,9 @@ class RequestGuards:
                                   "the X-API-Key header (SCENGEN_API_KEY)", "header.x-api-key",
                                   [(b"www-authenticate", b"ApiKey")])
                 return
+        if costly:
+            await self.app(scope, receive, send)
+            return
         # body size
         upload = scope.get("path", "").rstrip("/") == UPLOAD_PATH
         limit = settings.upload_limit_bytes + 64 * 1024 if upload else settings.body_limit_bytes

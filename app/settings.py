@@ -79,7 +79,9 @@ class Settings(BaseSettings):
     api_key: SecretStr | None = Field(
         default=None,
         description="when set, POST/PUT/PATCH/DELETE need it in the X-API-Key header "
-        "(or Authorization: Bearer); reads stay open (SCENGEN_API_KEY)")
+        "(or Authorization: Bearer), and so do the costly reads (app.guards.COSTLY_READS: "
+        "compare, the dashboard's shift, rates and fit, the exports); reads of what is "
+        "stored stay open (SCENGEN_API_KEY)")
     trusted_hosts: list[str] = Field(
         default_factory=lambda: list(LOOPBACK_NAMES),
         description="host names the service answers to (the request's Host header, port "
