@@ -291,13 +291,25 @@ def _constant_jerk(x: float, v: float, a: float, jj: float,
     else:
         disc = a * a - 2.0 * jj * v
         if disc >= 0.0:
-            r = math.sqrt(disc)
-            for root in sorted(((-a - r) / jj, (-a + r) / jj)):
-                if root > 0.0 and a + jj * root <= 0.0:
+            # the roots of jj/2 t^2 + a t + v in the cancellation-free form
+            q = -0.5 * (a + math.copysign(math.sqrt(disc), a))
+            roots = [q / (0.5 * jj)] + ([v / q] if q != 0.0 else [])
+            for root in sorted(roots):
+                slope = a + jj * root
+                if root >= 0.0 and (slope < 0.0 or (slope == 0.0 and jj < 0.0)):
                     stop = root
                     break
     if stop > tau and v + a * tau + jj * tau * tau / 2.0 < 0.0:
-        stop = tau  # rounding: the speed ends below 0 without a root found
+        # rounding (e.g. subnormal inputs) hid the root: the speed starts >= 0 and ends
+        # below 0, so it crosses 0 once in between; bisect for it
+        lo, hi = 0.0, tau
+        for _ in range(_BISECT):
+            mid = 0.5 * (lo + hi)
+            if v + a * mid + jj * mid * mid / 2.0 < 0.0:
+                hi = mid
+            else:
+                lo = mid
+        stop = lo
     if stop <= tau:
         t = stop
         return x + v * t + a * t * t / 2.0 + jj * t ** 3 / 6.0, 0.0, 0.0, True

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from lxml import etree
 
 from app.esmini import (
@@ -133,6 +135,24 @@ def test_ego_advance_matches_a_fine_euler_reference() -> None:
         assert got[2] == pytest.approx(ae, abs=1e-4)
 
 
+@given(x=st.floats(-100.0, 100.0), v=st.floats(0.0, 40.0), a=st.floats(-9.0, 3.0),
+       u=st.floats(-9.0, 3.0), tau=st.floats(0.0, 0.2))
+def test_ego_advance_properties(x: float, v: float, a: float, u: float, tau: float) -> None:
+    x1, v1, a1, stopped = ego_advance(x, v, a, u, 12.65, tau)
+    assert v1 >= 0.0  # never reverses
+    assert x1 >= x - 1e-12  # never backs up
+    assert abs(a1 - a) <= 12.65 * tau + 1e-9 or (stopped and a1 == 0.0)  # the jerk limit
+    if not stopped:  # the acceleration moves towards the command, never past it
+        assert min(a, u) - 1e-9 <= a1 <= max(a, u) + 1e-9
+    # two half steps are one step (the closed form composes), except that, as in the
+    # simulator, coming to a stop ends the step's motion: a positive command restarts
+    # the ego only from the next step
+    assume(not (stopped and u > 0.0))
+    xh, vh, ah, _ = ego_advance(x, v, a, u, 12.65, tau / 2)
+    x2, v2, a2, _ = ego_advance(xh, vh, ah, u, 12.65, tau / 2)
+    assert (x2, v2, a2) == pytest.approx((x1, v1, a1), abs=1e-9)
+
+
 # ------------------------------------------------------------------------- geometry
 
 
@@ -148,6 +168,26 @@ def test_band_range_hand_computed() -> None:
     # 1.7 - (3 - sqrt(2))
     w = 1.7 - (3.0 - math.sqrt(2.0))
     assert band_range(0.0, 3.0, math.pi / 4, 1.0, 1.0, 1.7) == pytest.approx((-w, w))
+
+
+@settings(max_examples=60)
+@given(x=st.floats(-10.0, 10.0), y=st.floats(-4.0, 4.0), h=st.floats(-math.pi, math.pi),
+       hl=st.floats(0.5, 3.0), hw=st.floats(0.3, 1.2), band=st.floats(0.2, 2.0))
+def test_band_range_matches_dense_points_of_the_box(x: float, y: float, h: float, hl: float,
+                                                    hw: float, band: float) -> None:
+    """A slow reference: a dense grid of the box's points, those inside the band."""
+    i, j = np.meshgrid(np.linspace(-1.0, 1.0, 401), np.linspace(-1.0, 1.0, 401))
+    px = x + i * hl * math.cos(h) - j * hw * math.sin(h)
+    py = y + i * hl * math.sin(h) + j * hw * math.cos(h)
+    inside = np.abs(py) <= band
+    got = band_range(x, y, h, hl, hw, band)
+    step = 2.0 * (hl + hw) / 400  # the grid's spacing bounds the reference's error
+    if got is None:
+        assert not inside.any()
+        return
+    if inside.any():
+        assert got[0] == pytest.approx(px[inside].min(), abs=step)
+        assert got[1] == pytest.approx(px[inside].max(), abs=step)
 
 
 def test_boxes_touch_hand_computed() -> None:
