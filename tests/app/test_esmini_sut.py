@@ -337,6 +337,32 @@ def test_the_cutter_is_found_by_its_name_or_as_the_first_object(library: Path) -
     _same_runs(ours, theirs, 0.0)
 
 
+class _Creep:
+    """Accelerates gently for ever (0.15 m/s², above the 0.1 m/s² of 'settled')."""
+
+    def reset(self, seed: int) -> None:
+        pass
+
+    def act(self, obs: Observation) -> float:
+        return 0.15
+
+
+@pytest.mark.esmini
+def test_a_run_that_never_resolves_ends_at_the_exports_time_limit(library: Path) -> None:
+    # a cutter 5 m/s faster pulls away in front of an ego that keeps speeding up: the
+    # conflict never settles; esmini's own stop trigger ends the run at the export's time
+    # limit, the scenario's duration + 30 s (scengen's own simulator goes on, up to t_max:
+    # there the never-braking ego hits the cutter at 66 s)
+    s = build_scenario({"p_y1": 0.05, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0,
+                        "p_v0": 31.0, "dv": -5.0, "gap": 20.0}, seed=0)
+    duration = float(s.t[-1] - s.t[0])
+    runs = simulate_esmini(per_run(_Creep, "creep"), [s], seeds=0, library=library).runs
+    assert list(runs.end) == ["esmini_stop"]
+    assert runs.end_time[0] == pytest.approx(duration + 30.0, abs=0.011)
+    ours = simulate(per_run(_Creep, "creep"), CutInBatch.from_scenarios([s]), seeds=0)
+    assert ours.end_time[0] > duration + 31.0
+
+
 class _Recorder:
     """A plain per-run SUT: keeps its speed until the gap is below 10 m, then brakes;
     records the seed it was given."""
