@@ -458,7 +458,7 @@ class _Run:
     def intrusion(self, t0: float, dt: float, cut: VehicleState, ego_x: float, ego_y: float,
                   v_ego: float, ehl: float, chl: float, chw: float, at: float) -> None:
         """The regulation's moment: the cutter's inner edge ``at`` m from the ego lane's
-        centre line (interpolated between the steps)."""
+        centre line (interpolated in the step from t0 to t0 + dt; dt = 0 at the start)."""
         dy = cut.y - ego_y
         inner = abs(dy) - (chl * abs(math.sin(cut.h)) + chw * abs(math.cos(cut.h)))
         if inner <= at and math.isnan(self.intr_t):
@@ -466,7 +466,7 @@ class _Run:
             f = (prev - at) / (prev - inner) if math.isfinite(prev) and prev > inner else 1.0
             clos = v_ego - cut.v * math.cos(cut.h)
             gap = cut.x - ego_x - ehl - chl
-            self.intr_t = t0 + f * dt if t0 >= 0 else 0.0
+            self.intr_t = t0 + f * dt
             self.intr_vrel = clos
             self.intr_ttc = (gap / clos if gap > 0.0 else 0.0) if clos > 0.0 else math.inf
         self.intr_prev = inner
@@ -700,7 +700,7 @@ def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnde
         u = u_old = 0.0
         onset = 0.0
         # at time 0: the regulation's moment and a contact already there
-        run.intrusion(-1.0, dt, cut, e0.x, ey, v, ehl, chl, chw, intrude_at)
+        run.intrusion(0.0, 0.0, cut, e0.x, ey, v, ehl, chl, chw, intrude_at)
         k = 0
         if boxes_touch(cut, e0.x, ey, ehl, ehw, chl, chw):
             run.collided = True
