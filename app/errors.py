@@ -148,6 +148,11 @@ async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
     if not errors:
         return _response(422, "invalid request")
     first = errors[0]
+    if first.get("type") == "json_invalid":  # the body is not JSON: nothing to validate
+        loc = first.get("loc", ())
+        at = f" at character {loc[1]}" if len(loc) > 1 and isinstance(loc[1], int) else ""
+        why = (first.get("ctx") or {}).get("error") or "JSON decode error"
+        return _response(400, f"body: could not be parsed as JSON{at}: {why}", "body")
     field = _loc_to_field(first.get("loc", ()))
     parts = []
     for err in errors[:5]:
@@ -172,6 +177,15 @@ async def _http_error(request: Request, exc: Exception) -> JSONResponse:
     headers = dict(exc.headers) if exc.headers else None
     if exc.status_code == 405:
         headers = {**(headers or {}), "Allow": _allowed_methods(request)}
+    if exc.status_code == 400:
+        # the framework could not read the body (FastAPI's "There was an error parsing the
+        # body", Starlette's "Missing boundary in multipart."): say what and why
+        kind = request.headers.get("content-type", "no content type").split(";")[0]
+        cause = exc.__cause__ or exc.__context__
+        why = (f"{type(cause).__name__}: {cause}" if cause is not None
+               and str(exc.detail) == "There was an error parsing the body" else exc.detail)
+        return _response(400, f"body: could not be parsed as {kind}: {why}"[:300], "body",
+                         headers)
     return _response(exc.status_code, str(exc.detail), None, headers)
 
 

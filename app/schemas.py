@@ -8,14 +8,16 @@ JSON built outside pydantic goes through :func:`app.jsonconv.dumps`.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
 
 from sampler import SAMPLER_NAMES
+from sampler.region import constraint_pattern
 from sampler.scenario import ScenarioRecord
 
-__all__ = ["SEED_MAX", "ApiModel", "PRegion", "SamplingRequest", "ScenarioRecord"]
+__all__ = ["SEED_MAX", "ApiModel", "ConstraintText", "PRegion", "SamplingRequest",
+           "ScenarioRecord", "schema_enum"]
 
 #: the largest seed a request may give: the largest integer every JSON parser holds exactly
 #: (JavaScript's Number.MAX_SAFE_INTEGER), so a seed survives any client unchanged
@@ -30,6 +32,21 @@ if TYPE_CHECKING:
     SamplerName = str
 else:
     SamplerName = Literal[SAMPLER_NAMES]
+
+
+#: a constraint in the short form: its grammar (``sampler.region.constraint_pattern``: the
+#: quantity names, the operators, a number in ASCII digits) is in the JSON schema; the
+#: value is checked by the parser, whose 422 names the constraint and what is wrong
+#: ("unknown quantity 'x'; did you mean ..."), which a pattern mismatch could not say
+ConstraintText = Annotated[str, WithJsonSchema({
+    "type": "string", "pattern": constraint_pattern(),
+    "description": "NAME OP VALUE, e.g. 'ttc<3' (docs/sampler.md lists the names)"})]
+
+
+def schema_enum(values: tuple[str, ...] | list[str]) -> dict[str, object]:
+    """A query parameter's ``json_schema_extra`` listing its values (the route checks them
+    and answers a 422 that names the valid ones)."""
+    return {"enum": list(values)}
 
 
 class ApiModel(BaseModel):
@@ -49,7 +66,7 @@ class SamplingRequest(BaseModel):
 
     model: str = Field(default="default", description="model id ('default': the embedded "
                        "data's model)")
-    constraints: list[str] = Field(default_factory=lambda: list(DEFAULT_CONSTRAINTS),
+    constraints: list[ConstraintText] = Field(default_factory=lambda: list(DEFAULT_CONSTRAINTS),
                                    description="risk-region constraints, e.g. 'ttc<3'")
     seed: int = Field(default=0, ge=0, le=SEED_MAX, description="random seed of the sampler")
     sampler: SamplerName = Field(default="auto", description="rejection, mcmc, or auto "

@@ -9,15 +9,17 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import FileResponse, Response
-from pydantic import ConfigDict, Field
+from pydantic import ConfigDict, Field, WithJsonSchema
 
 from app import jsonconv
+from app.db.repository import ORDER_FIELDS
 from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.quotas import client_of
 from app.rates import RegionRates
-from app.schemas import ApiModel, SamplingRequest
+from app.schemas import ApiModel, SamplingRequest, schema_enum
 from app.services import catalogues as service
+from riskcore.criticality import CLASSES
 from sampler.scenario import ScenarioRecord
 
 router = APIRouter(prefix="/catalogues", tags=["catalogues"])
@@ -31,6 +33,11 @@ MEDIA_TYPES = {
 }
 SUFFIXES = {"jsonl": "jsonl", "csv": "csv", "parquet": "parquet", "xosc": "zip",
             "commonroad": "commonroad.zip"}
+
+
+#: a criticality class in a query: the enum in the schema, the check (422 listing them)
+#: in ``service.page_filter``
+ClassName = Annotated[str, WithJsonSchema({"type": "string", "enum": list(CLASSES)})]
 
 
 class CatalogueRequest(SamplingRequest):
@@ -162,11 +169,12 @@ def list_scenarios(
     offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     order_by: Annotated[str, Query(description="sort key: index or a numeric field (ttc, "
-                                   "risk, btn, a_req, ttr_true, ...); default btn")] = "btn",
+                                   "risk, btn, a_req, ttr_true, ...); default btn",
+                                   json_schema_extra=schema_enum(ORDER_FIELDS))] = "btn",
     desc: Annotated[bool | None, Query(description="descending (default: true, except for "
                                        "index)")] = None,
-    classes: Annotated[list[str] | None, Query(alias="class", description="keep these "
-                                               "classes (repeatable)")] = None,
+    classes: Annotated[list[ClassName] | None, Query(alias="class", description="keep "
+                                                     "these classes (repeatable)")] = None,
     risk_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     risk_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     ttc_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,

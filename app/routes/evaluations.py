@@ -16,7 +16,7 @@ from app import jsonconv
 from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.quotas import client_of
-from app.schemas import SEED_MAX, ApiModel
+from app.schemas import SEED_MAX, ApiModel, ConstraintText, schema_enum
 from app.services import evaluations as service
 from app.services import suts
 
@@ -39,9 +39,9 @@ class EvaluationRequest(BaseModel):
                                        "parameters of the SUT (its 'parameters' in GET /suts)")
     model: str = Field(default="default", description="model id ('default': the embedded "
                        "data's model)")
-    constraints: list[str] = Field(default_factory=list, description="restrict the cut-ins "
-                                   "to a region (e.g. 'v_ego>25'); default: the model's "
-                                   "whole distribution")
+    constraints: list[ConstraintText] = Field(
+        default_factory=list, description="restrict the cut-ins to a region (e.g. "
+        "'v_ego>25'); default: the model's whole distribution")
     n: int | None = Field(default=None, ge=1, description="exactly this many draws (no "
                           "stop rule)")
     rhw: float = Field(default=0.3, gt=0, lt=10, description="stop when the relative "
@@ -192,7 +192,9 @@ def list_runs(
     offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     order_by: Annotated[str, Query(description="run, impact_speed (default), r_dep_peak, "
-                                   "min_gap, min_ttc or weight")] = "impact_speed",
+                                   "min_gap, min_ttc or weight",
+                                   json_schema_extra=schema_enum(service.ORDER_FIELDS))
+                        ] = "impact_speed",
     desc: Annotated[bool | None, Query(description="descending (default: true, except for "
                                        "run)")] = None,
     vs_careful: Annotated[list[Literal["worse", "same", "better"]] | None, Query(

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Query
-from pydantic import Field
+from pydantic import Field, WithJsonSchema
 
 from app import jsonconv
 from app.deps import SettingsDep
@@ -13,6 +13,39 @@ from app.schemas import ApiModel
 from app.services import risk
 
 router = APIRouter(prefix="/risk", tags=["risk"])
+
+#: riskcore's JSON form's name (``riskcore.scenario.SCHEMA``; a test checks they agree)
+SCHEMA = "scengen.concrete-scenario/1"
+_NUMBERS = {"type": "array", "items": {"type": "number"}}
+_TRACK = {
+    "type": "object", "additionalProperties": False,
+    "required": ["id", "length", "width", "x", "y", "psi", "v"],
+    "properties": {
+        "id": {"type": "string", "minLength": 1},
+        "length": {"type": "number", "exclusiveMinimum": 0, "description": "m"},
+        "width": {"type": "number", "exclusiveMinimum": 0, "description": "m"},
+        "x": _NUMBERS, "y": _NUMBERS, "psi": _NUMBERS, "v": _NUMBERS,
+        "a": {"anyOf": [_NUMBERS, {"type": "null"}]},
+        "yaw_rate": {"anyOf": [_NUMBERS, {"type": "null"}]},
+    },
+}
+#: the JSON schema of a concrete scenario (``riskcore.scenario``'s JSON form); what it
+#: cannot say, the validation answers with a 422 naming the field: every series as long as
+#: ``t``, ``t`` strictly increasing, ids unique, the service's object and step limits
+CONCRETE_SCENARIO_SCHEMA = {
+    "title": "ConcreteScenario", "type": "object", "additionalProperties": False,
+    "required": ["t", "ego"],
+    "properties": {
+        "schema": {"type": "string", "enum": [SCHEMA]},
+        "t": {**_NUMBERS, "minItems": 2, "description": "time, s, strictly increasing"},
+        "ego": _TRACK,
+        "objects": {"type": "array", "items": _TRACK},
+        "params": {"anyOf": [{"type": "object", "additionalProperties": {"type": "number"}},
+                             {"type": "null"}]},
+        "seed": {"anyOf": [{"type": "integer"}, {"type": "null"}]},
+        "provenance": {"anyOf": [{"type": "object"}, {"type": "null"}]},
+    },
+}
 
 
 class RiskReport(ApiModel):
@@ -41,7 +74,7 @@ class RiskReport(ApiModel):
              summary="TTR Monte-Carlo risk of a concrete scenario (its JSON form, schema "
              "scengen.concrete-scenario/1): summary and per-step series")
 def score(
-    scenario: Annotated[dict[str, Any], Body(
+    scenario: Annotated[dict[str, Any], WithJsonSchema(CONCRETE_SCENARIO_SCHEMA), Body(
         description="a concrete scenario in the JSON form of riskcore.scenario (at most "
         "SCENGEN_RISK_OBJECTS_LIMIT objects and SCENGEN_RISK_STEPS_LIMIT time steps)")],
     settings: SettingsDep,

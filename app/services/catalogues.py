@@ -36,6 +36,10 @@ def check_n(ctx: ServiceContext, n: int) -> None:
         raise InvalidInput(f"n must be between 1 and {limit}, got {n}", field="body.n")
 
 
+#: samplers that need a region smaller than the whole model
+SUBSET_METHODS = ("subset", "subset-is")
+
+
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
            model: str | None = None, method: str = "auto", score: bool = True,
            chunk_size: int | None = None, wagner_scan: bool = False) -> CatalogueRow:
@@ -44,6 +48,11 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     if method not in SAMPLER_NAMES:
         raise InvalidInput(f"unknown sampler {method!r}; choose one of "
                            f"{', '.join(SAMPLER_NAMES)}", field="body.sampler")
+    if method in SUBSET_METHODS and not constraints:  # as POST /scenarios refuses it
+        raise InvalidInput(f"sampler {method!r}: subset simulation needs at least one "
+                           "constraint (without one the region is the whole model); give "
+                           "constraints, or use auto, rejection or mcmc",
+                           field="body.constraints")
     size = chunk_size or ctx.settings.chunk_size
     if size < 1:
         raise InvalidInput("chunk_size must be at least 1", field="body.chunk_size")
@@ -218,12 +227,12 @@ def page_filter(items: Sequence[tuple[str, str]], classes: Sequence[str] = (),
         name, _, bound = key.rpartition("_")
         if bound in ("min", "max") and name in repo.RANGE_FIELDS:
             try:
-                value = float(raw)
+                value = float(raw) if raw.isascii() and "_" not in raw else math.nan
             except ValueError:
                 value = math.nan
-            if math.isnan(value):
-                raise InvalidInput(f"{key}: expected a number, got {raw!r}",
-                                   field=f"{where}.{key}")
+            if not math.isfinite(value):  # btn_min=-inf as ttc_min=inf: refused alike
+                raise InvalidInput(f"{key}: expected a finite number in ASCII digits, got "
+                                   f"{raw!r}", field=f"{where}.{key}")
             ranges.setdefault(name, [None, None])[0 if bound == "min" else 1] = value
         elif key in repo.FLAG_FIELDS:
             if raw.lower() not in ("true", "false", "1", "0"):

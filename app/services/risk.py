@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from app import domain
+from app.errors import InvalidInput
 from app.limits import check_posted_scenario
 from app.settings import Settings
 from riskcore import InputSurfaces, RiskSettings, ScenarioError
@@ -44,7 +45,35 @@ def score(data: Any, *, samples: bool = False, settings: RiskSettings | None = N
     return domain.score_posted(data, samples=samples, settings=settings, surfaces=surfaces)
 
 
+#: a track's time series (``riskcore.scenario``); ``a`` and ``yaw_rate`` may be null
+SERIES_KEYS = ("x", "y", "psi", "v", "a", "yaw_rate")
+
+
+def check_json_numbers(data: Any) -> None:
+    """Every value of a posted scenario's series is a JSON number (not a string such as
+    "1.5" nor a boolean, which numpy would read as numbers): the API's schema of the body
+    says so, and the validation is as strict (``InvalidInput`` naming the value)."""
+    if not isinstance(data, Mapping):
+        return  # riskcore's validation names that
+    series: list[tuple[str, Any]] = [("t", data.get("t"))]
+    tracks = [("ego", data.get("ego"))]
+    objects = data.get("objects")
+    if isinstance(objects, list):
+        tracks += [(f"objects[{i}]", o) for i, o in enumerate(objects)]
+    for where, track in tracks:
+        if isinstance(track, Mapping):
+            series += [(f"{where}.{k}", track.get(k)) for k in SERIES_KEYS]
+    for where, values in series:
+        if not isinstance(values, list):
+            continue
+        for i, v in enumerate(values):
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                raise InvalidInput(f"{where}[{i}]: expected a number, got "
+                                   f"{type(v).__name__}", field=f"body.{where}[{i}]")
+
+
 def score_posted(data: Any, service: Settings, *, samples: bool = False) -> dict[str, Any]:
     """``POST /risk``: :func:`score` after the service's size limits (objects, steps)."""
     check_posted_scenario(data, service)
+    check_json_numbers(data)
     return score(data, samples=samples)

@@ -98,12 +98,14 @@ from sampler.scenario.builder import DEFAULT_LEAD_IN
 
 __all__ = [
     "DERIVED",
+    "NUMBER_PATTERN",
     "OPERATORS",
     "PHYSICAL_BOUNDS",
     "QUANTITY_NAMES",
     "SUPPORT_CLASSES",
     "Constraint",
     "Region",
+    "constraint_pattern",
     "derive",
     "implied_bounds",
     "parse_constraint",
@@ -170,6 +172,23 @@ _SUPPORT_NAMES = ("support", "support_distance", "support_excess")
 
 #: Every name a constraint may use.
 QUANTITY_NAMES: tuple[str, ...] = (*PARAM_NAMES, *DERIVED)
+
+#: how a constraint's number is written: ASCII digits, an optional sign, decimal point and
+#: exponent (``3``, ``-0.5``, ``.5``, ``1e-3``); Python's ``float`` would also take
+#: ``３`` (a fullwidth digit), ``1_000``, ``inf`` and ``nan``, which a constraint does not
+NUMBER_PATTERN = r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
+_NUMBER = re.compile(NUMBER_PATTERN)
+
+
+def constraint_pattern() -> str:
+    """The short form's grammar as one regular expression (the API's JSON schema uses it):
+    a quantity, one of ``< <= > >=`` and a number (``NUMBER_PATTERN``), or ``support``
+    compared with a class (its word checked by the parser). Every text it refuses,
+    ``parse_constraint`` refuses too."""
+    names = "|".join(sorted((n for n in QUANTITY_NAMES if n != "support"), key=len,
+                            reverse=True))
+    return (rf"^\s*(?:(?:{names})\s*(?:<=|>=|<|>)\s*{NUMBER_PATTERN}"
+            rf"|support\s*(?:<=|>=|==|!=|=<|=>|<|>|=)\s*\S+)\s*$")
 
 
 class Constraint(BaseModel):
@@ -355,12 +374,14 @@ def parse_constraint(text: str) -> Constraint:
             f"constraint {text!r}: unknown quantity {name!r}{did_you_mean(name)} (valid "
             f"names: {', '.join(QUANTITY_NAMES)})", field="name", problem="unknown quantity",
             value=name, constraint=text)
-    try:
-        value = float(raw)
-    except ValueError:
-        raise ConstraintError(f"constraint {text!r}: value {raw!r} is not a number",
+    if _NUMBER.fullmatch(raw) is None and raw.lstrip("+-").lower() not in (
+            "inf", "infinity", "nan"):  # those: "must be finite" below
+        why = ("is not written with ASCII digits" if not raw.isascii()
+               else "is not a number such as 3, -0.5 or 1e-3")
+        raise ConstraintError(f"constraint {text!r}: value {raw!r} {why}",
                               field="value", problem="not a number", value=raw,
-                              constraint=text) from None
+                              constraint=text)
+    value = float(raw)
     if not math.isfinite(value):
         raise ConstraintError(f"constraint {text!r}: value must be finite, got {raw!r}",
                               field="value", problem="not finite", value=raw, constraint=text)

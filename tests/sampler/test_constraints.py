@@ -200,3 +200,31 @@ def test_params_shape_errors() -> None:
         Region().contains(np.zeros((3, 5)))
     with pytest.raises(ConstraintError, match="missing column"):
         Region().contains({"p_y1": [0.1]})
+
+
+@pytest.mark.parametrize("text", ["ttc<３", "ttc<٣", "ttc<1_000", "ttc<3.0.1", "ttc<0x10"])
+def test_a_number_is_written_with_ascii_digits(text: str) -> None:
+    """Issue 27 finding 5: Python's float() reads a fullwidth or Arabic-Indic digit and
+    '1_000', so 'ttc<３' was accepted as 3; the grammar (and the API's pattern) refuse it."""
+    with pytest.raises(ConstraintError, match=r"ASCII digits|not a number") as info:
+        parse_constraint(text)
+    assert info.value.problem == "not a number"
+
+
+def test_the_pattern_refuses_whatever_the_parser_refuses() -> None:
+    import re
+
+    from sampler.region import constraint_pattern
+
+    pattern = re.compile(constraint_pattern())
+    accepted = ["ttc<3", " ttc <= 3 ", "btn>=1", "gap<-.5e1", "p_y1>+0.5", "v_ego>20.",
+                "support==inside", "support!=extrapolated", "support<=near"]
+    refused = ["ttc<３", "ttc<1_000", "ttc<inf", "foo<3", "ttc==3", "ttc", "ttc<3;x",
+               "ttc<nan", "ttc<3 4"]
+    for text in accepted:
+        assert pattern.match(text), text
+        parse_constraint(text)
+    for text in refused:
+        assert not pattern.match(text), text
+        with pytest.raises(ConstraintError):
+            parse_constraint(text)
