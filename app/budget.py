@@ -169,11 +169,12 @@ class BudgetGuard:
             # receive that is cancelled at once sees a disconnect that has arrived
             if state["gone"] or not state["body_done"]:
                 return bool(state["gone"])
+            msg: Message = {}
             with anyio.CancelScope() as scope_:
                 scope_.cancel()
                 msg = await receive()
-                if msg.get("type") == "http.disconnect":
-                    state["gone"] = True
+            if msg.get("type") == "http.disconnect":
+                state["gone"] = True
             return bool(state["gone"])
 
         def gone() -> bool:

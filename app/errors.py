@@ -111,6 +111,9 @@ def _loc_to_field(loc: tuple[int | str, ...] | list[int | str]) -> str:
 
 async def _service_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, ServiceError)
+    if exc.status == 499:  # app.budget.ClientGone: nobody reads the answer
+        log.warning("%s %s: the client has gone; its work was stopped", request.method,
+                 request.url.path)
     return _response(exc.status, exc.message, exc.field, getattr(exc, "headers", None))
 
 

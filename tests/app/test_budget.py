@@ -99,3 +99,26 @@ def test_a_fit_whose_client_has_gone_stores_no_model(model_cache_dir: Path,
         assert [m.id for m in models_service.list_models(ctx)] == before
     finally:
         ctx.close()
+
+
+@pytest.mark.slow
+def test_a_client_that_disconnects_stops_its_sampling(model_cache_dir: Path,
+                                                      tmp_path: Path) -> None:
+    """Over real HTTP (uvicorn): a client that gives up on a slow read after 1 s; the
+    service notices at the sampler's next progress report and stops (its log says so;
+    before: the estimate ran to its end for nobody)."""
+    import httpx
+
+    from tests.app.factories import service_env, uvicorn_service, wait_for
+
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    env = service_env(data_dir, sync_budget_seconds="600", local_workers="0",
+                      warm_start="false")
+    log = tmp_path / "uvicorn.log"
+    with uvicorn_service(env, log, "--log-level", "info") as base:
+        with pytest.raises(httpx.TimeoutException):
+            httpx.get(f"{base}/dashboard/api/models/default/rates",
+                      params={"constraints": "btn>0.95"}, timeout=1.0)
+        wait_for(lambda: "the client has gone; its work was stopped" in log.read_text(),
+                 "the service to stop the work", attempts=600)
