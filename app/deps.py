@@ -12,6 +12,7 @@ from app.context import ServiceContext
 from app.jobs.manager import JobManager
 from app.schemas import SEED_MAX
 from app.settings import Settings, get_settings
+from sampler.region import constraint_grammar
 
 
 def get_context(request: Request) -> ServiceContext:
@@ -40,8 +41,15 @@ SessionDep = Annotated[Session, Depends(get_session)]
 
 
 #: a region typed as one query string: constraints separated by ";" (default ttc<3)
+#: constraints in one query string, separated by ';' (',' and '&' too; blanks dropped:
+#: ``app.services.sampling.split_constraints``); the grammar is in the schema only, the
+#: parser's 422 says what is wrong with a constraint
+_ONE = constraint_grammar()
+CONSTRAINTS_QUERY_PATTERN = rf"^\s*(?:{_ONE})?\s*(?:[;,&]\s*(?:{_ONE})?\s*)*$"
 ConstraintsQuery = Annotated[str, Query(max_length=500, description="the region: "
                                         "constraints separated by ';', e.g. 'ttc<3' or "
-                                        "'ttc<3; btn>0.7'")]
+                                        "'ttc<3; btn>0.7'",
+                                        json_schema_extra={"pattern":
+                                                           CONSTRAINTS_QUERY_PATTERN})]
 #: a sampler seed in a query string
 SeedQuery = Annotated[int, Query(ge=0, le=SEED_MAX)]

@@ -105,6 +105,7 @@ __all__ = [
     "SUPPORT_CLASSES",
     "Constraint",
     "Region",
+    "constraint_grammar",
     "constraint_pattern",
     "derive",
     "implied_bounds",
@@ -180,15 +181,20 @@ NUMBER_PATTERN = r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
 _NUMBER = re.compile(NUMBER_PATTERN)
 
 
-def constraint_pattern() -> str:
-    """The short form's grammar as one regular expression (the API's JSON schema uses it):
-    a quantity, one of ``< <= > >=`` and a number (``NUMBER_PATTERN``), or ``support``
-    compared with a class (its word checked by the parser). Every text it refuses,
-    ``parse_constraint`` refuses too."""
+def constraint_grammar() -> str:
+    """One constraint as a regular expression without anchors or surrounding blanks: a
+    quantity, one of ``< <= > >=`` and a number (``NUMBER_PATTERN``), or ``support``
+    compared with a class (its word checked by the parser)."""
     names = "|".join(sorted((n for n in QUANTITY_NAMES if n != "support"), key=len,
                             reverse=True))
-    return (rf"^\s*(?:(?:{names})\s*(?:<=|>=|<|>)\s*{NUMBER_PATTERN}"
-            rf"|support\s*(?:<=|>=|==|!=|=<|=>|<|>|=)\s*\S+)\s*$")
+    return (rf"(?:(?:{names})\s*(?:<=|>=|<|>)\s*{NUMBER_PATTERN}"
+            rf"|support\s*(?:<=|>=|==|!=|=<|=>|<|>|=)\s*\S+)")
+
+
+def constraint_pattern() -> str:
+    """The short form's grammar as one anchored regular expression (the API's JSON schema
+    uses it). Every text it refuses, ``parse_constraint`` refuses too."""
+    return rf"^\s*{constraint_grammar()}\s*$"
 
 
 class Constraint(BaseModel):

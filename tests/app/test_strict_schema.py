@@ -95,3 +95,31 @@ def test_a_risk_series_value_must_be_a_json_number(client: Any) -> None:
     scenario["ego"]["v"][0] = True
     r = client.post("/risk", json=scenario)
     assert r.status_code == 422 and r.json()["error"]["field"] == "body.ego.v[0]"
+
+
+def test_the_constraints_query_string_has_the_grammar_too(client: Any) -> None:
+    """GET /models/compare, the dashboard's shift and rates take constraints as one string
+    (';', ',' or '&' between them): its pattern accepts what the parser accepts."""
+    from app.services.sampling import split_constraints
+    from sampler import parse_constraint
+    from sampler.errors import ConstraintError
+
+    spec = client.get("/openapi.json").json()
+    params = {p["name"]: p["schema"] for p in
+              spec["paths"]["/dashboard/api/models/{model_id}/shift"]["get"]["parameters"]}
+    pattern = re.compile(params["constraints"]["pattern"])
+    for text in ["ttc<3", "ttc<3; btn>0.7", " ttc<3 ,v_ego>=20 & gap<30 ", "", ";",
+                 "support==inside; ttc<2"]:
+        assert pattern.match(text), text
+        for part in split_constraints(text):
+            parse_constraint(part)
+    for text in ["ttc<３", "ttc<3;; foo<1", "ttc<3 btn>1", "ttc<inf"]:
+        assert not pattern.match(text), text
+        try:
+            for part in split_constraints(text):
+                parse_constraint(part)
+        except ConstraintError:
+            continue
+        raise AssertionError(f"{text!r} parsed")
+    r = client.get("/dashboard/api/models/default/shift", params={"constraints": "ttc<３"})
+    assert r.status_code == 422
