@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from riskcore.criticality import (
@@ -22,6 +22,7 @@ from riskcore.errors import SettingsError
 from riskcore.scenario import ConcreteScenario, Track
 from sampler import build_scenario
 from tests.riskcore.driver_reference import (
+    IMPACT_TOL,
     L,
     clear_outcome,
     generated_cut_ins,
@@ -267,7 +268,18 @@ def test_profiles_equal_riskcore_scenario_risk() -> None:
 # --------------------------------------------------------------------------- reference
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(params=generated_cut_ins())
+# low-speed rear-end contacts, found by HYPOTHESIS_PROFILE=explore: with its brake onset
+# on its 1 ms grid the reference was off by 0.032 / 0.033 m/s (so is the one reported at
+# 0.055: p_y1 -0.0392, p_t 3.1016, p_a1 1.0, p_a2 0.5); now within IMPACT_TOL
+@example(params={"p_y1": -0.23810928342852, "p_t": 1.2582802945768083, "p_a1": 0.0,
+                 "p_a2": 0.5, "p_a3": 0.0, "p_v0": 15.0, "dv": 12.253937312409933,
+                 "gap": 15.0})
+@example(params={"p_y1": 0.09424683713696624, "p_t": 2.00001,
+                 "p_a1": -1.6782435550718273, "p_a2": 0.5, "p_a3": 0.0, "p_v0": 15.0,
+                 "dv": 15.0, "gap": 15.0})
 def test_fast_drivers_agree_with_a_slow_reference(params: dict[str, float]) -> None:
+    """The record's reference drivers against the plain 1 ms loop: the same collisions,
+    impact speeds within IMPACT_TOL (tests/riskcore/driver_reference.py derives it)."""
     try:
         scen = build_scenario(params)
     except ValueError:
@@ -281,7 +293,7 @@ def test_fast_drivers_agree_with_a_slow_reference(params: dict[str, float]) -> N
         assert c[f"{name}_collision"] is ref_hit, (driver, c.to_record())
         if ref_hit:
             assert float(c[f"{name}_impact_speed"]) == pytest.approx(  # type: ignore[arg-type]
-                ref_speed, abs=0.05)
+                ref_speed, abs=IMPACT_TOL)
 
 
 # --------------------------------------------------------------------------- TNO

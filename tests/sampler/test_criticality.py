@@ -22,6 +22,7 @@ from sampler import (
 )
 from sampler.region.criticality import CRITICALITY_QUANTITIES, criticality_quantities
 from tests.riskcore.driver_reference import (
+    IMPACT_TOL,
     clear_outcome,
     generated_cut_ins,
     reference_drive,
@@ -183,7 +184,7 @@ def test_fast_path_agrees_with_the_slow_reference(params: dict[str, float]) -> N
         ref_hit, ref_speed = reference_drive(scen, driver, s)
         assert bool(q[key][0]) is ref_hit, (driver, rec)
         if driver == "r157" and ref_hit:
-            assert q["r157_impact_speed"][0] == pytest.approx(ref_speed, abs=0.05)
+            assert q["r157_impact_speed"][0] == pytest.approx(ref_speed, abs=IMPACT_TOL)
 
 
 def test_step_must_divide_the_sample_step() -> None:
