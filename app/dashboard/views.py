@@ -509,6 +509,11 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
         risk = domain.scenario_risk_series(sc)
         prov = data.get("provenance") or {}
         profiles, profiles_error = _profiles(sc)
+        ego = _track(data["ego"])
+        if profiles is not None:
+            # the R157 driver's ego is the same car as the scripted one: its size, so the
+            # page can draw its box (issue 25: null sizes made view 4 skip it)
+            profiles["r157_ego"].update(length=ego["length"], width=ego["width"])
         return {
             "catalogue": crow.id,
             "index": row.idx,
@@ -516,7 +521,7 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
             "trajectory_source": source,
             "lane_width": prov.get("lane_width"),
             "t": data["t"],
-            "ego": _track(data["ego"]),
+            "ego": ego,
             "objects": [_track(o) for o in data.get("objects", [])],
             "record": catalogue_service.record_of(row),
             "summary": jsonconv.encode(risk["summary"]),

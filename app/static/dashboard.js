@@ -827,9 +827,11 @@
       sc.objects.map((o) => [o.id, o, COLORS.cutter, false]));
     if (prof) {
       // the R157 careful driver's reacted ego: the scripted one until it brakes
-      tracks.push(["ego (R157 driver)", Object.assign({ length: sc.ego.length,
-                                                        width: sc.ego.width }, prof.r157_ego),
-                   COLORS.r157, true]);
+      // the same car as the scripted ego: a size the profile lacks (null) is the ego's
+      const r157 = Object.assign({}, prof.r157_ego);
+      if (r157.length === null || r157.length === undefined) r157.length = sc.ego.length;
+      if (r157.width === null || r157.width === undefined) r157.width = sc.ego.width;
+      tracks.push(["ego (R157 driver)", r157, COLORS.r157, true]);
     }
     for (const [name, tr, color, reacted] of tracks) {
       traces.push({ type: "scatter", mode: "lines", name: name + " path", x: tr.x, y: tr.y,

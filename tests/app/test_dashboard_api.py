@@ -324,6 +324,10 @@ def test_scenario_view_of_a_real_catalogue(client: TestClient) -> None:
     for name in ("r_dep", "r_ind", "r_dep_r157", "r_ind_r157"):
         assert len(prof[name]) == n_t
     assert len(prof["r157_ego"]["x"]) == n_t and len(prof["r157_ego"]["psi"]) == n_t
+    # the R157 driver's ego is the scripted ego's car: its size, so view 4 can draw its box
+    assert view["ego"]["length"] > 3 and view["ego"]["width"] > 1
+    assert prof["r157_ego"]["length"] == view["ego"]["length"]
+    assert prof["r157_ego"]["width"] == view["ego"]["width"]
     assert max(prof["r_dep"]) == pytest.approx(row["risk_peak"], rel=1e-12)
     if row["r157_cc_t_brake"] is not None:
         assert prof["r157_t_brake"] == pytest.approx(row["r157_cc_t_brake"], abs=1e-9)
