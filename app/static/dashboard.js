@@ -744,9 +744,7 @@
       state.scenario = sc;
       const url = "/dashboard/catalogues/" + encodeURIComponent(catalogue) + "?scenario=" +
         sc.index;
-      if (window.location.pathname + window.location.search !== url) {
-        window.history.replaceState(null, "", url);
-      }
+      setUrl(url, false);
       const sm = sc.summary;
       const rec = sc.record;
       const prof = sc.profiles;
@@ -1071,9 +1069,44 @@
     if (push) {
       const url = state.catalogue ? "/dashboard/catalogues/" +
         encodeURIComponent(state.catalogue) : "/dashboard";
-      window.history.pushState(null, "", url);
+      setUrl(url, true);
     }
     await Promise.all(tasks);
+  }
+
+  // ------------------------------------------------------------------ address bar
+  // The page's address names what it shows (/dashboard, /dashboard/catalogues/{id},
+  // ?scenario=k); moving between them happens here, without loading the page again.
+  let shownUrl = window.location.pathname + window.location.search;
+
+  function setUrl(url, push) {
+    if (url === shownUrl) return;
+    shownUrl = url;
+    if (push) window.history.pushState(null, "", url);
+    else window.history.replaceState(null, "", url);
+  }
+
+  function route() {
+    const m = window.location.pathname.match(/^\/dashboard\/catalogues\/([^/]+)\/?$/);
+    const k = new URLSearchParams(window.location.search).get("scenario");
+    return { catalogue: m ? decodeURIComponent(m[1]) : null,
+             scenario: k !== null && /^\d+$/.test(k) ? parseInt(k, 10) : null };
+  }
+
+  async function onPopState() {
+    const url = window.location.pathname + window.location.search;
+    // a header link (#view-…) only scrolls: the same address, nothing to load (before,
+    // every one of them reloaded the whole page)
+    if (url === shownUrl) return;
+    shownUrl = url;
+    clearError();
+    const to = route();
+    try {
+      if (to.catalogue !== state.catalogue) await selectCatalogue(to.catalogue, false);
+      if (to.catalogue && to.scenario !== null) await openScenario(to.catalogue, to.scenario);
+    } catch (e) {
+      reportError("going back", e);
+    }
   }
 
   async function init() {
@@ -1147,7 +1180,7 @@
     }
   }
 
-  window.addEventListener("popstate", () => window.location.reload());
+  window.addEventListener("popstate", onPopState);
   // shared with dashboard_rates.js (sections 5 and 6)
   window.scengen = { api, fmt, esc, table, draw, clearPlot, reportError, centres, COLORS };
   init();

@@ -1,0 +1,180 @@
+"""What a new user met in the dashboard (issue 25 item 6), in headless Chromium against the
+service started here (quick default model, private data dir): header links that reloaded
+the whole page, view 4 without the R157 driver's car, view 5 titled with the typed
+constraint instead of the catalogue's, the riskiest-10 table, the histograms, a lone
+unpreventable case, the running catalogue's progress text, the data support.
+
+Each test looks at the page as drawn (Plotly's data, the DOM) and saves a screenshot under
+``test-artifacts/dashboard/``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from playwright.sync_api import Browser, Page, sync_playwright
+
+from app.db.database import Database
+from tests.app.factories import uvicorn_service
+from tests.browser.factories import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    prepare_data_dir,
+    store_synthetic_catalogue,
+)
+
+pytestmark = pytest.mark.browser
+
+ROOT = Path(__file__).resolve().parents[2]
+ARTIFACTS = ROOT / "test-artifacts" / "dashboard"
+TIMEOUT_MS = 120_000
+
+
+class Server:
+    def __init__(self, base: str, data_dir: Path) -> None:
+        self.base = base
+        self.data_dir = data_dir
+
+    def db(self) -> Database:
+        return Database(f"sqlite:///{(self.data_dir / 'scengen.db').resolve()}")
+
+    def default_model(self) -> str:
+        model: str = httpx.get(f"{self.base}/health").json()["default_model"]
+        return model
+
+    def catalogue(self, rows: list[dict[str, Any]] | None = None, n: int = 60,
+                  seed: int = 3, **kw: Any) -> str:
+        db = self.db()
+        try:
+            return store_synthetic_catalogue(db, self.data_dir, self.default_model(), n,
+                                             seed=seed, rows=rows, **kw)
+        finally:
+            db.dispose()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    data_dir = prepare_data_dir(tmp_path_factory.mktemp("usability-data"))
+    env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0",
+               SCENGEN_CHUNK_SIZE="6", SCENGEN_WARM_START="0")
+    for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
+        env.pop(name, None)
+    with uvicorn_service(env, data_dir / "uvicorn.log") as base:
+        yield Server(base, data_dir)
+
+
+@pytest.fixture(scope="module")
+def real_catalogue(server: Server) -> str:
+    """A small scored catalogue made by the service (trajectories stored)."""
+    r = httpx.post(f"{server.base}/catalogues", timeout=60,
+                   json={"n": 12, "seed": 5, "constraints": ["ttc<2"]})
+    assert r.status_code == 202, r.text
+    cid: str = r.json()["id"]
+    deadline = time.monotonic() + 600
+    while time.monotonic() < deadline:
+        status = httpx.get(f"{server.base}/catalogues/{cid}").json()["status"]
+        if status not in ("queued", "running"):
+            assert status == "done"
+            return cid
+        time.sleep(0.2)
+    raise AssertionError("the catalogue did not finish")
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Page]:
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    context.set_default_timeout(TIMEOUT_MS)
+    pg = context.new_page()
+    errors: list[str] = []
+    pg.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    pg.on("pageerror", lambda exc: errors.append(f"pageerror: {exc}"))
+    yield pg
+    context.close()
+    assert errors == []
+
+
+def settle(page: Page) -> None:
+    page.wait_for_selector("body[data-ready='1']")
+    page.wait_for_function("document.body.dataset.busy === '0'")
+
+
+def shot(page: Page, selector: str, name: str) -> None:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.add_style_tag(content="header { position: static !important; }")
+    size = page.viewport_size or {"width": 1400, "height": 1000}
+    box = page.locator(selector).bounding_box()
+    tall = int(box["height"]) + 200 if box else size["height"]
+    page.set_viewport_size({"width": size["width"], "height": max(size["height"], tall)})
+    try:
+        page.locator(selector).screenshot(path=str(ARTIFACTS / name), animations="disabled")
+    finally:
+        page.set_viewport_size(size)
+
+
+def traces(page: Page, div: str) -> list[dict[str, Any]]:
+    data: list[dict[str, Any]] = page.evaluate(
+        "(id) => Array.from(document.getElementById(id).data || [])"
+        ".map((t) => ({x: t.x, y: t.y, name: t.name, width: t.width, type: t.type}))", div)
+    return data
+
+
+# --------------------------------------------------------------------------- navigation
+def test_header_links_move_within_the_page_without_loading_it_again(
+        server: Server, page: Page) -> None:
+    """Every header link used to reload the whole page (5-12 s): the page's popstate
+    handler reloaded on any history entry, and a #fragment link makes one."""
+    first, second = server.catalogue(seed=11), server.catalogue(seed=12)
+    page.goto(f"{server.base}/dashboard/catalogues/{first}")
+    settle(page)
+    page.evaluate("() => { window.__loadedOnce = true; }")
+    for link in page.locator("header nav a[href^='#']").all():
+        target = link.get_attribute("href")
+        link.click()
+        page.wait_for_function(f"window.location.hash === '{target}'")
+        assert page.evaluate("() => window.__loadedOnce === true"), f"{target} reloaded"
+    # the catalogue picker and Back switch catalogues here too, without a reload
+    page.select_option("#catalogue-select", second)
+    page.wait_for_selector(f"#class-counts[data-source='{second}']")
+    settle(page)
+    assert page.url.endswith(f"/dashboard/catalogues/{second}")
+    page.go_back()  # the fragments, then the first catalogue
+    while not page.url.split("#")[0].endswith(first):
+        page.go_back()
+    page.wait_for_selector(f"#class-counts[data-source='{first}']")
+    settle(page)
+    assert page.locator("#catalogue-select").input_value() == first
+    assert page.evaluate("() => window.__loadedOnce === true"), "Back reloaded the page"
+
+
+# --------------------------------------------------------------------------- view 4
+def test_view4_draws_the_r157_drivers_car(server: Server, real_catalogue: str,
+                                          page: Page) -> None:
+    page.goto(f"{server.base}/dashboard/catalogues/{real_catalogue}?scenario=0")
+    settle(page)
+    page.wait_for_selector(f"#series-plot[data-source='{real_catalogue}#0']")
+    drawn = {t["name"]: t for t in traces(page, "topdown-plot")}
+    ego, r157 = drawn["ego (scripted)"], drawn["ego (R157 driver)"]
+    for car in (ego, r157):
+        assert all(isinstance(v, float | int) and math.isfinite(v) for v in car["x"]), car
+    # the same car: its box as long and as wide as the scripted ego's
+    assert max(r157["x"]) - min(r157["x"]) == pytest.approx(max(ego["x"]) - min(ego["x"]),
+                                                           rel=0.2)
+    assert max(r157["x"]) - min(r157["x"]) > 3.0
+    shot(page, "#view-scenario", "ux-4-scenario-r157-car.png")
