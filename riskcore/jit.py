@@ -24,8 +24,10 @@ import os
 from pathlib import Path
 
 import numba
+import numpy as np
+import numpy.typing as npt
 
-__all__ = ["cache_dir", "register", "registered"]
+__all__ = ["cache_dir", "kernel_input", "register", "registered"]
 
 _REGISTERED: list[Path] = []
 
@@ -44,6 +46,22 @@ def cache_dir(files: tuple[Path, ...] | None = None) -> Path:
         h.update(path.read_bytes())
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     return base / "scengen" / "numba" / h.hexdigest()[:16]
+
+
+def kernel_input(values: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """``values`` as the one array type a kernel's input is compiled for: float64,
+    C-contiguous and read-only (a read-only view, no copy, when it is already
+    float64 and contiguous).
+
+    numba compiles one machine-code version per read-only flag of each array argument, so
+    the same kernel fed a writable array in one call and a read-only one (a pandas
+    ``to_numpy()`` view, a memoised array) in another is compiled twice: measured (issue
+    25), the first ``POST /scenarios`` after the start-up warm-up compiled the criticality
+    kernels again for 12-15 s. Entry points pass their inputs through this (outputs stay
+    writable)."""
+    arr = np.ascontiguousarray(values, dtype=np.float64).view()
+    arr.flags.writeable = False
+    return arr
 
 
 def register(module_file: str) -> None:

@@ -343,7 +343,7 @@ def a_req_bound(params: FloatArray, lane_width: float, *, stop_at: float = 0.0,
     ndarray of shape (n,)
         ``>= a_req`` of every buildable row; +inf where nothing is proved.
     """
-    arr = np.ascontiguousarray(params, dtype=np.float64)
+    arr = jit.kernel_input(params)  # one compiled version whoever calls
     if arr.ndim != 2 or arr.shape[1] != 8:
         raise SamplerError(f"params: expected shape (n, 8), got {arr.shape}", field="params",
                            problem="wrong shape", value=arr.shape)

@@ -439,7 +439,7 @@ def criticality_quantities(params: FloatArray, lane_width: float = DEFAULT_LANE_
     dict of name -> ndarray of shape (n,)
         NaN where the row is not a buildable cut-in.
     """
-    arr = np.ascontiguousarray(params, dtype=np.float64)
+    arr = jit.kernel_input(params)  # one compiled version whoever calls
     if arr.ndim != 2 or arr.shape[1] != 8:
         raise SamplerError(f"params: expected shape (n, 8), got {arr.shape}", field="params",
                            problem="wrong shape", value=arr.shape)

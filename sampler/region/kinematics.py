@@ -163,6 +163,6 @@ def crossing_kinematics(params: FloatArray, offset: float,
                            problem="out of range", value=n_grid)
     out = np.empty((arr.shape[0], 4))
     one_minus_cos = _one_minus_cos(int(n_grid))
-    _crossing_kernel(np.ascontiguousarray(arr[:, :6]), float(offset), one_minus_cos, out)
+    _crossing_kernel(jit.kernel_input(arr[:, :6]), float(offset), one_minus_cos, out)
     return CrossingKinematics(t_cross=out[:, 0].copy(), v_cross=out[:, 1].copy(),
                               y_end=out[:, 2].copy(), max_lat_speed=out[:, 3].copy())

@@ -309,7 +309,7 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
     the risk horizon (3 s), in whole steps. Rows the builder would refuse get ``ok``
     False, their ``status`` code (``reasons``) and NaN or zero tracks; nothing raises.
     """
-    x = np.ascontiguousarray(np.atleast_2d(np.asarray(params, dtype=np.float64)))
+    x = jit.kernel_input(np.atleast_2d(np.asarray(params, dtype=np.float64)))
     if x.ndim != 2 or x.shape[1] != 8:
         raise BuilderError(f"params: expected shape (N, 8), got {x.shape}", field="params")
     dt = _positive(dt, "dt")

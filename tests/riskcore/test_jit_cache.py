@@ -108,3 +108,23 @@ def test_register_uses_it_unless_the_user_chose(tmp_path: Path,
     monkeypatch.setenv("NUMBA_CACHE_DIR", "/the/users/choice")
     jit.register(jit.__file__.replace("jit.py", "kernels.py"))
     assert numba.config.CACHE_DIR == "/the/users/choice"
+
+
+def test_kernel_input_is_one_array_type_whatever_comes_in() -> None:
+    """Issue 25 item 4: numba compiles a kernel once per read-only flag of its array
+    arguments, so entry points hand every kernel a read-only float64 C array."""
+    import numpy as np
+
+    from riskcore.jit import kernel_input
+
+    writable = np.arange(6.0).reshape(2, 3)
+    frozen = writable.copy()
+    frozen.flags.writeable = False
+    for given in (writable, frozen, writable.T, [[1, 2, 3]], writable.astype(np.float32)):
+        arr = kernel_input(given)
+        assert arr.dtype == np.float64 and arr.flags.c_contiguous
+        assert not arr.flags.writeable
+        np.testing.assert_array_equal(arr, np.asarray(given, dtype=np.float64))
+    view = kernel_input(writable)
+    assert np.shares_memory(view, writable)  # a view: no copy
+    assert writable.flags.writeable  # the caller's array stays writable
