@@ -39,7 +39,8 @@ def _refused(r: Any) -> None:
 @pytest.mark.parametrize("path", [
     f"/dashboard/api/models/default/shift?constraints={RARE}",
     f"/dashboard/api/models/default/rates?constraints={RARE}",
-    f"/models/compare?a=default&b=default&constraints={RARE}",
+    pytest.param(f"/models/compare?a=default&b=default&constraints={RARE}",
+                 marks=pytest.mark.slow),
 ])
 def test_an_expensive_read_over_the_budget_is_refused_saying_how_to_get_it(
         budget_client: Any, path: str) -> None:
@@ -50,6 +51,7 @@ def test_post_scenarios_over_the_budget_is_refused(budget_client: Any) -> None:
     _refused(budget_client.post("/scenarios", json={"n": 5, "constraints": ["btn>0.95"]}))
 
 
+@pytest.mark.slow
 def test_a_cheap_request_is_answered(budget_client: Any) -> None:
     r = budget_client.post("/scenarios", json={"n": 2, "constraints": ["ttc<3"],
                                                "score": False})

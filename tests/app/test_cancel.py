@@ -111,6 +111,7 @@ def test_a_cancel_during_the_p_a_estimate_stops_it(tmp_path: Path) -> None:
     assert runner.run("p") == "done"  # and it resumes
 
 
+@pytest.mark.slow
 def test_a_cancelled_evaluation_stops_between_the_parts_of_a_chunk(
         model_cache_dir: Path, tmp_path: Path) -> None:
     """One chunk of 5000 draws, about half of them inside the region and simulated, in
