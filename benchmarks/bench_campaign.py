@@ -145,6 +145,11 @@ def report(name: str, res: list[dict], p_ref: float | None, ref_ci: tuple[float,
         print(f"  naive reference {p_ref:.3e} [{ref_ci[0]:.2e}, {ref_ci[1]:.2e}]; "
               f"coverage of the 95 % interval: {cov * 100:.0f} %; mean / naive "
               f"{p / p_ref:.3f}")
+    if len(res) > 1:  # against the pooled mean of all campaigns (precise, not independent)
+        cov_m = np.mean([r["p_collision"]["ci"][0] <= p <= r["p_collision"]["ci"][1]
+                         for r in res])
+        print(f"  coverage of the mean of the {len(res)} estimates ({p:.3e}, standard error "
+              f"{est.std(ddof=1) / math.sqrt(est.size):.1e}): {cov_m * 100:.0f} %")
     print(f"  SUT runs per campaign: mean {runs.mean():.0f} (min {runs.min():.0f}, max "
           f"{runs.max():.0f}); wall {wall.mean():.1f} s")
     print(f"  naive runs for the same SE: {np.mean(need_se):.3e} -> "
@@ -172,6 +177,10 @@ def main() -> None:
     ap.add_argument("--no-sut", action="store_true")
     ap.add_argument("--no-standin", action="store_true")
     ap.add_argument("--batch", type=int, default=2000)
+    ap.add_argument("--sut-batch", type=int, default=500,
+                    help="chunk size of the SUT campaigns (Part B)")
+    ap.add_argument("--adapt", default="ce", choices=("ce", "kernels"),
+                    help="proposal adaptation of the SUT campaigns (Part B)")
     a = ap.parse_args()
     if a.quick:
         a.seeds, a.naive = min(a.seeds, 10), min(a.naive, 1e6)
@@ -212,7 +221,12 @@ def main() -> None:
             return make_sut(a.sut, **params)
 
         runner_s = sut_runner(factory, careful=False, settings=settings, name=a.sut)
-        res = campaigns(model, runner_s, range(a.sut_seeds), batch_size=a.batch)
+        print(f"  campaigns: adapt={a.adapt}, chunks of {a.sut_batch} runs")
+        res = campaigns(model, runner_s, range(a.sut_seeds), batch_size=a.sut_batch,
+                        adapt=a.adapt)
+        parts = sorted({p["part"].split("@")[0] for r in res for p in r["proposal"]})
+        print(f"  proposal parts of the final chunks: {', '.join(parts)}; pilot runs per "
+              f"campaign: mean {np.mean([r['pilot_runs'] for r in res]):.0f}")
         runs = sum(r["sut_runs"] for r in res)
         secs = sum(r["wall_s"] for r in res)
         per_run = secs / runs
@@ -225,7 +239,8 @@ def main() -> None:
             p_ref = k / n_in if k else None
             ci = cp(k, n_in)
             per_run = secs_n / n_in
-            print(f"  naive: {n_in} runs, {k} collisions, CI {ci}, {n_in / secs_n:.0f} runs/s")
+            print(f"  naive: {n_in} runs, {k} collisions -> P {k / n_in:.3e} [{ci[0]:.2e}, "
+                  f"{ci[1]:.2e}] ({secs_n:.0f} s, {n_in / secs_n:.0f} runs/s)", flush=True)
         report(a.sut, res, p_ref, ci, per_run)
 
 

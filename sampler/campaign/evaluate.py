@@ -30,7 +30,12 @@ from scipy.special import logsumexp
 from scipy.stats import norm
 
 from datasets import PARAM_NAMES
-from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
+from sampler.campaign.proposal import (
+    DEFAULT_ENVELOPES,
+    Proposal,
+    build_ce_proposal,
+    build_proposal,
+)
 from sampler.campaign.runners import Runner
 from sampler.errors import SamplerError
 from sampler.model.bootstrap import log_density_z_boot, pooled_model
@@ -119,6 +124,9 @@ class ChunkResult:
     simulated: NDArray[np.bool_]
     outcome: dict[str, NDArray[Any]]
     proposal: list[dict[str, Any]] = field(default_factory=list)
+    #: False for a pilot chunk of an adaptive cross-entropy campaign (its runs shape the
+    #: proposal but are left out of the estimate; decided before its draws)
+    counted: bool = True
 
     @property
     def n(self) -> int:
@@ -139,6 +147,7 @@ class ChunkResult:
             "weights": _enc(self.weights), "simulated": _enc(self.simulated),
             "outcome": {k: _enc(v) for k, v in self.outcome.items()},
             "proposal": list(self.proposal),
+            "counted": bool(self.counted),
         }
 
     @classmethod
@@ -153,7 +162,8 @@ class ChunkResult:
                        log_q=_dec(d["log_q"]), weights=_dec(d["weights"]),
                        simulated=_dec(d["simulated"]),
                        outcome={str(k): _dec(v) for k, v in d["outcome"].items()},
-                       proposal=list(d.get("proposal", [])))
+                       proposal=list(d.get("proposal", [])),
+                       counted=bool(d.get("counted", True)))
         except (KeyError, TypeError, ValueError) as exc:
             raise SamplerError(f"chunk: not a stored campaign chunk ({exc})",
                                field="chunk") from None
@@ -300,11 +310,21 @@ class CampaignResult:
     rhw_target: float | None = 0.3
     alpha: float = 0.15
     p_region: Any = None  # PRegion of the user's region (None without constraints)
+    adapt: str = "kernels"
     _summary: dict[str, Any] | None = field(default=None, repr=False)
 
     @property
     def runs(self) -> int:
         return sum(c.n for c in self.chunks)
+
+    @property
+    def counted_chunks(self) -> list[ChunkResult]:
+        """The chunks the estimate uses (:func:`_counted`)."""
+        return _counted(self.chunks)
+
+    @property
+    def counted_runs(self) -> int:
+        return sum(c.n for c in self.counted_chunks)
 
     @property
     def sut_runs(self) -> int:
@@ -313,9 +333,9 @@ class CampaignResult:
     def _model_replicates(self, key: str, pb_b: FloatArray) -> FloatArray | None:
         """P_b(key and A | B) of each bootstrap replicate from the same runs:
         ``(1/N) sum_i w_i c_i p_b(z_i) / p(z_i) / P_b(B)``."""
-        n = self.runs
+        n = self.counted_runs
         zs, ws, lps = [], [], []
-        for c in self.chunks:
+        for c in self.counted_chunks:
             sel = c.simulated & np.asarray(c.outcome.get(key, np.zeros(c.n, dtype=bool)),
                                            dtype=bool)
             zs.append(c.z[sel])
@@ -335,7 +355,7 @@ class CampaignResult:
             return self._summary
         zq = float(norm.ppf(0.5 + self.confidence / 2))
         pb, cv_b = _p_bounds(self.model, self.region)
-        col = _estimate(self.chunks, "collided", pb, cv_b)
+        col = _estimate(self.counted_chunks, "collided", pb, cv_b)
         has_boot = bool(self.bootstrap and getattr(self.model, "bootstrap_", None))
         pb_b = _p_bounds_boot(self.model, self.region) if has_boot else None
         # the user's region: P(A | B) from the existing machinery, and its relative error
@@ -360,8 +380,8 @@ class CampaignResult:
                                       confidence=self.confidence)
                 model_ci = [_num(lo), _num(hi)]
             upper = None
-            if est.hits == 0 and self.runs > 0:
-                upper = RULE_OF_THREE / (self.alpha * self.runs * pb) / pa
+            if est.hits == 0 and self.counted_runs > 0:
+                upper = RULE_OF_THREE / (self.alpha * self.counted_runs * pb) / pa
             out = {"estimate": _num(p), "ci": _lognormal_ci(p, cv, zq), "model_ci": model_ci,
                    "se": _num(p * cv) if p > 0 else _num(est.se / pa),
                    "rhw": _num(zq * cv) if p > 0 else None,
@@ -370,7 +390,7 @@ class CampaignResult:
 
         p_col, reps_col = block(col, "collided")
         viol_known = all("violation" in c.outcome for c in self.chunks) and self.chunks
-        p_viol = block(_estimate(self.chunks, "violation", pb, cv_b), "violation")[0] \
+        p_viol = block(_estimate(self.counted_chunks, "violation", pb, cv_b), "violation")[0] \
             if viol_known else None
         # rates: lambda P(C and A | B), the count's Poisson replicates in the model interval
         rates: dict[str, Any] = {"rate_per_hour": None, "rate_per_1e6_km": None}
@@ -390,8 +410,8 @@ class CampaignResult:
                     "ci": _lognormal_ci(lam * p_joint, cv_joint, zq),
                     "model_ci": None,
                     "upper_bound": None if col.hits else _num(
-                        RULE_OF_THREE / (self.alpha * self.runs * pb) * lam)
-                    if self.runs else None}
+                        RULE_OF_THREE / (self.alpha * self.counted_runs * pb) * lam)
+                    if self.counted_runs else None}
                 if reps_col is not None and p_joint > 0:
                     r = reps_col * counts / amount
                     a = 1.0 - self.confidence
@@ -408,6 +428,9 @@ class CampaignResult:
             "p_violation": p_viol,
             "runs": self.runs,
             "sut_runs": n_sim,
+            "pilot_runs": self.runs - self.counted_runs,
+            "adapt": self.adapt,
+            "proposal": self.chunks[-1].proposal if self.chunks else [],
             "collisions": col.hits,
             "ess": _num(col.ess),
             "acceleration": _num(accel),
@@ -445,6 +468,7 @@ class CampaignResult:
                 k = int(c.part[i])
                 rec["part"] = names[k] if 0 <= k < len(names) else k
                 rec["simulated"] = bool(c.simulated[i])
+                rec["counted"] = bool(c.counted)
                 for name, arr in c.outcome.items():
                     v = arr[i]
                     rec[name] = (bool(v) if arr.dtype == np.bool_ else str(v)
@@ -477,16 +501,85 @@ def _hits(chunks: Sequence[ChunkResult]) -> tuple[FloatArray, FloatArray] | None
     return (z, np.concatenate(ws)) if z.shape[0] else None
 
 
+def _counted(chunks: Sequence[ChunkResult]) -> list[ChunkResult]:
+    """The chunks the estimate uses: those flagged ``counted``; all of them when none is
+    (a cross-entropy campaign stopped at ``max_runs`` before its final stage: every
+    chunk is still an importance sample of p under its own proposal)."""
+    out = [c for c in chunks if c.counted]
+    return out if out else list(chunks)
+
+
+def performance_score(outcome: Mapping[str, NDArray[Any]], simulated: NDArray[np.bool_]
+                      ) -> FloatArray | None:
+    """A continuous performance score per run, at most 0 exactly for the collided runs
+    (lower: closer to a collision), or None when the runner gives none:
+
+    * ``margin`` when the runner reports it (the stand-ins: the signed distance to the
+      collision set, <= 0 iff collided);
+    * else ``min_gap`` (m, the SUT's smallest clearance ahead) for runs without
+      contact and ``-impact_speed`` (m/s) for collided runs (a harder impact is worse).
+
+    Rows not simulated, NaN and +inf score +inf (never elite)."""
+    collided = np.asarray(outcome["collided"], dtype=bool) & simulated
+    if "margin" in outcome:
+        s = np.asarray(outcome["margin"], dtype=np.float64).copy()
+    elif "min_gap" in outcome:
+        gap = np.asarray(outcome["min_gap"], dtype=np.float64)
+        s = np.where(collided, -np.asarray(outcome["impact_speed"], dtype=np.float64), gap)
+    else:
+        return None
+    s = np.where(~collided & (s <= 0), 1e-9, s)  # touching without contact is not <= 0
+    s = np.where(simulated & np.isfinite(s), s, np.inf)
+    return np.asarray(np.where(collided, np.minimum(s, 0.0), s), dtype=np.float64)
+
+
+def _ce_elite(previous: Sequence[ChunkResult], rho: float, min_hits: int
+              ) -> tuple[tuple[FloatArray, FloatArray] | None, float, bool]:
+    """The cross-entropy step's elite from the runs so far (multi-level: Rubinstein &
+    Kroese 2004): with at least ``min_hits`` collided runs the elite are the collided
+    runs (level 0, final stage); else the runs so far whose score is at most the
+    ``rho``-quantile gamma of the last chunk's scores (level gamma > 0, a pilot stage).
+    Returns (z rows and weights p/q of the elite, or None; the level; final stage?)."""
+    zs, ws, ss = [], [], []
+    for c in previous:
+        sc = performance_score(c.outcome, c.simulated)
+        if sc is None:
+            return None, math.inf, False
+        zs.append(c.z)
+        ws.append(c.weights)
+        ss.append(sc)
+    if not zs:
+        return None, math.inf, False
+    z, w, s = np.concatenate(zs), np.concatenate(ws), np.concatenate(ss)
+    hit = s <= 0
+    if int(hit.sum()) >= min_hits:
+        return (z[hit], w[hit]), 0.0, True
+    gamma = float(np.quantile(ss[-1], rho, method="inverted_cdf"))
+    if not math.isfinite(gamma):
+        return None, math.inf, False
+    sel = s <= gamma
+    return (z[sel], w[sel]), gamma, False
+
+
 def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runner,
                seed: int, previous: Sequence[ChunkResult], envelopes: Sequence[str],
                alpha: float, executor: Executor | None, part_size: int,
-               min_fit_hits: int) -> ChunkResult:
+               min_fit_hits: int, adapt: str = "kernels", rho: float = 0.1,
+               ce_min_hits: int = 10) -> ChunkResult:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
-    hits = _hits(previous)
-    if hits is not None and hits[0].shape[0] < min_fit_hits:
-        hits = None
-    proposal: Proposal = build_proposal(model, region=region, lane_width=region.lane_width,
-                                        envelopes=envelopes, hits=hits, rng=rng, alpha=alpha)
+    counted = True
+    proposal: Proposal
+    if adapt == "ce":
+        elite, level, counted = _ce_elite(previous, rho, ce_min_hits)
+        proposal = build_ce_proposal(model, region=region, lane_width=region.lane_width,
+                                     elite=elite, level=level, rng=rng,
+                                     envelopes=envelopes, alpha=alpha)
+    else:
+        hits = _hits(previous)
+        if hits is not None and hits[0].shape[0] < min_fit_hits:
+            hits = None
+        proposal = build_proposal(model, region=region, lane_width=region.lane_width,
+                                  envelopes=envelopes, hits=hits, rng=rng, alpha=alpha)
     z, part = proposal.draw(size, rng)
     seeds = rng.integers(0, np.iinfo(np.uint64).max, size=size, dtype=np.uint64,
                          endpoint=True)
@@ -505,7 +598,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
         outcome = {"collided": np.zeros(size, dtype=bool), "impact_speed": np.zeros(size)}
     return ChunkResult(index=k, params=params, z=z, seeds=seeds, part=part, log_p=log_p,
                        log_q=log_q, weights=weights, simulated=inside, outcome=outcome,
-                       proposal=proposal.describe())
+                       proposal=proposal.describe(), counted=counted)
 
 
 def _exposure(model: CutInGMM, exposure: Exposure | Mapping[str, Any] | None
@@ -528,7 +621,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
              sut: str | None = None, envelopes: Sequence[str] = DEFAULT_ENVELOPES,
              physical_bounds: bool = True, alpha: float = 0.15, confidence: float = 0.95,
              min_collisions: int = MIN_COLLISIONS, part_size: int = 1024,
-             min_fit_hits: int = 2) -> CampaignResult:
+             min_fit_hits: int = 2, adapt: str = "kernels", rho: float = 0.1,
+             ce_min_hits: int = 20) -> CampaignResult:
     """Run a campaign: importance-sampled cut-ins driven by ``runner`` until the stop rule.
 
     Parameters
@@ -553,6 +647,16 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
     on_chunk : called with each new ``ChunkResult`` (the job stores it)
     executor : concurrent.futures Executor, optional: runs parts of ``part_size`` rows
     progress : ``progress("runs", done, planned)`` after each chunk
+    adapt : "kernels" or "ce"
+        How later chunks adapt their proposal. "kernels": Student-t kernels on the
+        collided runs so far (``min_fit_hits`` of them), every chunk counted. "ce":
+        adaptive multi-level cross-entropy on the runner's continuous performance score
+        (:func:`performance_score`): pilot chunks fit a normal mixture to the runs below
+        the ``rho``-quantile of the score so far, until ``ce_min_hits`` collided runs
+        are seen; from then on the mixture is fitted to the collided runs and only those
+        chunks (decided before their draws) enter the estimate and the stop rule
+        (docs/evaluation.md). A runner without a score falls back to the defensive
+        mixture.
     """
     model.check_fitted()
     if n is not None and (isinstance(n, bool) or int(n) < 1):
@@ -567,6 +671,13 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                            field="batch_size")
     if isinstance(seed, bool) or int(seed) < 0:
         raise SamplerError(f"seed: must be an integer >= 0, got {seed!r}", field="seed")
+    if adapt not in ("kernels", "ce"):
+        raise SamplerError(f"adapt: must be 'kernels' or 'ce', got {adapt!r}", field="adapt")
+    if not (isinstance(rho, int | float) and 0 < rho < 1):
+        raise SamplerError(f"rho: must be a quantile in (0, 1), got {rho!r}", field="rho")
+    if int(ce_min_hits) < 1:
+        raise SamplerError(f"ce_min_hits: must be >= 1, got {ce_min_hits!r}",
+                           field="ce_min_hits")
     seed = int(seed)
     region = _region(model, constraints, physical_bounds)
     if is_dataclass(runner) and hasattr(runner, "lane_width") and runner.lane_width is None:
@@ -593,15 +704,16 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                                    field="stored")
         else:
             chunk = _new_chunk(k, size, model, region, runner, seed, chunks, envelopes,
-                               alpha, executor, part_size, min_fit_hits)
+                               alpha, executor, part_size, min_fit_hits, adapt, float(rho),
+                               int(ce_min_hits))
             if on_chunk is not None:
                 on_chunk(chunk)
         chunks.append(chunk)
         done += chunk.n
         if progress is not None:
             progress("runs", done, planned)
-        if n is None:
-            est = _estimate(chunks, "collided", pb, cv_b)
+        if n is None and (adapt != "ce" or any(c.counted for c in chunks)):
+            est = _estimate(_counted(chunks), "collided", pb, cv_b)
             if est.hits >= min_collisions and est.estimate > 0:
                 cv = est.se / est.estimate
                 if p_region is not None:
@@ -616,4 +728,4 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                           seed=seed, sut=sut or getattr(runner, "name", None), exposure=exp,
                           bootstrap=bootstrap, confidence=confidence,
                           rhw_target=None if n is not None else float(rhw), alpha=alpha,
-                          p_region=p_region)
+                          p_region=p_region, adapt=adapt)

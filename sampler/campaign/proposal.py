@@ -43,7 +43,8 @@ from sampler.model.gmm import CutInGMM
 from sampler.model.memo import memoised
 from sampler.region.constraints import Region
 
-__all__ = ["DEFAULT_ENVELOPES", "MixturePart", "Proposal", "build_proposal", "widened_model"]
+__all__ = ["DEFAULT_ENVELOPES", "GaussianMixture", "MixturePart", "Proposal", "build_ce_proposal",
+           "build_proposal", "fit_ce_mixture", "fit_weighted_gmm", "widened_model"]
 
 FloatArray = NDArray[np.float64]
 
@@ -238,4 +239,235 @@ def build_proposal(model: CutInGMM, *, region: Region | None, lane_width: float,
     else:
         shares[0] += rest / 2
         shares[1] += rest / 2
+    return Proposal(parts, shares)
+
+
+# --------------------------------------------------------------------------- cross-entropy
+
+def _mvn_logpdf(z: FloatArray, means: FloatArray, covs: FloatArray) -> FloatArray:
+    """(K, n) log-densities of the normals N(means[k], covs[k]) at the rows of z."""
+    k, d = means.shape
+    out = np.empty((k, z.shape[0]))
+    for j in range(k):
+        chol = np.linalg.cholesky(covs[j])
+        sol = np.linalg.solve(chol, (z - means[j]).T)
+        out[j] = (-0.5 * (sol * sol).sum(axis=0) - np.log(np.diag(chol)).sum()
+                  - 0.5 * d * math.log(2 * math.pi))
+    return out
+
+
+@dataclass
+class GaussianMixture:
+    """A mixture in z-space: ``weights`` (K,), ``means`` (K, d), ``covs`` (K, d, d);
+    normal components, or multivariate Student-t with ``nu`` degrees of freedom and
+    scale matrices ``covs`` when ``nu`` is finite (polynomial tails: the weight ``p / q``
+    of a proposal made of them vanishes far out). Exact normalised density."""
+
+    weights: FloatArray
+    means: FloatArray
+    covs: FloatArray
+    nu: float = math.inf
+
+    def log_q(self, z: FloatArray) -> FloatArray:
+        z = np.asarray(z, dtype=np.float64)
+        if math.isinf(self.nu):
+            lp = _mvn_logpdf(z, self.means, self.covs)
+        else:
+            lp = _mvt_logpdf(z, self.means, self.covs, self.nu)
+        return np.asarray(logsumexp(lp + np.log(self.weights)[:, None], axis=0),
+                          dtype=np.float64)
+
+    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
+        k, d = self.means.shape
+        comp = np.minimum(np.searchsorted(np.cumsum(self.weights), rng.random(n),
+                                          side="right"), k - 1)
+        eps = rng.standard_normal((n, d))
+        if not math.isinf(self.nu):
+            eps = eps * np.sqrt(self.nu / rng.chisquare(self.nu, size=n))[:, None]
+        out = np.empty((n, d))
+        for j in range(k):
+            idx = np.flatnonzero(comp == j)
+            if idx.size:
+                out[idx] = self.means[j] + eps[idx] @ np.linalg.cholesky(self.covs[j]).T
+        return out
+
+
+def _mvt_logpdf(z: FloatArray, means: FloatArray, scales: FloatArray, nu: float
+                ) -> FloatArray:
+    """(K, n) log-densities of multivariate Student-t(nu) laws at the rows of z."""
+    k, d = means.shape
+    out = np.empty((k, z.shape[0]))
+    const = (math.lgamma((nu + d) / 2) - math.lgamma(nu / 2)
+             - 0.5 * d * math.log(nu * math.pi))
+    for j in range(k):
+        chol = np.linalg.cholesky(scales[j])
+        sol = np.linalg.solve(chol, (z - means[j]).T)
+        m2 = (sol * sol).sum(axis=0)
+        out[j] = const - np.log(np.diag(chol)).sum() - 0.5 * (nu + d) * np.log1p(m2 / nu)
+    return out
+
+
+def fit_weighted_gmm(z: FloatArray, w: FloatArray, k: int, rng: np.random.Generator, *,
+                     floor: float = 0.02, iters: int = 60) -> tuple[GaussianMixture, float]:
+    """Weighted EM of a K-component normal mixture on rows ``z`` with weights ``w``
+    (normalised inside): maximises ``sum_i w_i log q(z_i)``, the cross-entropy step
+    (Rubinstein & Kroese 2004, ch. 3; the weights are ``p / q`` of the runs and the rows
+    the elite). ``floor`` is added to every covariance's diagonal (no needle on a few
+    points). Initial means: K rows drawn by weight without replacement (``rng``), so the
+    fit is deterministic given the generator. Returns the mixture and the weighted mean
+    log-likelihood."""
+    z = np.asarray(z, dtype=np.float64)
+    om = np.asarray(w, dtype=np.float64)
+    om = om / om.sum()
+    m, d = z.shape
+    k = max(1, min(int(k), int(np.count_nonzero(om))))
+    start = rng.choice(m, size=k, replace=False, p=om)
+    means = z[start].copy()
+    mu = om @ z
+    glob = ((z - mu) * om[:, None]).T @ (z - mu) + floor * np.eye(d)
+    covs = np.repeat(glob[None], k, axis=0)
+    pis = np.full(k, 1.0 / k)
+    ll = -math.inf
+    for _ in range(iters):
+        lp = _mvn_logpdf(z, means, covs) + np.log(pis)[:, None]
+        tot = logsumexp(lp, axis=0)
+        new_ll = float(om @ tot)
+        r = np.exp(lp - tot[None, :]) * om[None, :]  # (k, m)
+        nk = r.sum(axis=1)
+        keep = nk > 1e-9
+        r, nk = r[keep], nk[keep]
+        pis = nk / nk.sum()
+        means = (r @ z) / nk[:, None]
+        covs = np.empty((nk.size, d, d))
+        for j in range(nk.size):
+            diff = z - means[j]
+            covs[j] = (diff * r[j][:, None]).T @ diff / nk[j] + floor * np.eye(d)
+        if abs(new_ll - ll) < 1e-8:
+            ll = new_ll
+            break
+        ll = new_ll
+    return GaussianMixture(pis, means, covs), ll
+
+
+def fit_ce_mixture(z: FloatArray, w: FloatArray, rng: np.random.Generator, *,
+                   max_k: int = 3, floor: float = 0.02, inflate: float = 1.2,
+                   nu: float = 5.0, model: CutInGMM | None = None,
+                   min_share: float = 0.1, shape: str = "model") -> GaussianMixture:
+    """The cross-entropy density of elite rows ``z`` weighted by ``w``: K in 1..max_k
+    by BIC with Kish's effective size ``(sum w)^2 / sum w^2`` as the sample size (a K
+    is tried only with at least 2 (d + 1) effective rows per component); the proposal's
+    components are then Student-t(``nu``) at the fitted means with the fitted
+    covariances times ``inflate^2`` as scales (``nu = inf``: the normals themselves).
+    A normal fitted to a failure set that is cut by a plane is narrower than the model
+    across the plane, so its weights ``p / q`` grow without bound deep in the set; the
+    t's heavier tails keep them bounded there.
+
+    With ``model``: half of the mixture's weight goes to one more component per model
+    component k, fitted to the elite weighted by ``w`` times the model's responsibility
+    of k (share: the weighted fraction of the elite under k, at least ``min_share``
+    before renormalising). A failure set that cuts several of the model's components
+    keeps a component on each even when the EM above, led by a few heavy weights,
+    merged them (the cross-entropy method's known way of missing a mode).
+
+    ``shape="model"`` (with ``model``; the default): each component keeps its fitted
+    mean but takes the model's own covariance there (the model's covariances averaged
+    by their responsibilities at that mean) times ``inflate^2``: a mean shift. For a
+    failure set cut by a plane the weight ``p / q`` of a shifted normal with the model's
+    covariance is the exponential of a linear function, bounded on the set; a fitted
+    (narrower) covariance makes it grow across the set, and the interval undercovers.
+    ``shape="fitted"``: the fitted covariances."""
+    om = np.asarray(w, dtype=np.float64) / float(np.sum(w))
+    ess = 1.0 / float((om * om).sum())
+    d = z.shape[1]
+    best: tuple[float, GaussianMixture] | None = None
+    for k in range(1, max_k + 1):
+        if k > 1 and ess < 2 * (d + 1) * k:
+            break
+        gm, ll = fit_weighted_gmm(z, om, k, rng, floor=floor)
+        n_par = (gm.weights.size - 1) + gm.weights.size * (d + d * (d + 1) / 2)
+        bic = -2 * ess * ll + n_par * math.log(max(ess, 2.0))
+        if best is None or bic < best[0]:
+            best = (bic, gm)
+    assert best is not None
+    gm = best[1]
+    weights, means, covs = gm.weights, gm.means, gm.covs
+    if model is not None:
+        lr = (np.log(np.asarray(model.weights_, dtype=np.float64))[:, None]
+              + _mvn_logpdf(z, np.asarray(model.means_, dtype=np.float64),
+                            np.asarray(model.covariances_, dtype=np.float64)))
+        resp = np.exp(lr - logsumexp(lr, axis=0)[None, :])  # (K_model, m)
+        mw, mm, mc = [], [], []
+        for rk in resp:
+            wk = om * rk
+            tot = float(wk.sum())
+            if tot <= 1e-12:
+                continue
+            mu = wk @ z / tot
+            diff = z - mu
+            mw.append(tot)
+            mm.append(mu)
+            mc.append((diff * wk[:, None]).T @ diff / tot + floor * np.eye(d))
+        if mw:
+            share = np.maximum(np.asarray(mw) / sum(mw), min_share)
+            share /= share.sum()
+            weights = np.concatenate([0.5 * weights, 0.5 * share])
+            means = np.concatenate([means, np.asarray(mm)])
+            covs = np.concatenate([covs, np.asarray(mc)])
+    if model is not None and shape == "model":
+        mcov = np.asarray(model.covariances_, dtype=np.float64)
+        lr = (np.log(np.asarray(model.weights_, dtype=np.float64))[:, None]
+              + _mvn_logpdf(np.asarray(means), np.asarray(model.means_, dtype=np.float64),
+                            mcov))
+        rm = np.exp(lr - logsumexp(lr, axis=0)[None, :])  # (K_model, K)
+        covs = np.einsum("km,kij->mij", rm, mcov)
+    return GaussianMixture(weights, means, covs * inflate * inflate, nu=nu)
+
+
+@dataclass
+class _MixturePart:
+    name: str
+    mixture: GaussianMixture
+
+    def log_q(self, z: FloatArray) -> FloatArray:
+        return self.mixture.log_q(z)
+
+    def draw(self, n: int, rng: np.random.Generator) -> FloatArray:
+        return self.mixture.draw(n, rng)
+
+
+def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: float,
+                      elite: tuple[FloatArray, FloatArray] | None, level: float,
+                      rng: np.random.Generator,
+                      envelopes: Sequence[str] = DEFAULT_ENVELOPES, alpha: float = 0.1,
+                      wide_share: float = 0.05, envelope_share: float = 0.1,
+                      kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3
+                      ) -> Proposal:
+    """The proposal of one chunk of an adaptive cross-entropy campaign: the model
+    (``alpha``: weights stay below ``1 / alpha``), the wide part, the envelopes
+    (``envelope_share`` together) and, with ``elite`` (z rows and their weights ``p/q``
+    of the runs whose performance score is at most ``level``), a normal mixture fitted
+    to them (:func:`fit_ce_mixture`) with the rest. At level 0 (the elite are the
+    collided runs) also the Student-t kernels of :func:`build_proposal` on them
+    (``kernel_share``): non-parametric, they keep mass on every collided run, so a
+    failure family found once (by an envelope, say) is drawn again in the next chunk
+    even when the mixture fit has no component there. Without elite: as
+    :func:`build_proposal` before any collision."""
+    if elite is None or elite[0].shape[0] == 0:
+        return build_proposal(model, region=region, lane_width=lane_width,
+                              envelopes=envelopes, alpha=0.15)
+    parts: list[MixturePart] = [_ModelPart("model", model), _wide_part(model, widen)]
+    shares = [alpha, wide_share]
+    env = _envelope_parts(model, envelopes, lane_width, region)
+    gm = fit_ce_mixture(elite[0], elite[1], rng, max_k=max_k, model=model)
+    rest = 1.0 - alpha - wide_share - (envelope_share if env else 0.0)
+    if level <= 0:
+        parts.append(_fitted_part(elite[0], elite[1], rng, model, 300, 1.3, 5.0))
+        shares.append(kernel_share)
+        rest -= kernel_share
+    parts.append(_MixturePart(f"ce:gmm{gm.weights.size}@{level:.4g}x{elite[0].shape[0]}",
+                              gm))
+    shares.append(rest)
+    if env:
+        parts.extend(env)
+        shares.extend([envelope_share / len(env)] * len(env))
     return Proposal(parts, shares)

@@ -60,6 +60,9 @@ class StandInRuns:
     impact_speed: FloatArray
     must_avoid: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     violation: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: signed distance to the collision set (<= 0 iff collided): the campaign's
+    #: continuous performance score (``adapt="ce"``)
+    margin: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def records(self) -> list[dict[str, Any]]:
         return [{"collided": bool(c), "impact_speed": float(v), "must_avoid": bool(m),
@@ -87,10 +90,12 @@ class _HalfSpaceRunner:
         x = np.asarray(params, dtype=np.float64)
         feats = [PARAM_NAMES.index(f) for f in self.model.features_]
         z = self.model.to_z(x[:, feats])
-        hit = np.asarray(z @ np.asarray(self.a) <= self.b, dtype=bool)
+        a = np.asarray(self.a)
+        margin = (z @ a - self.b) / float(np.linalg.norm(a))
+        hit = np.asarray(margin <= 0, dtype=bool)
         dv = x[:, PARAM_NAMES.index("dv")]
         speed = np.where(hit, np.maximum(dv, 0.0), 0.0)
-        return StandInRuns(hit, speed, hit.copy(), hit.copy())
+        return StandInRuns(hit, speed, hit.copy(), hit.copy(), margin)
 
 
 def halfspace_runner(model: CutInGMM, a: FloatArray, b: float) -> _HalfSpaceRunner:
@@ -118,7 +123,10 @@ class _LateBrakeRunner:
         speed = np.where(before, dv, np.where(during, np.sqrt(np.maximum(sq, 0.0)), 0.0))
         # the regulation's verdict stand-in: avoidable if braking at once would avoid it
         must = closing & (dv * dv / (2.0 * self.decel) < gap)
-        return StandInRuns(hit, speed, must, must & hit)
+        margin = np.where(closing, gap - dv * self.reaction - dv * dv / (2.0 * self.decel),
+                          gap)
+        margin = np.where(hit, np.minimum(margin, 0.0), np.where(margin <= 0, 1e-12, margin))
+        return StandInRuns(hit, speed, must, must & hit, margin)
 
 
 def late_brake_runner(reaction: float = 1.2, decel: float = 4.0) -> _LateBrakeRunner:

@@ -1,0 +1,158 @@
+"""sampler.campaign, adaptive cross-entropy stage (``evaluate(adapt="ce")``).
+
+The weighted EM's one-component fit is the weighted mean and covariance, worked out by
+hand below; the mixture's densities are checked against scipy's own normal and Student-t
+densities; the campaign's estimate is checked on a half-space whose mass is known in
+closed form (scipy's normal CDF over the model's mixture, as tests/sampler/test_campaign.py).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from sampler import CutInGMM
+from sampler.campaign import evaluate, halfspace_runner
+from sampler.campaign.evaluate import performance_score
+from sampler.campaign.proposal import GaussianMixture, fit_ce_mixture, fit_weighted_gmm
+from sampler.errors import SamplerError
+from tests.sampler.factories import synthetic_parameter_table
+from tests.sampler.test_campaign import _Counting, _rare_halfspace
+
+
+@pytest.fixture(scope="module")
+def model() -> CutInGMM:
+    return CutInGMM(k_range=(2, 2), n_init=1, n_report_samples=500).fit(
+        synthetic_parameter_table(300, seed=3))
+
+
+def test_one_component_weighted_em_is_the_weighted_mean_and_covariance() -> None:
+    z = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]])
+    w = np.array([2.0, 1.0, 1.0])
+    gm, _ = fit_weighted_gmm(z, w, 1, np.random.default_rng(0), floor=0.01)
+    # by hand: weights 1/2, 1/4, 1/4 -> mean (0.5, 0.5); deviations (-.5,-.5),
+    # (1.5,-.5), (-.5,1.5): var = .5*.25 + .25*2.25 + .25*.25 = .75,
+    # cov = .5*.25 + .25*(-.75) + .25*(-.75) = -.25; plus the floor .01 on the diagonal
+    assert np.allclose(gm.means, [[0.5, 0.5]])
+    assert np.allclose(gm.covs[0], [[0.76, -0.25], [-0.25, 0.76]])
+    assert np.allclose(gm.weights, [1.0])
+
+
+def test_weighted_em_separates_two_clusters() -> None:
+    rng = np.random.default_rng(1)
+    z = np.concatenate([rng.normal(-5, 0.3, (200, 2)), rng.normal(5, 0.3, (100, 2))])
+    w = np.concatenate([np.full(200, 1.0), np.full(100, 4.0)])  # mass 200 : 400
+    gm, _ = fit_weighted_gmm(z, w, 2, np.random.default_rng(2), floor=1e-6)
+    order = np.argsort(gm.means[:, 0])
+    assert np.allclose(gm.weights[order], [1 / 3, 2 / 3], atol=1e-6)
+    assert np.allclose(gm.means[order, 0], [z[:200, 0].mean(), z[200:, 0].mean()])
+
+
+def test_mixture_densities_match_scipy_and_draws_follow_them() -> None:
+    means = np.array([[0.0, 1.0], [3.0, -1.0]])
+    covs = np.array([[[1.0, 0.3], [0.3, 0.5]], [[0.4, 0.0], [0.0, 2.0]]])
+    w = np.array([0.3, 0.7])
+    pts = np.random.default_rng(3).normal(0, 2, (50, 2))
+    for nu in (math.inf, 5.0):
+        gm = GaussianMixture(w, means, covs, nu=nu)
+        if math.isinf(nu):
+            ref = sum(wk * stats.multivariate_normal(m, c).pdf(pts)
+                      for wk, m, c in zip(w, means, covs, strict=True))
+        else:
+            ref = sum(wk * stats.multivariate_t(m, c, df=nu).pdf(pts)
+                      for wk, m, c in zip(w, means, covs, strict=True))
+        assert np.allclose(np.exp(gm.log_q(pts)), ref, rtol=1e-10)
+        x = gm.draw(40000, np.random.default_rng(4))
+        assert abs(x[:, 0].mean() - (w @ means[:, 0])) < 0.05
+
+
+def test_ce_mixture_has_a_component_on_each_model_component(model: CutInGMM) -> None:
+    rng = np.random.default_rng(5)
+    z = model.sample_z(400, rng)
+    gm = fit_ce_mixture(z, np.ones(400), np.random.default_rng(6), model=model, max_k=1)
+    # one EM component plus one per model component (K = 2), Student-t(5)
+    assert gm.weights.size == 1 + model.n_components_ and gm.nu == 5.0
+    assert math.isclose(float(gm.weights.sum()), 1.0)
+
+
+def test_performance_score_by_hand() -> None:
+    out = {"collided": np.array([True, False, False, False, True]),
+           "impact_speed": np.array([3.0, 0.0, 0.0, 0.0, 2.0]),
+           "min_gap": np.array([0.0, 4.5, np.nan, np.inf, 0.0])}
+    sim = np.array([True, True, True, True, False])
+    s = performance_score(out, sim)
+    assert s is not None
+    # collided: -impact speed; else the smallest gap; NaN, inf, not simulated: inf
+    assert s.tolist() == [-3.0, 4.5, math.inf, math.inf, math.inf]
+    assert performance_score({"collided": sim, "impact_speed": np.zeros(5)}, sim) is None
+
+
+def test_ce_campaign_is_unbiased_and_covers_on_a_closed_form_case(model: CutInGMM) -> None:
+    a, b, p_true = _rare_halfspace(model, 3e-5)
+    runner = halfspace_runner(model, a, b)
+    est, covered = [], 0
+    for s in range(40):
+        r = evaluate(model, runner, n=1200, seed=s, batch_size=300, physical_bounds=False,
+                     bootstrap=False, adapt="ce")
+        summ = r.summary()
+        assert summ["pilot_runs"] >= 300  # the first chunk is a pilot
+        est.append(summ["p_collision"]["estimate"])
+        lo, hi = summ["p_collision"]["ci"]
+        covered += int(lo is not None and lo <= p_true <= hi)
+    e = np.asarray(est)
+    se_mean = e.std(ddof=1) / math.sqrt(e.size)
+    assert abs(e.mean() - p_true) <= 3 * se_mean
+    assert abs(e.mean() / p_true - 1) < 0.15
+    assert covered >= 34
+
+
+def test_ce_estimate_uses_the_final_stage_only(model: CutInGMM) -> None:
+    a, b, _ = _rare_halfspace(model, 1e-4)
+    r = evaluate(model, halfspace_runner(model, a, b), n=1500, seed=1, batch_size=300,
+                 physical_bounds=False, bootstrap=False, adapt="ce", ce_min_hits=5)
+    counted = [c.counted for c in r.chunks]
+    assert counted[0] is False and counted[-1] is True
+    first = counted.index(True)
+    # a chunk is counted once the chunks before it hold >= 5 collided runs
+    assert sum(int(c.collided.sum()) for c in r.chunks[:first]) >= 5
+    assert sum(int(c.collided.sum()) for c in r.chunks[:first - 1]) < 5
+    assert all(counted[first:])
+    # the estimate by hand from the records: mean of weight x collided over counted rows
+    recs = [x for x in r.records() if x["counted"]]
+    by_hand = sum(x["weight"] for x in recs if x["collided"] and x["simulated"]) / len(recs)
+    s = r.summary()
+    assert math.isclose(s["p_collision"]["estimate"], by_hand, rel_tol=1e-12)
+    assert s["pilot_runs"] == 300 * first and s["adapt"] == "ce"
+    assert any(p["part"].startswith("ce:") for p in s["proposal"])
+
+
+def test_ce_resume_is_byte_identical_and_deterministic(model: CutInGMM) -> None:
+    a, b, _ = _rare_halfspace(model, 3e-5)
+    stored: list[str] = []
+    first = evaluate(model, halfspace_runner(model, a, b), seed=11, batch_size=300,
+                     physical_bounds=False, bootstrap=False, adapt="ce",
+                     on_chunk=lambda c: stored.append(json.dumps(c.to_dict())))
+    assert len(stored) >= 3
+    counting = _Counting(halfspace_runner(model, a, b))
+    again = evaluate(model, counting, seed=11, batch_size=300, physical_bounds=False,
+                     bootstrap=False, adapt="ce", stored=[json.loads(t) for t in stored[:2]])
+    assert json.dumps(again.summary(), sort_keys=True) == json.dumps(first.summary(),
+                                                                     sort_keys=True)
+    assert counting.rows == first.sut_runs - sum(int(c.simulated.sum())
+                                                 for c in first.chunks[:2])
+    assert [c.counted for c in again.chunks] == [c.counted for c in first.chunks]
+
+
+@pytest.mark.parametrize(("kwargs", "name"), [({"adapt": "nope"}, "adapt"),
+                                              ({"rho": 1.5}, "rho"),
+                                              ({"ce_min_hits": 0}, "ce_min_hits")])
+def test_bad_ce_settings_name_the_field(model: CutInGMM, kwargs: dict[str, object],
+                                        name: str) -> None:
+    with pytest.raises(SamplerError) as err:
+        evaluate(model, halfspace_runner(model, np.ones(model.n_features), 0.0), n=10,
+                 **kwargs)  # type: ignore[arg-type]
+    assert err.value.field == name
