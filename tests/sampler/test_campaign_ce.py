@@ -91,6 +91,7 @@ def test_performance_score_by_hand() -> None:
     assert performance_score({"collided": sim, "impact_speed": np.zeros(5)}, sim) is None
 
 
+@pytest.mark.slow
 def test_ce_campaign_is_unbiased_and_covers_on_a_closed_form_case(model: CutInGMM) -> None:
     a, b, p_true = _rare_halfspace(model, 3e-5)
     runner = halfspace_runner(model, a, b)
