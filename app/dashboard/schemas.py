@@ -20,6 +20,7 @@ __all__ = [
     "CatalogueCriticalityView",
     "HistogramView",
     "ModelFitView",
+    "PlotValues",
     "ScenarioView",
     "ShiftView",
 ]

@@ -39,6 +39,17 @@ from app.dashboard.aggregate import (
     shared_edges,
     thin_scatter,
 )
+from app.dashboard.schemas import (
+    CornerPoints,
+    CornerView,
+    DensityCurve,
+    FitParameter,
+    HistogramView,
+    ModelFitView,
+    PlotValues,
+    ShiftParameter,
+    ShiftView,
+)
 from app.db import repository as repo
 from app.db.models import CatalogueRow
 from app.errors import Conflict, InvalidInput, NotFound
@@ -135,17 +146,17 @@ def _evenly(n: int, m: int) -> np.ndarray:
     return (np.arange(m) * n) // m
 
 
-def _points(frame: pd.DataFrame, names: Sequence[str], limit: int) -> dict[str, Any]:
+def _points(frame: pd.DataFrame, names: Sequence[str], limit: int) -> CornerPoints:
     idx = _evenly(len(frame), limit)
-    out: dict[str, Any] = {}
+    out: dict[str, PlotValues] = {}
     for name in names:
         col = _column(frame, name)
         out[name] = jsonconv.plot_values(col[idx]) if col.size else []
-    return {"n_total": len(frame), "n_shown": int(idx.size), "values": out}
+    return CornerPoints(n_total=len(frame), n_shown=int(idx.size), values=out)
 
 
 # --------------------------------------------------------------------------- view 1
-def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None) -> dict[str, Any]:
+def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None) -> ModelFitView:
     """Data against model: per parameter the data histogram and the GMM marginal density,
     and the corner points (data and plain model draws)."""
     mid, model, mrow = model_and_row(ctx, model_id)
@@ -154,7 +165,7 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
         drow = repo.get_dataset(s, ds_id, field="query.dataset")
         s.expunge(drow)
 
-    def compute() -> dict[str, Any]:
+    def compute() -> ModelFitView:
         try:
             table = ctx.dataset_table(drow)
         except OSError as exc:
@@ -167,39 +178,37 @@ def model_fit(ctx: ServiceContext, model_id: str, dataset_id: str | None = None)
             data = _column(table, name)
             edges = shared_edges([data], bins=PARAM_BINS, quantiles=(0.0, 1.0))
             pad = 0.15 * (edges[-1] - edges[0])
-            entry: dict[str, Any] = {
-                "name": name,
-                "label": PARAM_LABELS.get(name, name),
-                "histogram": histogram(data, edges),
-                "density": None,
-            }
+            density = fixed = None
             if name in features:
                 grid = np.linspace(edges[0] - pad, edges[-1] + pad, DENSITY_POINTS)
                 dens = domain.marginal_density(model, name, grid)
-                entry["density"] = {"x": jsonconv.plot_values(grid),
-                                    "y": jsonconv.plot_values(dens)}
+                density = DensityCurve(x=jsonconv.plot_values(grid),
+                                       y=jsonconv.plot_values(dens))
             else:
-                entry["fixed"] = jsonconv.plot_values(getattr(model, "fixed_", {}).get(name))
-            params.append(entry)
-        return {
-            "model": mid,
-            "dataset": ds_id,
-            "dataset_name": drow.name,
-            "n_data": len(table),
-            "n_components": mrow.n_components,
-            "features": features,
-            "parameters": params,
-            "corner": {
-                "names": list(domain.PARAM_NAMES),
-                "labels": PARAM_LABELS,
-                "default": list(CORNER_DEFAULT),
-                "data": _points(table, domain.PARAM_NAMES, MAX_CORNER_POINTS),
-                "model": _points(draws, domain.PARAM_NAMES, MAX_CORNER_POINTS),
-            },
-            "density_method": "exact marginal density of the fitted mixture",
-        }
+                fixed = jsonconv.plot_values(getattr(model, "fixed_", {}).get(name))
+            params.append(FitParameter(name=name, label=PARAM_LABELS.get(name, name),
+                                       histogram=HistogramView(**histogram(data, edges)),
+                                       density=density, fixed=fixed))
+        return ModelFitView(
+            model=mid,
+            dataset=ds_id,
+            dataset_name=drow.name,
+            n_data=len(table),
+            n_components=mrow.n_components,
+            features=features,
+            parameters=params,
+            corner=CornerView(
+                names=list(domain.PARAM_NAMES),
+                labels=PARAM_LABELS,
+                default=list(CORNER_DEFAULT),
+                data=_points(table, domain.PARAM_NAMES, MAX_CORNER_POINTS),
+                model=_points(draws, domain.PARAM_NAMES, MAX_CORNER_POINTS),
+            ),
+            density_method="exact marginal density of the fitted mixture",
+        )
 
-    result: dict[str, Any] = _views(ctx).get(_key(ctx, "fit", mid, ds_id, drow.data_hash), compute)
+    result: ModelFitView = _views(ctx).get(_key(ctx, "fit", mid, ds_id, drow.data_hash),
+                                           compute)
     return result
 
 
@@ -217,25 +226,25 @@ def bins_for_both(samples: Sequence[np.ndarray], bins: int,
                                              max(float(e[-1]) for e in each)))
 
 
-def _shift(reference: pd.DataFrame, constrained: pd.DataFrame) -> list[dict[str, Any]]:
+def _shift(reference: pd.DataFrame, constrained: pd.DataFrame) -> list[ShiftParameter]:
     out = []
     for name in domain.PARAM_NAMES:
         ref = _column(reference, name)
         con = _column(constrained, name)
         edges = bins_for_both([ref, con], bins=PARAM_BINS)
-        out.append({
-            "name": name,
-            "label": PARAM_LABELS.get(name, name),
-            "unconstrained": histogram(ref, edges),
-            "constrained": histogram(con, edges),
-            "mean_unconstrained": jsonconv.plot_values(np.mean(ref)) if ref.size else None,
-            "mean_constrained": jsonconv.plot_values(np.mean(con)) if con.size else None,
-        })
+        out.append(ShiftParameter(
+            name=name,
+            label=PARAM_LABELS.get(name, name),
+            unconstrained=HistogramView(**histogram(ref, edges)),
+            constrained=HistogramView(**histogram(con, edges)),
+            mean_unconstrained=jsonconv.plot_values(np.mean(ref)) if ref.size else None,
+            mean_constrained=jsonconv.plot_values(np.mean(con)) if con.size else None,
+        ))
     return out
 
 
 def shift_preview(ctx: ServiceContext, model_id: str, constraint_text: str, n: int,
-                  seed: int) -> dict[str, Any]:
+                  seed: int) -> ShiftView:
     """Constrained against unconstrained for constraints typed in the page (no scoring)."""
     if not 1 <= n <= PREVIEW_N_LIMIT:
         raise InvalidInput(f"n must be between 1 and {PREVIEW_N_LIMIT}, got {n}",
@@ -244,21 +253,21 @@ def shift_preview(ctx: ServiceContext, model_id: str, constraint_text: str, n: i
     mid, model, _ = model_and_row(ctx, model_id)
     constraints = domain.parse_constraints(texts, field="query.constraints")
 
-    def compute() -> dict[str, Any]:
+    def compute() -> ShiftView:
         reference = reference_draws(ctx, mid, model)
         drawn = domain.sample(model, constraints, n, seed)
-        return {
-            "source": "preview",
-            "model": mid,
-            "constraints": texts,
-            "n": n,
-            "seed": seed,
-            "n_reference": len(reference),
-            "p_region": jsonconv.plot_values(drawn.p_region),
-            "parameters": _shift(reference, drawn.params),
-        }
+        return ShiftView(
+            source="preview",
+            model=mid,
+            constraints=texts,
+            n=n,
+            seed=seed,
+            n_reference=len(reference),
+            p_region=jsonconv.plot_values(drawn.p_region),
+            parameters=_shift(reference, drawn.params),
+        )
 
-    result: dict[str, Any] = _views(ctx).get(_key(ctx, "preview", mid, tuple(texts), n, seed),
+    result: ShiftView = _views(ctx).get(_key(ctx, "preview", mid, tuple(texts), n, seed),
                                         compute)
     return result
 
@@ -304,28 +313,28 @@ def _float(value: Any) -> float:
     return math.nan
 
 
-def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
+def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> ShiftView:
     """Constrained (the catalogue's samples) against unconstrained (the model's draws
     inside the physical bounds)."""
     crow = _catalogue(ctx, catalogue_id)
     mid, model, _ = model_and_row(ctx, crow.model_id)
 
-    def compute() -> dict[str, Any]:
+    def compute() -> ShiftView:
         constrained = _columns(ctx, crow)["params"]
         reference = reference_draws(ctx, mid, model)
-        return {
-            "source": "catalogue",
-            "catalogue": crow.id,
-            "model": mid,
-            "constraints": list(crow.spec.get("constraints", [])),
-            "n": len(constrained),
-            "seed": crow.seed,
-            "n_reference": len(reference),
-            "p_region": jsonconv.plot_values(jsonconv.decode(crow.p_region)),
-            "parameters": _shift(reference, constrained),
-        }
+        return ShiftView(
+            source="catalogue",
+            catalogue=crow.id,
+            model=mid,
+            constraints=list(crow.spec.get("constraints", [])),
+            n=len(constrained),
+            seed=crow.seed,
+            n_reference=len(reference),
+            p_region=jsonconv.plot_values(jsonconv.decode(crow.p_region)),
+            parameters=_shift(reference, constrained),
+        )
 
-    result: dict[str, Any] = _views(ctx).get(_key(ctx, "cshift", *_version(crow)), compute)
+    result: ShiftView = _views(ctx).get(_key(ctx, "cshift", *_version(crow)), compute)
     return result
 
 

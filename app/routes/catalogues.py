@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import tempfile
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Query, Request
@@ -17,6 +15,7 @@ from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.quotas import client_of
 from app.rates import RegionRates
+from app.routes._download import file_response
 from app.schemas import ApiModel, SamplingRequest, schema_enum
 from app.services import catalogues as service
 from riskcore.criticality import CLASSES
@@ -207,15 +206,9 @@ def export_catalogue(
         description="xosc only: test (default; the ego is the system under test) or "
                     "replay (both vehicles scripted)")] = None,
 ) -> Response:
-    tmp = Path(tempfile.mkdtemp(prefix="export-", dir=_tmp_dir(ctx.data_dir)))
-    out = tmp / f"{catalogue_id}.{SUFFIXES[format]}"
-    try:
-        service.export(ctx, catalogue_id, format, out, mode=mode)
-    except BaseException:
-        _rmtree(tmp)
-        raise
-    background.add_task(_rmtree, tmp)
-    return FileResponse(out, media_type=MEDIA_TYPES[format], filename=out.name)
+    return file_response(
+        ctx.data_dir, background, f"{catalogue_id}.{SUFFIXES[format]}", MEDIA_TYPES[format],
+        lambda out: service.export(ctx, catalogue_id, format, out, mode=mode))
 
 
 @router.delete("/{catalogue_id}", status_code=204, response_model=None,
@@ -225,15 +218,3 @@ def delete_catalogue(catalogue_id: str, ctx: ContextDep, jobs: JobsDep) -> Respo
     jobs.cancel(catalogue_id)
     service.delete(ctx, catalogue_id)
     return Response(status_code=204)
-
-
-def _tmp_dir(data_dir: Path) -> Path:
-    path = data_dir / "tmp"
-    path.mkdir(parents=True, exist_ok=True)
-    return path
-
-
-def _rmtree(path: Path) -> None:
-    import shutil
-
-    shutil.rmtree(path, ignore_errors=True)

@@ -120,7 +120,7 @@ def static_file(name: str) -> FileResponse:
             "corner points")
 def model_fit(model_id: str, ctx: ContextDep,
               dataset: Annotated[str | None, Query(max_length=64)] = None) -> ModelFitView:
-    return ModelFitView.model_validate(views.model_fit(ctx, model_id, dataset or None))
+    return views.model_fit(ctx, model_id, dataset or None)
 
 
 @router.get("/api/models/{model_id}/shift", response_model=ShiftView,
@@ -133,7 +133,7 @@ def model_shift(
     n: Annotated[int, Query(ge=1, le=views.PREVIEW_N_LIMIT)] = 1000,
     seed: SeedQuery = 0,
 ) -> ShiftView:
-    return ShiftView.model_validate(views.shift_preview(ctx, model_id, constraints, n, seed))
+    return views.shift_preview(ctx, model_id, constraints, n, seed)
 
 
 @router.get("/api/models/{model_id}/rates", response_model=RegionReport,
@@ -153,7 +153,7 @@ def model_rates(
             summary="Constrained (the catalogue's samples) against unconstrained model "
             "samples")
 def catalogue_shift(catalogue_id: str, ctx: ContextDep) -> ShiftView:
-    return ShiftView.model_validate(views.catalogue_shift(ctx, catalogue_id))
+    return views.catalogue_shift(ctx, catalogue_id)
 
 
 @router.get("/api/catalogues/{catalogue_id}/criticality", response_model=CatalogueCriticalityView,

@@ -4,8 +4,6 @@ export; and the registered systems under test (``GET /suts``)."""
 
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Query, Request
@@ -16,6 +14,7 @@ from app import jsonconv
 from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.quotas import client_of
+from app.routes._download import file_response
 from app.schemas import SEED_MAX, ApiModel, ConstraintText, schema_enum
 from app.services import evaluations as service
 from app.services import suts
@@ -225,17 +224,9 @@ def export_evaluation(
     """The collided runs, each rebuilt from its parameter vector: ``json`` (the summary and
     each run's record with its concrete scenario), ``xosc`` (OpenSCENARIO 1.2 in test mode:
     the ego is the system under test) or ``commonroad`` (zip)."""
-    tmp_root = ctx.data_dir / "tmp"
-    tmp_root.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix="export-", dir=tmp_root))
-    out = tmp / f"{evaluation_id}-failures.{SUFFIXES[format]}"
-    try:
-        service.export(ctx, evaluation_id, format, out)
-    except BaseException:
-        _rmtree(tmp)
-        raise
-    background.add_task(_rmtree, tmp)
-    return FileResponse(out, media_type=MEDIA_TYPES[format], filename=out.name)
+    return file_response(
+        ctx.data_dir, background, f"{evaluation_id}-failures.{SUFFIXES[format]}",
+        MEDIA_TYPES[format], lambda out: service.export(ctx, evaluation_id, format, out))
 
 
 @router.delete("/evaluations/{evaluation_id}", status_code=204, response_model=None,
@@ -245,9 +236,3 @@ def delete_evaluation(evaluation_id: str, ctx: ContextDep, jobs: JobsDep) -> Res
     jobs.cancel(evaluation_id)
     service.delete(ctx, evaluation_id)
     return Response(status_code=204)
-
-
-def _rmtree(path: Path) -> None:
-    import shutil
-
-    shutil.rmtree(path, ignore_errors=True)

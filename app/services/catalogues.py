@@ -23,6 +23,7 @@ from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
 from app.rates import catalogue_rates
+from app.services.filters import parse_filters
 from riskcore import ConcreteScenario
 from sampler import SAMPLER_NAMES
 from sampler.scenario import SCORE_FIELDS, ScenarioRecord
@@ -221,35 +222,12 @@ def page_filter(items: Sequence[tuple[str, str]], classes: Sequence[str] = (),
     ``InvalidInput`` naming it (``where.name``)."""
     from riskcore.criticality import CLASSES
 
-    ranges: dict[str, list[float | None]] = {}
-    flags: list[tuple[str, bool]] = []
-    for key, raw in items:
-        name, _, bound = key.rpartition("_")
-        if bound in ("min", "max") and name in repo.RANGE_FIELDS:
-            try:
-                value = float(raw) if raw.isascii() and "_" not in raw else math.nan
-            except ValueError:
-                value = math.nan
-            if not math.isfinite(value):  # btn_min=-inf as ttc_min=inf: refused alike
-                raise InvalidInput(f"{key}: expected a finite number in ASCII digits, got "
-                                   f"{raw!r}", field=f"{where}.{key}")
-            ranges.setdefault(name, [None, None])[0 if bound == "min" else 1] = value
-        elif key in repo.FLAG_FIELDS:
-            if raw.lower() not in ("true", "false", "1", "0"):
-                raise InvalidInput(f"{key}: expected true or false, got {raw!r}",
-                                   field=f"{where}.{key}")
-            flags.append((key, raw.lower() in ("true", "1")))
-        else:
-            raise InvalidInput(
-                f"{key}: unknown filter; filters are <field>_min / <field>_max for "
-                f"{', '.join(repo.RANGE_FIELDS)}, <field>=true|false for "
-                f"{', '.join(repo.FLAG_FIELDS)}, and class", field=f"{where}.{key}")
+    parsed = parse_filters(items, repo.RANGE_FIELDS, repo.FLAG_FIELDS, "class", where)
     bad = [c for c in classes if c not in CLASSES]
     if bad:
         raise InvalidInput(f"class: unknown class {bad[0]!r}; valid: {', '.join(CLASSES)}",
                            field=f"{where}.class")
-    return repo.ScenarioFilter(ranges=tuple((k, v[0], v[1]) for k, v in ranges.items()),
-                               flags=tuple(flags), classes=tuple(classes))
+    return repo.ScenarioFilter(ranges=parsed.ranges, flags=parsed.flags, classes=tuple(classes))
 
 
 def check_order(order_by: str, desc: bool | None, where: str = "query") -> bool:

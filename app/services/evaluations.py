@@ -42,6 +42,7 @@ from app.errors import Conflict, InvalidInput, NotFound, ServiceError
 from app.jobs.fair import FairExecutor, InlineFutures, JobCancelled, Share
 from app.limits import check_constraints
 from app.services import suts
+from app.services.filters import parse_filters
 from datasets import PARAM_NAMES
 from riskcore import ConcreteScenario
 
@@ -493,35 +494,12 @@ def run_filter(items: Sequence[tuple[str, str]], vs_careful: Sequence[str] = (),
     """Filters of ``/runs`` from ``name=value`` pairs: ``<field>_min``/``_max`` on
     ``RANGE_FIELDS``, ``<flag>=true|false`` on ``FLAG_FIELDS``, ``vs_careful`` (repeatable).
     Anything else is an ``InvalidInput`` naming it."""
-    ranges: dict[str, list[float | None]] = {}
-    flags: list[tuple[str, bool]] = []
-    for key, raw in items:
-        name, _, bound = key.rpartition("_")
-        if bound in ("min", "max") and name in RANGE_FIELDS:
-            try:
-                value = float(raw)
-            except ValueError:
-                value = math.nan
-            if not math.isfinite(value):
-                raise InvalidInput(f"{key}: expected a finite number, got {raw!r}",
-                                   field=f"{where}.{key}")
-            ranges.setdefault(name, [None, None])[0 if bound == "min" else 1] = value
-        elif key in FLAG_FIELDS:
-            if raw.lower() not in ("true", "false", "1", "0"):
-                raise InvalidInput(f"{key}: expected true or false, got {raw!r}",
-                                   field=f"{where}.{key}")
-            flags.append((key, raw.lower() in ("true", "1")))
-        else:
-            raise InvalidInput(
-                f"{key}: unknown filter; filters are <field>_min / <field>_max for "
-                f"{', '.join(RANGE_FIELDS)}, <field>=true|false for "
-                f"{', '.join(FLAG_FIELDS)}, and vs_careful", field=f"{where}.{key}")
+    parsed = parse_filters(items, RANGE_FIELDS, FLAG_FIELDS, "vs_careful", where)
     bad = [v for v in vs_careful if v not in VS_CAREFUL]
     if bad:
         raise InvalidInput(f"vs_careful: unknown value {bad[0]!r}; valid: "
                            f"{', '.join(VS_CAREFUL)}", field=f"{where}.vs_careful")
-    return RunFilter(tuple((k, v[0], v[1]) for k, v in ranges.items()), tuple(flags),
-                     tuple(vs_careful))
+    return RunFilter(parsed.ranges, parsed.flags, tuple(vs_careful))
 
 
 def check_order(order_by: str, desc: bool | None, where: str = "query") -> bool:
