@@ -15,6 +15,13 @@ import numpy as np
 
 from app import domain, jsonconv
 from app.context import ServiceContext
+from app.dashboard.schemas import (
+    DriverProfile,
+    EvaluationBrief,
+    EvaluationOverview,
+    EvaluationScatter,
+    RunProfileView,
+)
 from app.errors import NotFound
 from app.services import evaluations as service
 from app.services import suts
@@ -77,7 +84,7 @@ def careful_request(st: dict[str, Any]) -> dict[str, Any]:
     return body
 
 
-def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
+def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
     """Status and figures of one evaluation, the careful driver's beside them, the
     failures list and the r_dep-against-btn scatter."""
     st = service.describe(ctx, evaluation_id)
@@ -109,20 +116,18 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
             # the page then plots the impact speed against btn instead, and says why
             scatter["note"] = ("r_dep of the SUT's drive not computed by the runner: impact "
                                "speed shown instead")
-    return {
-        "evaluation": {k: st[k] for k in ("id", "status", "sut", "model", "seed",
-                                          "constraints", "runs_done", "runs_planned",
-                                          "progress", "collisions_so_far", "error")},
-        "figures": _figures(st["summary"]),
-        "careful": careful_evaluation(ctx, st["model"], list(st["constraints"])),
-        "careful_request": careful_request(st),
-        "failures_total": failures_total,
-        "failures": jsonconv.encode(failures),
-        "scatter": jsonconv.plot_values(scatter),
-    }
+    return EvaluationOverview(
+        evaluation=EvaluationBrief(**{k: st[k] for k in EvaluationBrief.model_fields}),
+        figures=_figures(st["summary"]),
+        careful=careful_evaluation(ctx, st["model"], list(st["constraints"])),
+        careful_request=careful_request(st),
+        failures_total=failures_total,
+        failures=jsonconv.encode(failures),
+        scatter=EvaluationScatter(**jsonconv.plot_values(scatter)),
+    )
 
 
-def run_profile(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str, Any]:
+def run_profile(ctx: ServiceContext, evaluation_id: str, run: int) -> RunProfileView:
     """One run driven again by the SUT and by the careful driver, with profiles: time,
     the ego's speed and acceleration, r_dep (null where not computed)."""
     st = service.describe(ctx, evaluation_id)
@@ -142,14 +147,14 @@ def run_profile(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str, 
     spec = st["spec"]
     sim = rs.SimSettings.from_dict(spec["settings"]) if spec.get("settings") else None
     entry = suts.resolve(st["sut"], allow_import=False, field="sut")
-    out: dict[str, Any] = {"run": jsonconv.encode(rec), "drivers": {}}
+    drivers: dict[str, DriverProfile] = {}
     for label, factory in (("sut", entry.factory(spec.get("sut_params") or {})),
                            ("careful", suts.registry().entries[CAREFUL].factory())):
         runs = _simulate(rs, factory(), batch, seeds, sim)
         prof = runs.profiles or {}
         t = np.asarray(prof.get("t", []), dtype=float)
         r_dep = prof.get("r_dep")
-        out["drivers"][label] = jsonconv.plot_values({
+        drivers[label] = DriverProfile(**jsonconv.plot_values({
             "name": str(getattr(factory, "name", label)),
             "t": t.tolist(),
             "v": np.asarray(prof.get("v", [[]]))[0].tolist(),
@@ -159,8 +164,8 @@ def run_profile(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str, 
             "collided": bool(runs.collided[0]),
             "impact_speed": float(runs.impact_speed[0]),
             "min_gap": float(runs.min_gap[0]),
-        })
-    return out
+        }))
+    return RunProfileView(run=jsonconv.encode(rec), drivers=drivers)
 
 
 def _simulate(rs: Any, sut: Any, batch: Any, seeds: Any, sim: Any) -> Any:

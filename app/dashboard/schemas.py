@@ -18,9 +18,14 @@ from sampler.scenario import ScenarioRecord
 
 __all__ = [
     "CatalogueCriticalityView",
+    "DriverProfile",
+    "EvaluationBrief",
+    "EvaluationOverview",
+    "EvaluationScatter",
     "HistogramView",
     "ModelFitView",
     "PlotValues",
+    "RunProfileView",
     "ScenarioView",
     "ShiftView",
 ]
@@ -231,3 +236,72 @@ class ScenarioView(ApiModel):
     profiles: ProfilesView | None = Field(description="null when the record could not be "
                                           "computed for this scenario (profiles_error says why)")
     profiles_error: str | None = None
+
+
+# --------------------------------------------------------------------------- section 7
+class EvaluationBrief(ApiModel):
+    """The evaluation's state (``GET /evaluations/{id}``, these fields)."""
+
+    id: str
+    status: str
+    sut: str
+    model: str
+    seed: int
+    constraints: list[str]
+    runs_done: int
+    runs_planned: int
+    progress: float
+    collisions_so_far: int
+    error: str | None
+
+
+class EvaluationScatter(ApiModel):
+    """Peak r_dep (or the impact speed, see ``note``) against btn, one point a run."""
+
+    run: list[int]
+    btn: PlotValues
+    r_dep_peak: PlotValues
+    impact_speed: PlotValues
+    collided: list[bool]
+    vs_careful: list[str | None]
+    note: str | None
+
+
+class DriverProfile(ApiModel):
+    """One driver's drive of the run: speed, acceleration and r_dep over time."""
+
+    name: str
+    t: PlotValues
+    v: PlotValues
+    a: PlotValues
+    t_risk: PlotValues | None = Field(description="null: r_dep not computed")
+    r_dep: PlotValues | None
+    collided: bool
+    impact_speed: float | None
+    min_gap: float | None
+
+
+class EvaluationOverview(ApiModel):
+    """The "system under test" section: the evaluation, its figures and the careful
+    driver's, the failures, the r_dep-against-btn scatter (plot data: null = gap)."""
+
+    evaluation: EvaluationBrief
+    figures: dict[str, Any] | None
+    careful: dict[str, Any] | None = Field(description="the latest finished evaluation of "
+                                           "r157_cc on the same model and region (status "
+                                           "done, figures), else the latest queued or "
+                                           "running one (figures null, runs_done, "
+                                           "runs_planned), or null")
+    careful_request: dict[str, Any] = Field(description="the POST /evaluations body that "
+                                            "evaluates r157_cc on the same model, region, "
+                                            "seed, runs and simulator settings")
+    failures_total: int
+    failures: list[dict[str, Any]]
+    scatter: EvaluationScatter
+
+
+class RunProfileView(ApiModel):
+    """One run driven again by the SUT and by the careful driver (plot data)."""
+
+    run: dict[str, Any]
+    drivers: dict[str, DriverProfile]

@@ -15,13 +15,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
-from pydantic import Field
 
 from app import jsonconv
 from app.dashboard import evaluation_views, views
 from app.dashboard.schemas import (
     CatalogueCriticalityView,
+    EvaluationOverview,
     ModelFitView,
+    RunProfileView,
     ScenarioView,
     ShiftView,
 )
@@ -30,7 +31,6 @@ from app.deps import ConstraintsQuery, ContextDep, SeedQuery
 from app.errors import NotFound, ServiceError
 from app.limits import INDEX_MAX
 from app.rates import RegionReport
-from app.schemas import ApiModel
 from app.services import rates
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
@@ -175,41 +175,15 @@ def scenario(catalogue_id: str, index: Annotated[int, PathParam(ge=0, le=INDEX_M
     return ScenarioView.model_validate(views.scenario(ctx, catalogue_id, index))
 
 
-class EvaluationOverview(ApiModel):
-    """The "system under test" section: the evaluation, its figures and the careful
-    driver's, the failures, the r_dep-against-btn scatter (plot data: null = gap)."""
-
-    evaluation: dict[str, Any]
-    figures: dict[str, Any] | None
-    careful: dict[str, Any] | None = Field(description="the latest finished evaluation of "
-                                           "r157_cc on the same model and region (status "
-                                           "done, figures), else the latest queued or "
-                                           "running one (figures null, runs_done, "
-                                           "runs_planned), or null")
-    careful_request: dict[str, Any] = Field(description="the POST /evaluations body that "
-                                            "evaluates r157_cc on the same model, region, "
-                                            "seed, runs and simulator settings")
-    failures_total: int
-    failures: list[dict[str, Any]]
-    scatter: dict[str, Any]
-
-
-class RunProfileView(ApiModel):
-    """One run driven again by the SUT and by the careful driver (plot data)."""
-
-    run: dict[str, Any]
-    drivers: dict[str, dict[str, Any]]
-
-
 @router.get("/api/evaluations/{evaluation_id}", response_model=EvaluationOverview,
             summary="System under test: rate per hour with both intervals beside the careful "
             "driver's, failures, peak r_dep against btn")
 def evaluation_overview(evaluation_id: str, ctx: ContextDep) -> EvaluationOverview:
-    return EvaluationOverview.model_validate(evaluation_views.overview(ctx, evaluation_id))
+    return evaluation_views.overview(ctx, evaluation_id)
 
 
 @router.get("/api/evaluations/{evaluation_id}/runs/{run}", response_model=RunProfileView,
             summary="One run's speed, acceleration and r_dep, SUT beside the careful driver")
 def evaluation_run(evaluation_id: str, run: Annotated[int, PathParam(ge=0, le=INDEX_MAX)],
                    ctx: ContextDep) -> RunProfileView:
-    return RunProfileView.model_validate(evaluation_views.run_profile(ctx, evaluation_id, run))
+    return evaluation_views.run_profile(ctx, evaluation_id, run)
