@@ -27,7 +27,7 @@ import zlib
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, SupportsFloat
 
 import numpy as np
 from sqlalchemy import delete as sql_delete
@@ -46,6 +46,12 @@ from app.services.filters import parse_filters
 from datasets import PARAM_NAMES
 from riskcore import ConcreteScenario
 
+if TYPE_CHECKING:  # sampler.campaign is imported when a campaign runs (riskcore.sut's kernels)
+    from concurrent.futures import Executor
+
+    from sampler import CutInGMM
+    from sampler.campaign import CampaignResult, ChunkResult, Runner
+
 log = logging.getLogger("scengen.jobs")
 
 #: runs per chunk when a request does not say
@@ -62,7 +68,7 @@ EXPORT_FORMATS = ("json", "xosc", "commonroad")
 
 ProgressFn = Callable[[str, int, int], None]
 #: (sut factory, simulator settings dict or None) -> a ``sampler.campaign.Runner``
-RunnerMaker = Callable[[Any, "dict[str, Any] | None"], Any]
+RunnerMaker = Callable[["suts.SutFactory", "dict[str, Any] | None"], "Runner"]
 
 
 class Cancelled(Exception):
@@ -75,7 +81,8 @@ def _campaign_face() -> Any:
     return importlib.import_module("sampler.campaign")
 
 
-def default_runner(factory: Any, settings: dict[str, Any] | None, risk: bool = False) -> Any:
+def default_runner(factory: suts.SutFactory, settings: dict[str, Any] | None,
+                   risk: bool = False) -> Runner:
     """``sampler.campaign.sut_runner`` with the careful driver beside the SUT (for
     ``vs_careful``); ``settings`` are ``riskcore.sut.SimSettings`` fields; ``risk``: Wagner's
     r_dep / r_ind of the SUT's drive per run."""
@@ -92,12 +99,13 @@ def default_runner(factory: Any, settings: dict[str, Any] | None, risk: bool = F
     if not hasattr(face, "sut_runner"):
         raise ServiceError("evaluations need sampler.campaign.sut_runner, which this "
                            "version does not have yet")
-    return face.sut_runner(factory, settings=sim, careful=True, name=factory.name,
-                           risk=risk)
+    runner: Runner = face.sut_runner(factory, settings=sim, careful=True, name=factory.name,
+                                     risk=risk)
+    return runner
 
 
-def runner_for(ctx: ServiceContext | None, factory: Any,
-               settings: dict[str, Any] | None, risk: bool = False) -> Any:
+def runner_for(ctx: ServiceContext | None, factory: suts.SutFactory,
+               settings: dict[str, Any] | None, risk: bool = False) -> Runner:
     maker: RunnerMaker | None = getattr(ctx, "campaign_runner", None) if ctx else None
     if maker is not None:  # a runner injected by the caller (tests): it knows its fields
         return maker(factory, settings)
@@ -210,21 +218,23 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
 
 
 # --------------------------------------------------------------------------- chunks
-def encode_chunk(chunk: Any) -> bytes:
+def encode_chunk(chunk: ChunkResult) -> bytes:
     return zlib.compress(json.dumps(chunk.to_dict(), separators=(",", ":"),
                                     allow_nan=False).encode(), 6)
 
 
-def decode_chunk(data: bytes) -> Any:
-    return _campaign_face().ChunkResult.from_dict(json.loads(zlib.decompress(data)))
+def decode_chunk(data: bytes) -> ChunkResult:
+    chunk: ChunkResult = _campaign_face().ChunkResult.from_dict(
+        json.loads(zlib.decompress(data)))
+    return chunk
 
 
-def _num(v: Any) -> float | None:
+def _num(v: SupportsFloat) -> float | None:
     f = float(v)
     return None if math.isnan(f) else f
 
 
-def run_rows(evaluation_id: str, chunk: Any, batch_size: int) -> list[dict[str, Any]]:
+def run_rows(evaluation_id: str, chunk: ChunkResult, batch_size: int) -> list[dict[str, Any]]:
     """The simulated runs of a chunk as ``evaluation_runs`` rows (``run`` counts every draw
     of the campaign: chunk k's rows start at k * batch_size)."""
     names = [str(p.get("part", "")) for p in getattr(chunk, "proposal", [])]
@@ -265,7 +275,8 @@ def _flag(v: Any) -> bool | None:
     return None if v is None else bool(v)
 
 
-def store_chunk(ctx: ServiceContext, evaluation_id: str, chunk: Any, batch_size: int) -> bool:
+def store_chunk(ctx: ServiceContext, evaluation_id: str, chunk: ChunkResult,
+                batch_size: int) -> bool:
     """Store one finished chunk and its runs in one transaction; False when the evaluation
     is gone (deleted while running) or the chunk was already stored."""
     rows = run_rows(evaluation_id, chunk, batch_size)
@@ -287,7 +298,7 @@ def store_chunk(ctx: ServiceContext, evaluation_id: str, chunk: Any, batch_size:
     return True
 
 
-def stored_chunks(ctx: ServiceContext, evaluation_id: str) -> list[Any]:
+def stored_chunks(ctx: ServiceContext, evaluation_id: str) -> list[ChunkResult]:
     """The stored chunks in order, as ``ChunkResult``s (consecutive from 0: a gap ends the
     replay, the rest is simulated again)."""
     with ctx.db.read_session() as s:
@@ -303,15 +314,18 @@ def stored_chunks(ctx: ServiceContext, evaluation_id: str) -> list[Any]:
 
 
 # --------------------------------------------------------------------------- run
-def campaign(model: Any, factory: Any, spec: CampaignSpec, *, runner: Any,
-             progress: ProgressFn | None = None, on_chunk: Callable[[Any], None] | None = None,
-             stored: Sequence[Any] = (), executor: Any = None) -> Any:
+def campaign(model: CutInGMM, factory: suts.SutFactory, spec: CampaignSpec, *, runner: Runner,
+             progress: ProgressFn | None = None,
+             on_chunk: Callable[[ChunkResult], None] | None = None,
+             stored: Sequence[ChunkResult] = (),
+             executor: Executor | None = None) -> CampaignResult:
     """``sampler.campaign.evaluate`` for a spec (the one call the job and the CLI make)."""
-    return _campaign_face().evaluate(
+    result: CampaignResult = _campaign_face().evaluate(
         model, runner, constraints=spec.constraints or None, n=spec.n, rhw=spec.rhw,
         max_runs=spec.max_runs, seed=spec.seed, batch_size=spec.batch_size,
         progress=progress, on_chunk=on_chunk, stored=list(stored), executor=executor,
         sut=spec.sut)
+    return result
 
 
 def run_job(ctx: ServiceContext, evaluation_id: str, *, cancel: threading.Event | None = None,
