@@ -8,9 +8,9 @@ JSON built outside pydantic goes through :func:`app.jsonconv.dumps`.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
 
 from sampler import SAMPLER_NAMES
 from sampler.region import constraint_pattern
@@ -77,9 +77,36 @@ class SamplingRequest(BaseModel):
 
 
 class PRegion(ApiModel):
-    """P(A): the model's probability mass of the constraint region, with its interval."""
+    """P(A): the model's probability mass of the constraint region, with its interval.
+
+    The one P(A) schema of the responses (POST /scenarios, a catalogue's status, the
+    dashboard's shift view): ``sampler.methods.PRegion``'s fields plus ``ci``; the keys the
+    uncertainty report adds (``mc_ci``, ``model_ci``, ``model_interval``, ``rates``) pass
+    through as they are. A float that is not defined is null (the dashboard's plot data);
+    so is a field a stand-in estimate (tests, a known P(A)) does not give."""
 
     model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
 
     estimate: float | None = Field(description="point estimate of P(A)")
     ci: list[float | None] = Field(description="[low, high] confidence interval of P(A)")
+    ci_low: float | None = None
+    ci_high: float | None = None
+    confidence: float | None = Field(default=None, description="level of ci, e.g. 0.95")
+    method: str | None = Field(default=None, description="how P(A) was estimated: mc, "
+                               "envelope, is, subset, subset-is or split (a sum of parts)")
+    n_draws: int | None = Field(default=None, description="draws behind the estimate")
+    n_hits: int | None = Field(default=None, description="of those, inside the region")
+    p_bounds: float | None = Field(default=None, description="P(B), the model's mass "
+                                   "inside the physical bounds")
+    p_bounds_ci: list[float | None] | None = None
+    p_joint: float | None = Field(default=None, description="P(A and B)")
+    cov: float | None = Field(default=None, description="coefficient of variation of the "
+                              "estimate, when known")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _ci_of_its_ends(cls, data: Any) -> Any:
+        """``ci`` = [ci_low, ci_high] for a P(A) stored without it (as region_dict adds)."""
+        if isinstance(data, dict) and "ci" not in data and "ci_low" in data:
+            data = {**data, "ci": [data.get("ci_low"), data.get("ci_high")]}
+        return data

@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import ConfigDict, Field
 
-from app.schemas import ApiModel
+from app.schemas import ApiModel, PRegion
 from sampler.scenario import ScenarioRecord
 
 __all__ = [
@@ -112,7 +112,7 @@ class ShiftView(ApiModel):
     n: int
     seed: int
     n_reference: int
-    p_region: dict[str, Any] | None
+    p_region: PRegion | None
     parameters: list[ShiftParameter]
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import FileResponse, Response
@@ -16,7 +16,7 @@ from app.limits import INDEX_MAX
 from app.quotas import client_of
 from app.rates import RegionRates
 from app.routes._download import file_response
-from app.schemas import ApiModel, SamplingRequest, schema_enum
+from app.schemas import ApiModel, PRegion, SamplingRequest, schema_enum
 from app.services import catalogues as service
 from riskcore.criticality import CLASSES
 from sampler.scenario import ScenarioRecord
@@ -106,7 +106,7 @@ class CatalogueStatus(ApiModel):
     progress: float = Field(description="scenarios_done / n, 0 … 1 (moves per scenario)")
     stage: CatalogueStage | None = Field(default=None, description="while running: the "
                                          "current stage (null otherwise)")
-    p_region: dict[str, Any] | None = Field(description="the catalogue's P(A) estimate; "
+    p_region: PRegion | None = Field(description="the catalogue's P(A) estimate; "
                                             "mc_ci and model_ci: its two intervals")
     rates: RegionRates | None = Field(default=None, description="cut-ins of the region per "
                                       "hour / per 10^6 km with both intervals (when the "
