@@ -1059,6 +1059,8 @@
   async function selectCatalogue(id, push) {
     state.catalogue = id || null;
     setSelect($("catalogue-select"), state.catalogue);
+    // sections 5 and 6 (dashboard_rates.js) follow the shown catalogue
+    window.dispatchEvent(new CustomEvent("scengen:catalogue", { detail: state.catalogue }));
     const cat = state.catalogues.find((c) => c.id === state.catalogue);
     const tasks = [loadShift(), loadRisk()];
     if (cat && cat.model !== state.model) {

@@ -71,23 +71,28 @@
 
   // ---------------------------------------------------------------- section 5
   let ratesVersion = 0;
+  // the catalogue dashboard.js shows (undefined until it says: the picker's value)
+  let shown;
 
   async function loadRates() {
-    const model = $("model-select").value;
     const note = $("rates-note");
-    if (!model) return;
+    if (!$("model-select").value) return;
     const version = ++ratesVersion;
-    const text = constraintText();
     note.dataset.state = "loading";
-    note.textContent = "Estimating P(" + text + ") and its model interval under " + model +
-      " (one extra sampling run of the bootstrap refits)…";
     try {
+      // a selected catalogue brings its own region and model (before, the region was the
+      // typed constraint: a ttc<2 catalogue was shown under "ttc<3")
+      const catalogue = shown === undefined ? $("catalogue-select").value : shown;
+      const cat = catalogue ? await S.api("/catalogues/" + encodeURIComponent(catalogue))
+        : null;
+      if (version !== ratesVersion) return;
+      const model = cat ? cat.model : $("model-select").value;
+      const text = cat ? cat.constraints.join("; ") : constraintText();
+      note.textContent = "Estimating P(" + (text || "no constraint") + ") and its model " +
+        "interval under " + model + " (one extra sampling run of the bootstrap refits)…";
       const q = "?constraints=" + encodeURIComponent(text);
       const view = await S.api("/dashboard/api/models/" + encodeURIComponent(model) +
                                "/rates" + q);
-      const catalogue = $("catalogue-select").value;
-      const cat = catalogue ? await S.api("/catalogues/" + encodeURIComponent(catalogue))
-        : null;
       if (version !== ratesVersion) return;
       const p = view.p_region;
       const mi = p.model_interval;
@@ -97,7 +102,9 @@
         "the model to its data (what the few recorded events leave open; usually much " +
         "wider)" : p.model_interval_error ? p.model_interval_error
           : "none (the model has no bootstrap refits)") +
-        ". Exposure: " + exposureWords(view.exposure) + ".";
+        ". Exposure: " + exposureWords(view.exposure) + "." +
+        (cat ? " The region is catalogue " + cat.id + "'s; with no catalogue selected it " +
+               "is the constraint typed above." : "");
       let html = "<h3>Region " + S.esc(view.constraints.join(" and ")) + " under model " +
         S.esc(view.model) + "</h3>" +
         grid(["", "estimate", "Monte Carlo 95 %", "model 95 %"], figureRows(p, view.rates));
@@ -351,7 +358,11 @@
     const two = fillModels(models);
     $("compare-form").addEventListener("submit", loadCompare);
     $("model-select").addEventListener("change", loadRates);
-    $("catalogue-select").addEventListener("change", loadRates);
+    // every change of the shown catalogue (picker, Draw, Back), not only the picker's
+    window.addEventListener("scengen:catalogue", (ev) => {
+      shown = ev.detail;
+      loadRates();
+    });
     $("constraint-input").addEventListener("change", loadRates);
     // the header's selections are set by dashboard.js once its lists are in
     const start = Date.now();

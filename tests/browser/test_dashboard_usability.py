@@ -178,3 +178,24 @@ def test_view4_draws_the_r157_drivers_car(server: Server, real_catalogue: str,
                                                            rel=0.2)
     assert max(r157["x"]) - min(r157["x"]) > 3.0
     shot(page, "#view-scenario", "ux-4-scenario-r157-car.png")
+
+
+# --------------------------------------------------------------------------- view 5
+def test_view5_shows_the_selected_catalogues_region(server: Server, real_catalogue: str,
+                                                    page: Page) -> None:
+    """A ttc<2 catalogue was plotted under the title "ttc<3" (the typed constraint)."""
+    page.goto(f"{server.base}/dashboard/catalogues/{real_catalogue}")
+    settle(page)
+    assert page.locator("#constraint-input").input_value() == "ttc<3"  # the default
+    page.wait_for_selector("#rates-note[data-state='done']")
+    table = page.locator("#rates-table").inner_text()
+    assert "Region ttc<2 under model" in table, table
+    assert "ttc<3" not in table
+    title = page.evaluate("() => document.getElementById('rates-bars').layout.title.text")
+    assert "ttc<2" in title and "ttc<3" not in title, title
+    assert f"catalogue {real_catalogue}'s" in page.locator("#rates-note").inner_text()
+    shot(page, "#view-rates", "ux-5-rates-of-the-catalogue.png")
+    # no catalogue: the typed constraint again
+    page.select_option("#catalogue-select", "")
+    page.wait_for_function("document.querySelector('#rates-table').innerText"
+                           ".includes('Region ttc<3 under model')")
