@@ -153,7 +153,7 @@ ORDER_FIELDS: tuple[str, ...] = ("index", *RANGE_FIELDS)
 @dataclass(frozen=True)
 class ScenarioFilter:
     """Filters of a scenario page: inclusive ranges of numeric columns, yes/no columns,
-    the classes. ``risk_min`` ... ``ttc_max`` are kept as shorthands."""
+    the classes, the data-support classes. ``risk_min`` ... ``ttc_max`` are kept as shorthands."""
 
     risk_min: float | None = None
     risk_max: float | None = None
@@ -162,6 +162,8 @@ class ScenarioFilter:
     ranges: tuple[tuple[str, float | None, float | None], ...] = ()
     flags: tuple[tuple[str, bool], ...] = ()
     classes: tuple[str, ...] = ()
+    #: data-support classes to keep (inside / near / extrapolated; issue 25)
+    supports: tuple[str, ...] = ()
 
     def apply(self, stmt: Any) -> Any:
         ranges = [("risk", self.risk_min, self.risk_max), ("ttc", self.ttc_min, self.ttc_max),
@@ -176,6 +178,8 @@ class ScenarioFilter:
             stmt = stmt.where(_column(name).is_(value))
         if self.classes:
             stmt = stmt.where(ScenarioRow.class_.in_(self.classes))
+        if self.supports:
+            stmt = stmt.where(ScenarioRow.support.in_(self.supports))
         return stmt
 
 

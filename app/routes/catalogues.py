@@ -19,6 +19,7 @@ from app.routes._download import file_response
 from app.schemas import ApiModel, PRegion, SamplingRequest, schema_enum
 from app.services import catalogues as service
 from riskcore.criticality import CLASSES
+from sampler.model import SUPPORT_CLASSES
 from sampler.scenario import ScenarioRecord
 
 router = APIRouter(prefix="/catalogues", tags=["catalogues"])
@@ -37,6 +38,9 @@ SUFFIXES = {"jsonl": "jsonl", "csv": "csv", "parquet": "parquet", "xosc": "zip",
 #: a criticality class in a query: the enum in the schema, the check (422 listing them)
 #: in ``service.page_filter``
 ClassName = Annotated[str, WithJsonSchema({"type": "string", "enum": list(CLASSES)})]
+#: a data-support class in a query (issue 25), checked the same way
+SupportName = Annotated[str, WithJsonSchema({"type": "string",
+                                             "enum": list(SUPPORT_CLASSES)})]
 
 
 class CatalogueRequest(SamplingRequest):
@@ -155,7 +159,7 @@ class ScenarioPage(ApiModel):
     scenarios: list[ScenarioRecord]
 
 
-_PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc", "class", "risk_min",
+_PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc", "class", "support", "risk_min",
                           "risk_max", "ttc_min", "ttc_max"})
 
 
@@ -174,6 +178,9 @@ def list_scenarios(
                                        "index)")] = None,
     classes: Annotated[list[ClassName] | None, Query(alias="class", description="keep "
                                                      "these classes (repeatable)")] = None,
+    supports: Annotated[list[SupportName] | None, Query(
+        alias="support", description="keep these data-support classes (repeatable): "
+        "inside, near, extrapolated (docs/sampler.md)")] = None,
     risk_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     risk_max: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     ttc_min: Annotated[float | None, Query(allow_inf_nan=False)] = None,
@@ -184,6 +191,7 @@ def list_scenarios(
     (inclusive), ``<field>=true|false`` and ``class``."""
     service.get_catalogue(ctx, catalogue_id)  # 404 before the filters' 422
     items = [(k, v) for k, v in request.query_params.multi_items() if k not in _PAGE_PARAMS]
+    items += [("support", v) for v in supports or ()]
     flt = dataclasses.replace(service.page_filter(items, classes or (), where="query"),
                               risk_min=risk_min, risk_max=risk_max, ttc_min=ttc_min,
                               ttc_max=ttc_max)

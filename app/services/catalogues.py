@@ -218,16 +218,25 @@ def page_filter(items: Sequence[tuple[str, str]], classes: Sequence[str] = (),
                 where: str = "query") -> repo.ScenarioFilter:
     """A scenario page's filters from ``name=value`` pairs (API query, CLI ``--filter``):
     ``<field>_min`` / ``<field>_max`` for the numeric fields (``repo.RANGE_FIELDS``),
-    ``<field>=true|false`` for the yes/no fields, and the classes. Anything else is an
+    ``<field>=true|false`` for the yes/no fields, ``support=inside|near|extrapolated``
+    (repeatable), and the classes. Anything else is an
     ``InvalidInput`` naming it (``where.name``)."""
     from riskcore.criticality import CLASSES
+    from sampler.model import SUPPORT_CLASSES
 
-    parsed = parse_filters(items, repo.RANGE_FIELDS, repo.FLAG_FIELDS, "class", where)
+    supports = [raw for key, raw in items if key == "support"]
+    bad_support = [v for v in supports if v not in SUPPORT_CLASSES]
+    if bad_support:
+        raise InvalidInput(f"support: unknown data-support class {bad_support[0]!r}; valid: "
+                           f"{', '.join(SUPPORT_CLASSES)}", field=f"{where}.support")
+    parsed = parse_filters([(k, v) for k, v in items if k != "support"], repo.RANGE_FIELDS,
+                           repo.FLAG_FIELDS, "class, support", where)
     bad = [c for c in classes if c not in CLASSES]
     if bad:
         raise InvalidInput(f"class: unknown class {bad[0]!r}; valid: {', '.join(CLASSES)}",
                            field=f"{where}.class")
-    return repo.ScenarioFilter(ranges=parsed.ranges, flags=parsed.flags, classes=tuple(classes))
+    return repo.ScenarioFilter(ranges=parsed.ranges, flags=parsed.flags, classes=tuple(classes),
+                               supports=tuple(supports))
 
 
 def check_order(order_by: str, desc: bool | None, where: str = "query") -> bool:

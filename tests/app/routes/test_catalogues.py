@@ -157,8 +157,14 @@ def test_scenarios_ranked_by_criticality(client: Any, catalogue: dict[str, Any])
     cls = everything[0]["class"]
     r = client.get(url, params={"class": cls}).json()
     assert r["total"] == sum(1 for s in everything if s["class"] == cls)
-    # the status counts the classes and summarises the margins
+    # the data support (issue 25): one class or several, counted as the status counts
     status = client.get(f"/catalogues/{cid}").json()
+    for keep in (["inside"], ["near", "extrapolated"]):
+        kept = client.get(url, params={"support": keep, "limit": 100}).json()
+        assert kept["total"] == sum(status["support"][k] for k in keep)
+        assert kept["total"] == sum(1 for s in everything if s["support"] in keep)
+        assert all(s["support"] in keep for s in kept["scenarios"])
+    # the status counts the classes and summarises the margins
     assert sum(status["classes"].values()) == N
     assert status["classes"][cls] == r["total"]
     btn = status["summary"]["btn"]
@@ -167,6 +173,7 @@ def test_scenarios_ranked_by_criticality(client: Any, catalogue: dict[str, Any])
     # bad input names the parameter
     for params, field in (({"order_by": "nope"}, "query.order_by"),
                           ({"class": "dangerous"}, "query.class"),
+                          ({"support": "outside"}, "query.support"),
                           ({"btn_min": "high"}, "query.btn_min"),
                           ({"r157_cc_collision": "maybe"}, "query.r157_cc_collision"),
                           ({"colour": "red"}, "query.colour")):
