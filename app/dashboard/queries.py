@@ -94,7 +94,7 @@ def scatter_columns(session: Session, catalogue_id: str) -> dict[str, Any]:
 
 #: the columns of the "riskiest" table
 TOP_FIELDS = ("btn", "a_req", "class", "ttr_true", "ttr_manoeuvre", "ttc", "t_p",
-              "r157_cc_collision", "r157_cc_impact_speed")
+              "r157_cc_collision", "r157_cc_impact_speed", "support")
 
 
 def top_rows(session: Session, catalogue_id: str, limit: int) -> list[dict[str, Any]]:

@@ -170,6 +170,8 @@ class TopScenario(ApiModel):
     t_p: float | None
     r157_cc_collision: bool | None
     r157_cc_impact_speed: float | None
+    support: str | None = Field(default=None, description="inside | near | extrapolated "
+                                "(null: stored without it)")
 
     model_config = ConfigDict(populate_by_name=True, serialize_by_alias=True)
 

@@ -502,6 +502,7 @@
         ["P(A)", esc(fmt(pr.estimate, 4) + (pr.ci ? "  (95% CI " + fmt(pr.ci[0], 3) + " – " +
                                                      fmt(pr.ci[1], 3) + ", " +
                                                      (pr.method || "") + ")" : ""))],
+        ["data support", esc(supportText(c.support))],
         ["sampler", esc(c.sampler + (d.methods.length ? " → " + d.methods.join(", ") : "") +
                         " over " + d.chunks + " chunk(s)")],
         ["acceptance", esc("mean " + fmt(d.acceptance_mean) + ", min " +
@@ -587,6 +588,16 @@
     } finally {
       busy(-1);
     }
+  }
+
+  // how many scenarios the real cut-ins support (docs/sampler.md, "Data support")
+  function supportText(counts) {
+    const names = Object.keys(counts || {});
+    const total = names.reduce((a, k) => a + counts[k], 0);
+    if (!total) return "– (no scenario stored yet)";
+    return names.map((k) => k + " " + counts[k] + " (" + fmt(100 * counts[k] / total, 2) +
+                     " %)").join(" · ") + " — inside: within the range of the real " +
+      "cut-ins; extrapolated: the model's invention";
   }
 
   async function drawClasses(div, view, id) {
@@ -691,34 +702,110 @@
     }, id);
   }
 
-  function drawTop(view, id) {
+  // The riskiest scenarios: the catalogue's first 10 by btn (from the view), then any
+  // order and filter the user picks (GET /catalogues/{id}/scenarios sorts and filters the
+  // whole catalogue on the server). Columns that sort: a click on the header.
+  const TOP_COLUMNS = [
+    ["index", "#", "index"], ["class", "class", null], ["btn", "btn", "btn"],
+    ["a_req", "a_req [m/s²]", "a_req"], ["ttr_true", "ttr_true [s] (manoeuvre)", "ttr_true"],
+    ["ttc", "TTC [s]", "ttc"], ["support", "data support", null],
+    ["r157", "R157 driver", "r157_cc_impact_speed"],
+  ];
+  const SUPPORT_CHOICES = [["", "any"], ["inside", "inside"], ["near", "near"],
+                           ["extrapolated", "extrapolated"],
+                           ["inside,near", "inside or near (not extrapolated)"]];
+  const top = { order: "btn", desc: true, cls: "", support: "", version: 0 };
+
+  function topRow(r) {
+    const r157 = r.r157_cc_collision === null || r.r157_cc_collision === undefined ? "–"
+      : r.r157_cc_collision ? "collides at " + fmt(num(r.r157_cc_impact_speed)) + " m/s"
+        : "avoids it";
+    const ttc = r.ttc === null ? Infinity : num(r.ttc);
+    return "<tr data-index=\"" + r.index + "\"><td><a href=\"?scenario=" + r.index + "\">" +
+      r.index + "</a></td><td><span class=\"swatch\" style=\"background:" +
+      (CLASS_COLORS[r["class"]] || "#999") + "\"></span>" + esc(r["class"] || "–") +
+      "</td><td>" + esc(fmt(num(r.btn))) + "</td><td>" + esc(fmt(num(r.a_req))) + "</td><td>" +
+      esc(fmt(num(r.ttr_true)) + (r.ttr_manoeuvre ? " (" + r.ttr_manoeuvre + ")" : "")) +
+      "</td><td>" + esc(fmt(ttc)) + "</td><td>" + esc(r.support || "–") + "</td><td>" +
+      esc(r157) + "</td></tr>";
+  }
+
+  function renderTop(rows, total, id) {
     const box = $("top-table");
-    if (!view.top.length) {
-      box.innerHTML = "<p class=\"note\">No scored scenario to rank.</p>";
-      return;
-    }
-    const head = ["#", "class", "btn", "a_req [m/s²]", "ttr_true [s] (manoeuvre)", "TTC [s]",
-                  "R157 driver"];
-    const body = view.top.map((r) => {
-      const r157 = r.r157_cc_collision === null ? "–" : r.r157_cc_collision
-        ? "collides at " + fmt(num(r.r157_cc_impact_speed)) + " m/s" : "avoids it";
-      return "<tr data-index=\"" + r.index + "\"><td><a href=\"?scenario=" + r.index + "\">" +
-        r.index + "</a></td><td><span class=\"swatch\" style=\"background:" +
-        (CLASS_COLORS[r["class"]] || "#999") + "\"></span>" + esc(r["class"]) + "</td><td>" +
-        esc(fmt(num(r.btn))) + "</td><td>" + esc(fmt(num(r.a_req))) + "</td><td>" +
-        esc(fmt(num(r.ttr_true)) + (r.ttr_manoeuvre ? " (" + r.ttr_manoeuvre + ")" : "")) +
-        "</td><td>" + esc(fmt(r.ttc === null ? Infinity : num(r.ttc))) + "</td><td>" +
-        esc(r157) + "</td></tr>";
-    });
-    box.innerHTML = "<h3>The riskiest " + view.top.length + " by btn (click to open)</h3>" +
-      "<table class=\"rank\"><tr>" + head.map((h) => "<th>" + esc(h) + "</th>").join("") +
-      "</tr>" + body.join("") + "</table>";
+    const sortName = (TOP_COLUMNS.find((c) => c[2] === top.order) || [null, top.order])[1];
+    const filtered = top.cls || top.support;
+    const title = "The first " + rows.length + " of " + (total === null ? "the catalogue"
+      : total + (filtered ? " matching" : "")) + " by " + sortName +
+      (top.desc ? ", highest first" : ", lowest first") + " (click a row to open it, a " +
+      "column's header to sort by it)";
+    const opts = (choices, value) => choices.map(([v, label]) => "<option value=\"" + esc(v) +
+      "\"" + (v === value ? " selected" : "") + ">" + esc(label) + "</option>").join("");
+    const classes = [["", "any"]].concat(Object.keys(CLASS_COLORS).map((k) => [k, k]));
+    const head = TOP_COLUMNS.map(([, label, key]) => key
+      ? "<th class=\"sortable" + (key === top.order ? " sorted" : "") + "\" data-order=\"" +
+        key + "\" title=\"sort by " + esc(label) + "\">" + esc(label) +
+        (key === top.order ? (top.desc ? " ▼" : " ▲") : "") + "</th>"
+      : "<th>" + esc(label) + "</th>").join("");
+    box.innerHTML = "<h3>" + esc(title) + "</h3>" +
+      "<div class=\"top-filters\"><label>class <select id=\"top-class\">" +
+      opts(classes, top.cls) + "</select></label> <label>data support <select " +
+      "id=\"top-support\">" + opts(SUPPORT_CHOICES, top.support) + "</select></label></div>" +
+      "<div class=\"scroll\"><table class=\"rank\"><tr>" + head + "</tr>" +
+      (rows.length ? rows.map(topRow).join("")
+        : "<tr><td colspan=\"" + TOP_COLUMNS.length + "\">no scenario matches</td></tr>") +
+      "</table></div>";
     box.dataset.source = id;
+    box.dataset.order = top.order + (top.desc ? " desc" : " asc");
     for (const link of box.querySelectorAll("a")) {
       link.addEventListener("click", (ev) => {
         ev.preventDefault();
         openScenario(state.catalogue, parseInt(link.textContent, 10));
       });
+    }
+    for (const th of box.querySelectorAll("th.sortable")) {
+      th.addEventListener("click", () => {
+        const key = th.dataset.order;
+        top.desc = key === top.order ? !top.desc : key !== "index" && key !== "ttc";
+        top.order = key;
+        loadTop(id);
+      });
+    }
+    $("top-class").addEventListener("change", (e) => { top.cls = e.target.value; loadTop(id); });
+    $("top-support").addEventListener("change", (e) => {
+      top.support = e.target.value;
+      loadTop(id);
+    });
+  }
+
+  function drawTop(view, id) {
+    if ($("top-table").dataset.source !== id) {  // another catalogue: its first 10 by btn
+      Object.assign(top, { order: "btn", desc: true, cls: "", support: "" });
+    }
+    if (!view.top.length) {
+      $("top-table").innerHTML = "<p class=\"note\">No scored scenario to rank.</p>";
+      return;
+    }
+    if (top.order === "btn" && top.desc && !top.cls && !top.support) {
+      renderTop(view.top, null, id);  // the view's own first 10: no extra request
+    } else {
+      loadTop(id);
+    }
+  }
+
+  async function loadTop(id) {
+    const version = ++top.version;
+    const q = new URLSearchParams({ limit: "10", order_by: top.order, desc: String(top.desc) });
+    if (top.cls) q.append("class", top.cls);
+    for (const s of top.support ? top.support.split(",") : []) q.append("support", s);
+    busy(1);
+    try {
+      const page = await api("/catalogues/" + encodeURIComponent(id) + "/scenarios?" + q);
+      if (version !== top.version || id !== state.catalogue) return;
+      renderTop(page.scenarios, page.total, id);
+    } catch (e) {
+      reportError("the riskiest scenarios", e);
+    } finally {
+      busy(-1);
     }
   }
 

@@ -199,3 +199,52 @@ def test_view5_shows_the_selected_catalogues_region(server: Server, real_catalog
     page.select_option("#catalogue-select", "")
     page.wait_for_function("document.querySelector('#rates-table').innerText"
                            ".includes('Region ttc<3 under model')")
+
+
+# --------------------------------------------------------------------------- view 3 table
+def _table_indices(page: Page) -> list[int]:
+    rows = page.locator("#top-table tr[data-index]")
+    return [int(rows.nth(i).get_attribute("data-index") or -1) for i in range(rows.count())]
+
+
+def test_the_riskiest_table_sorts_filters_and_fits(server: Server, real_catalogue: str,
+                                                   page: Page) -> None:
+    """The riskiest-10 table could not be sorted or filtered and its last column was cut at
+    1400 px; it now sorts by a header click and filters by class and data support, on the
+    whole catalogue (the API's order and filters), and shows each row's support."""
+    base, cid = server.base, real_catalogue
+    page.goto(f"{base}/dashboard/catalogues/{cid}")
+    settle(page)
+    url = f"{base}/catalogues/{cid}/scenarios"
+    by_btn = httpx.get(url, params={"limit": 10}).json()["scenarios"]
+    assert _table_indices(page) == [s["index"] for s in by_btn]
+    cells = page.locator("#top-table tr[data-index]").first.locator("td")
+    assert cells.nth(6).inner_text() == by_btn[0]["support"]
+    # the whole table is inside its panel: nothing cut at 1400 px
+    panel = page.locator("#top-table").bounding_box()
+    table = page.locator("#top-table table").bounding_box()
+    assert panel and table and table["x"] + table["width"] <= panel["x"] + panel["width"] + 1
+    # sort by TTC (lowest first), then highest first
+    page.locator("#top-table th[data-order='ttc']").click()
+    page.wait_for_selector("#top-table[data-order='ttc asc']")
+    want = httpx.get(url, params={"limit": 10, "order_by": "ttc", "desc": "false"}).json()
+    assert _table_indices(page) == [s["index"] for s in want["scenarios"]]
+    page.locator("#top-table th[data-order='ttc']").click()
+    page.wait_for_selector("#top-table[data-order='ttc desc']")
+    want = httpx.get(url, params={"limit": 10, "order_by": "ttc", "desc": "true"}).json()
+    assert _table_indices(page) == [s["index"] for s in want["scenarios"]]
+    # filter by data support: what the real cut-ins support
+    status = httpx.get(f"{base}/catalogues/{cid}").json()
+    page.select_option("#top-support", "inside,near")
+    supported = status["support"]["inside"] + status["support"]["near"]
+    page.wait_for_function(
+        f"document.querySelector('#top-table h3').innerText.includes('of {supported} matching')")
+    shown = [c.inner_text() for c in page.locator("#top-table tr[data-index] td:nth-child(7)")
+             .all()]
+    assert shown and set(shown) <= {"inside", "near"}
+    shot(page, "#view-risk", "ux-3-riskiest-sorted-filtered.png")
+    # the support shares in the catalogue panel
+    info = page.locator("#catalogue-info").inner_text()
+    n = sum(status["support"].values())
+    for name, k in status["support"].items():
+        assert f"{name} {k} ({100 * k / n:.2g} %)" in info or f"{name} {k} (" in info, info
