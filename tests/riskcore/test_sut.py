@@ -343,3 +343,90 @@ def test_ttr_aeb_brakes_on_the_online_risk_and_avoids_what_none_hits() -> None:
         return float(evaluate_scene(ego, [obj]).r_dep)
 
     assert r_dep(t_fire) >= 0.5 > r_dep(t_fire - 0.1)
+
+
+# --- hand-computed runs of the reference drivers (r157_cc, r157_cc_conflict, rss) ---------
+#
+# A cutter G0 = 30.02 m ahead (bumper to bumper) at 20 m/s, heading 0, slides from the next
+# lane's centre (y = 3.75 m) into the ego's at 1.25 m/s (y = 0 from t = 3 s on, a grid
+# point); the ego drives at 25 m/s: the gap closes at 5 m/s, gap(t) = G0 - 5 t. (The extra
+# 0.02 m keeps the TTC gates' moments off the 0.01 s steps.)
+G0 = 30.02
+
+def _sliding_cutter(t_p: float) -> CutInBatch:
+    h = 0.1
+    t = np.round(np.arange(151) * h, 12)
+    cx = G0 + EL + 20.0 * t
+    cy = np.maximum(3.75 - 1.25 * t, 0.0)
+    one = np.ones(t.size)
+    return CutInBatch(t=t, lane_width=3.75, ego_v0=np.array([25.0]), ego_length=EL,
+                      ego_width=EW, cx=cx[None, :], cy=cy[None, :],
+                      cpsi=np.zeros((1, t.size)), cv=(20.0 * one)[None, :],
+                      ca=np.zeros((1, t.size)), c_length=np.full(1, EL),
+                      c_width=np.full(1, EW), t_p=np.full(1, t_p), t_cross=np.zeros(1))
+
+
+def _braking_distance_used(v_rel: float, a: float, j: float) -> float:
+    """How much a closing gap shrinks from the brake onset until the speeds are equal:
+    the deceleration ramps at j up to a (t1 = a / j), then holds (the leader keeps its
+    speed)."""
+    t1 = a / j
+    v1 = v_rel - j * t1 ** 2 / 2.0
+    assert v1 > 0.0
+    return v_rel * t1 - j * t1 ** 3 / 6.0 + v1 ** 2 / (2.0 * a)
+
+
+# UN R157's careful driver: 0.774 g (7.593 m/s^2) ramped at 12.65 m/s^3, 0.75 s reaction
+_CC_A, _CC_J, _CC_REACT = 0.774 * 9.81, 12.65, 0.75
+
+
+def test_r157_cc_conflict_brakes_0_75_s_after_perception_by_hand() -> None:
+    # perception: the cutter's centre has moved 0.375 m towards the lane at 0.375 / 1.25 =
+    # 0.3 s; the gap is closing then, so the reaction starts at t_p and braking at 1.05 s
+    t_p = 0.3
+    r = simulate(make_sut("r157_cc_conflict"), _sliding_cutter(t_p), seeds=0)
+    t_b = t_p + _CC_REACT
+    assert r.t_brake_rel_tp[0] == pytest.approx(t_b - t_p, abs=1e-9)
+    gap_b = G0 - 5.0 * t_b
+    assert not r.collided[0]
+    assert r.min_gap[0] == pytest.approx(gap_b - _braking_distance_used(5.0, _CC_A, _CC_J),
+                                         abs=1e-3)
+    assert r.max_decel[0] == pytest.approx(_CC_A, abs=1e-12)
+
+
+def test_r157_cc_waits_for_ttc_below_2_s_then_reacts_by_hand() -> None:
+    # JRC-FSM rule: after t_p = 0.3 s it waits until TTC = gap / 5 < 2 s, i.e. gap < 10 m
+    # at t = 4.004 s, and brakes 0.75 s later at 4.754 s with 6.25 m left
+    t_p = 0.3
+    r = simulate(make_sut("r157_cc"), _sliding_cutter(t_p), seeds=0)
+    t_b = (G0 - 10.0) / 5.0 + _CC_REACT
+    assert r.t_brake_rel_tp[0] == pytest.approx(t_b - t_p, abs=1e-9)
+    assert not r.collided[0]
+    assert r.min_gap[0] == pytest.approx(G0 - 5.0 * t_b
+                                         - _braking_distance_used(5.0, _CC_A, _CC_J), abs=1e-3)
+    # a shorter gate (1 s: gap < 5 m at 5.004 s, braking at 5.754 s with 1.25 m left)
+    # collides
+    late = simulate(make_sut("r157_cc", critical_ttc=1.0), _sliding_cutter(t_p), seeds=0)
+    assert late.collided[0]
+    assert late.t_brake_rel_tp[0] == pytest.approx((G0 - 5.0) / 5.0 + _CC_REACT - t_p, abs=1e-9)
+
+
+def test_rss_brakes_rho_after_both_safe_distances_are_violated_by_hand() -> None:
+    # longitudinal safe distance (Shalev-Shwartz et al., rho 0.75, a_accel 3, b_min = b_max
+    # = 6): 25*0.75 + 3*0.75^2/2 + (25 + 3*0.75)^2/12 - 20^2/12 = 48.1 m > every gap here.
+    rho, a_lat, mu = 0.75, 1.0, 0.3
+    d_long = 25 * rho + 3 * rho ** 2 / 2 + (25 + 3 * rho) ** 2 / 12 - 20 ** 2 / 12
+    assert d_long > G0
+    # lateral: the cutter's heading is 0, so its velocity towards the ego is 0 and the
+    # safe distance is mu + a_lat rho^2 / 2 + (a_lat rho)^2 / (2 a_lat) = 0.8625 m; the
+    # lateral clearance |y| - 1.8 falls below it at y = 2.6625 m: t = (3.75 - 2.6625) / 1.25
+    d_lat = mu + a_lat * rho ** 2 / 2 + (a_lat * rho) ** 2 / (2 * a_lat)
+    t_trig = (3.75 - (EW + d_lat)) / 1.25
+    assert t_trig == pytest.approx(0.87)
+    t_p = 0.3
+    r = simulate(make_sut("rss"), _sliding_cutter(t_p), seeds=0)
+    t_b = t_trig + rho
+    assert r.t_brake_rel_tp[0] == pytest.approx(t_b - t_p, abs=1e-9)
+    assert not r.collided[0]
+    assert r.min_gap[0] == pytest.approx(G0 - 5.0 * t_b
+                                         - _braking_distance_used(5.0, _CC_A, _CC_J), abs=1e-3)
