@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import time
 
 import numpy as np
@@ -224,7 +225,8 @@ def main() -> None:
         print(f"  campaigns: adapt={a.adapt}, chunks of {a.sut_batch} runs")
         res = campaigns(model, runner_s, range(a.sut_seeds), batch_size=a.sut_batch,
                         adapt=a.adapt)
-        parts = sorted({p["part"].split("@")[0] for r in res for p in r["proposal"]})
+        parts = sorted({re.sub(r"(@.*|x\d+$)", "", p["part"]) for r in res
+                        for p in r["proposal"]})
         print(f"  proposal parts of the final chunks: {', '.join(parts)}; pilot runs per "
               f"campaign: mean {np.mean([r['pilot_runs'] for r in res]):.0f}")
         runs = sum(r["sut_runs"] for r in res)
