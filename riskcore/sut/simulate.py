@@ -131,7 +131,7 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
         Keep the ego's x, v, a at every step (``RunBatch.profiles``; memory N x steps).
     risk : bool
         Wagner's r_dep / r_ind of the SUT's own drive (``r_dep_peak``, ``r_ind_peak``,
-        ``r_dep_time_above``; with ``profiles`` also the r_dep profile). Costly (one
+        ``r_dep_time_above``; with ``profiles`` also the r_dep and r_ind profiles). Costly (one
         Monte-Carlo scene per step of the batch's grid and run); NaN when False.
     must_avoid_variant : "6" or "2.4"
         The regulation's deceleration for ``must_avoid``.
@@ -233,6 +233,8 @@ def simulate(sut: SystemUnderTest, batch: CutInBatch, *, seeds: ArrayLike | int,
         runs.r_dep_time_above = above
         if profiles:
             prof["r_dep"] = r_prof
+            # one object (the cutter): r_ind = r_dep at every step (riskcore.sut.risk)
+            prof["r_ind"] = r_prof.copy()
             prof["t_batch"] = batch.t
     if not profiles:
         runs.profiles = None

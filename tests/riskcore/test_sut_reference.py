@@ -94,6 +94,20 @@ def test_drive_risk_of_none_is_the_records_risk_peak() -> None:
     np.testing.assert_allclose(runs.r_dep_peak, peaks, rtol=0, atol=1e-9)
     assert 0.0 < peaks.min() < 1.0 == peaks.max()  # graded and saturated cases
     assert runs.profiles is not None and runs.profiles["r_dep"].shape[0] == 6
+    # the profiles on demand, r_dep and r_ind at every grid step until the end: those of
+    # riskcore's scenario evaluation of the scripted ego (an independent path: the
+    # scene-by-scene engine over the concrete scenario)
+    from riskcore.scenario_risk import evaluate_scenario
+
+    prof = runs.profiles
+    for i in (0, 3):
+        ref = evaluate_scenario(scs[i])
+        ok = ~np.isnan(prof["r_dep"][i])
+        assert ok.sum() > 10
+        for name in ("r_dep", "r_ind"):
+            ref_series = np.interp(prof["t_batch"][ok], ref.t, ref.series(name))
+            np.testing.assert_allclose(prof[name][i][ok], ref_series, rtol=0, atol=0.02)
+        assert np.nanmax(prof["r_ind"][i]) == runs.r_ind_peak[i]
     # r_dep >= 0.5 time: whole grid steps
     steps = runs.r_dep_time_above / 0.1
     np.testing.assert_allclose(steps, np.round(steps), atol=1e-9)
