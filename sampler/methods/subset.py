@@ -400,84 +400,120 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
     if not cons:
         raise SamplerError("subset simulation needs at least one constraint (the region is "
                            "the whole model)")
-    names = sorted({c.name for c in cons})
-    region = region.bind(model)  # its model quantities (density_pct) use the model
+    g = _RegionMargins.of(model, region.bind(model))  # bound: its model quantities
+    g.fit_scales(rng, int(n_scale))
+    return g
 
-    crit = [name for name in names if name in CRITICALITY_QUANTITIES]
-    flat = any(c.name in FLAT_VALUES for c in cons)
-    extra = ["gap", "dv"] if flat or "ttc" in names else []
-    # the support classes' continuous margin (support_margin) needs both of these
-    support_extra = ["support_distance", "support_excess"] if "support" in names else []
-    other = sorted({*(n for n in names if n not in CRITICALITY_QUANTITIES and n != "ttc"),
-                    *extra, *support_extra})
-    with_ttr = "ttr_true" in crit  # the TTR scan is the costliest part: only when asked
-    kin_cons = [c for c in cons if c.name not in CRITICALITY_QUANTITIES]
-    crit_cons = [c for c in cons if c.name in CRITICALITY_QUANTITIES]
-    # kinematic and criticality constraints together: layered (module docstring of
-    # ``region_limit_state``), so that no row outside the kinematic ones is simulated
-    layered = bool(kin_cons) and bool(crit_cons)
 
-    def quantities(z: FloatArray, params: FloatArray | None = None
+_TINY = float(np.finfo(np.float64).tiny)
+
+
+@dataclass
+class _RegionMargins:
+    """``region_limit_state``'s limit state, in its steps: the quantities a row needs, each
+    constraint's margin (scaled, continuous where the quantity is flat), the largest of a
+    group, and ``__call__`` = g (layered or not)."""
+
+    model: CutInGMM
+    region: Region
+    other: list[str]  # the quantities besides the criticality ones (and ttc)
+    crit: list[str]  # the criticality quantities the constraints name
+    flat: bool  # a constraint names a flat quantity (FLAT_VALUES)
+    extra: list[str]  # gap and dv when a margin needs them
+    kin_cons: list[Any]
+    crit_cons: list[Any]
+    scale: dict[int, float] = field(default_factory=dict)  # by id() of the constraint
+    proxy_scale: float = 1.0
+
+    @classmethod
+    def of(cls, model: CutInGMM, region: Region) -> _RegionMargins:
+        cons = region.constraints
+        names = sorted({c.name for c in cons})
+        crit = [name for name in names if name in CRITICALITY_QUANTITIES]
+        flat = any(c.name in FLAT_VALUES for c in cons)
+        extra = ["gap", "dv"] if flat or "ttc" in names else []
+        # the support classes' continuous margin (support_margin) needs both of these
+        support_extra = ["support_distance", "support_excess"] if "support" in names else []
+        other = sorted({*(n for n in names if n not in CRITICALITY_QUANTITIES and n != "ttc"),
+                        *extra, *support_extra})
+        return cls(model, region, other, crit, flat, extra,
+                   kin_cons=[c for c in cons if c.name not in CRITICALITY_QUANTITIES],
+                   crit_cons=[c for c in cons if c.name in CRITICALITY_QUANTITIES])
+
+    @property
+    def with_ttr(self) -> bool:
+        return "ttr_true" in self.crit  # the TTR scan is the costliest part: only when asked
+
+    @property
+    def layered(self) -> bool:
+        """Kinematic and criticality constraints together (``region_limit_state``'s
+        docstring): no row outside the kinematic ones is simulated."""
+        return bool(self.kin_cons) and bool(self.crit_cons)
+
+    def quantities(self, z: FloatArray, params: FloatArray | None = None
                    ) -> tuple[FloatArray, dict[str, FloatArray]]:
         if params is None:
-            params = model.params_matrix(model.from_z(z))
-        q = region.quantities(params, other) if other else {}
-        if crit:
-            q.update(criticality_quantities(params, region.lane_width, with_ttr=with_ttr))
+            params = self.model.params_matrix(self.model.from_z(z))
+        q = self.region.quantities(params, self.other) if self.other else {}
+        if self.crit:
+            q.update(criticality_quantities(params, self.region.lane_width,
+                                            with_ttr=self.with_ttr))
         return params, q
 
-    def raw(q: dict[str, FloatArray], c: Any) -> FloatArray:
+    def raw(self, q: dict[str, FloatArray], c: Any) -> FloatArray:
         """The constraint's unscaled margin (the continuous one for ttc)."""
         if c.name == "ttc":
             return ttc_margin(q["gap"], q["dv"], c.op, float(c.value))
         if c.name == "support":  # the class codes are flat: a continuous margin instead
-            return support_margin(model, q["support_distance"], q["support_excess"], c.op,
-                                  float(c.value))
+            return support_margin(self.model, q["support_distance"], q["support_excess"],
+                                  c.op, float(c.value))
         sgn = 1.0 if c.op in ("<", "<=") else -1.0
         return sgn * (q[c.name] - float(c.value))
 
-    def spread(group: list[Any], q0: dict[str, FloatArray]) -> list[float]:
+    def spread(self, group: list[Any], q0: dict[str, FloatArray]) -> list[float]:
         """Robust spreads of a group's margins (1 when the group names one quantity:
         then the scale changes none of the sets g <= b)."""
         if len({c.name for c in group}) < 2:
             return [1.0 for _ in group]
-        return [_margin_scale(raw(q0, c)) for c in group]
+        return [_margin_scale(self.raw(q0, c)) for c in group]
 
-    scale: dict[int, float] = {}
-    if layered:
-        # kinematic margins are compared among themselves, criticality margins among
-        # themselves: only several criticality quantities need simulated scale draws
-        x0 = model.params_matrix(model.sample(int(n_scale), rng))
-        q0 = region.quantities(x0, other)
-        kin_scale = spread(kin_cons, q0)
-        crit_scale = [1.0 for _ in crit_cons]
-        if len(set(crit)) > 1:
-            _, q1 = quantities(model.sample_z(int(n_scale) // 2, rng))
-            crit_scale = spread(crit_cons, q1)
-        for c, sc in zip([*kin_cons, *crit_cons], [*kin_scale, *crit_scale], strict=True):
-            scale[id(c)] = sc
-        proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
-                       if flat else 1.0)
-    elif len(names) > 1 or not crit:
-        # criticality regions: half the draws (each is a closed-loop simulation)
-        _, q0 = quantities(model.sample_z(int(n_scale) // (2 if crit else 1), rng))
-        for c in cons:
-            scale[id(c)] = _margin_scale(raw(q0, c))
-        proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
-                       if extra else 1.0)
-    else:  # one criticality quantity: its scale does not change the sets g <= b
-        for c in cons:
-            scale[id(c)] = 1.0
-        proxy_scale = 1.0
-        if extra:  # the proxy's spread needs no simulation
-            x0 = model.params_matrix(model.sample(int(n_scale), rng))
-            q0 = region.quantities(x0, ["gap", "dv"])
-            proxy_scale = _margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
-    tiny = float(np.finfo(np.float64).tiny)
+    def fit_scales(self, rng: np.random.Generator, n_scale: int) -> None:
+        """Each constraint's scale and the flat proxy's, from model draws."""
+        model, region, cons = self.model, self.region, self.region.constraints
+        if self.layered:
+            # kinematic margins are compared among themselves, criticality margins among
+            # themselves: only several criticality quantities need simulated scale draws
+            x0 = model.params_matrix(model.sample(n_scale, rng))
+            q0 = region.quantities(x0, self.other)
+            kin_scale = self.spread(self.kin_cons, q0)
+            crit_scale = [1.0 for _ in self.crit_cons]
+            if len(set(self.crit)) > 1:
+                _, q1 = self.quantities(model.sample_z(n_scale // 2, rng))
+                crit_scale = self.spread(self.crit_cons, q1)
+            for c, sc in zip([*self.kin_cons, *self.crit_cons], [*kin_scale, *crit_scale],
+                             strict=True):
+                self.scale[id(c)] = sc
+            self.proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
+                                if self.flat else 1.0)
+        elif len({c.name for c in cons}) > 1 or not self.crit:
+            # criticality regions: half the draws (each is a closed-loop simulation)
+            _, q0 = self.quantities(model.sample_z(n_scale // (2 if self.crit else 1), rng))
+            for c in cons:
+                self.scale[id(c)] = _margin_scale(self.raw(q0, c))
+            self.proxy_scale = (_margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
+                                if self.extra else 1.0)
+        else:  # one criticality quantity: its scale does not change the sets g <= b
+            for c in cons:
+                self.scale[id(c)] = 1.0
+            self.proxy_scale = 1.0
+            if self.extra:  # the proxy's spread needs no simulation
+                x0 = model.params_matrix(model.sample(n_scale, rng))
+                q0 = region.quantities(x0, ["gap", "dv"])
+                self.proxy_scale = _margin_scale(q0["gap"] - FLAT_PROXY_HORIZON * q0["dv"])
 
-    def margin(q: dict[str, FloatArray], c: Any) -> FloatArray:
-        s = scale[id(c)]
-        m = raw(q, c) / s
+    def margin(self, q: dict[str, FloatArray], c: Any) -> FloatArray:
+        s = self.scale[id(c)]
+        m = self.raw(q, c) / s
         if c.name in FLAT_VALUES:
             fv = FLAT_VALUES[c.name]
             at_flat = q[c.name] == fv
@@ -485,19 +521,20 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
             base = sgn * ((_TTR_FLAT_STANDIN if math.isinf(fv) else fv) - float(c.value)) / s
             outside = at_flat & ~OPERATORS[c.op](np.full(1, fv), float(c.value))[0]
             if outside.any():
-                h = (q["gap"] - FLAT_PROXY_HORIZON * q["dv"]) / proxy_scale
+                h = (q["gap"] - FLAT_PROXY_HORIZON * q["dv"]) / self.proxy_scale
                 m = np.where(outside, max(base, 0.0) + np.logaddexp(0.0, h), m)
         # a strict constraint excludes its threshold (discrete quantities such as ttr_true,
         # a multiple of the step, put mass on it): margin 0 counts as outside
         # (support_margin places its own boundary)
-        return np.where(m == 0.0, tiny, m) if c.op in "<>" and c.name != "support" else m
+        return np.where(m == 0.0, _TINY, m) if c.op in "<>" and c.name != "support" else m
 
-    def largest(q: dict[str, FloatArray], group: list[Any]) -> FloatArray:
+    def largest(self, q: dict[str, FloatArray], group: list[Any]) -> FloatArray:
         with np.errstate(invalid="ignore", over="ignore"):
-            m = np.max(np.stack([margin(q, c) for c in group]), axis=0)
+            m = np.max(np.stack([self.margin(q, c) for c in group]), axis=0)
         return np.asarray(np.where(np.isnan(m), np.inf, m), dtype=np.float64)
 
-    def g(z: FloatArray) -> FloatArray:
+    def __call__(self, z: FloatArray) -> FloatArray:
+        model, region = self.model, self.region
         out = np.full(z.shape[0], np.inf)
         # rows farther than R_MAX Mahalanobis units from every component hold no mass worth
         # simulating (an importance density's tails reach them: lane changes lasting hours)
@@ -509,22 +546,20 @@ def region_limit_state(model: CutInGMM, region: Region, rng: np.random.Generator
             ok, params = ok[keep], params[keep]
         if ok.size == 0 or params is None:
             return out
-        if not layered:
-            _, q = quantities(z[ok], params)  # the rows' parameters are known already
-            out[ok] = largest(q, list(cons))
+        if not self.layered:
+            _, q = self.quantities(z[ok], params)  # the rows' parameters are known already
+            out[ok] = self.largest(q, list(region.constraints))
             return out
-        q = region.quantities(params, other)
-        m_kin = largest(q, kin_cons)
+        q = region.quantities(params, self.other)
+        m_kin = self.largest(q, self.kin_cons)
         inside = m_kin <= 0
         out[ok[~inside]] = LAYER + m_kin[~inside]
         if inside.any():
             qc = {name: v[inside] for name, v in q.items()}
             qc.update(criticality_quantities(params[inside], region.lane_width,
-                                             with_ttr=with_ttr))
-            out[ok[inside]] = np.minimum(largest(qc, crit_cons), LAYER)
+                                             with_ttr=self.with_ttr))
+            out[ok[inside]] = np.minimum(self.largest(qc, self.crit_cons), LAYER)
         return out
-
-    return g
 
 
 #: a layered limit state's offset for rows outside the kinematic constraints (above every

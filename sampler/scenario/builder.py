@@ -145,30 +145,72 @@ def build_scenario(
     BuilderError
         Invalid settings, an invalid vector, or a vector that does not cross the marking.
     """
-    if isinstance(params, CutInParams):
-        p = params
-    else:
-        if not isinstance(params, Mapping):
-            raise BuilderError(f"params: expected a mapping of {PARAM_NAMES}, got {params!r}")
-        try:
-            p = CutInParams.from_mapping(params)
-        except (CutInParamError, TypeError, ValueError) as exc:
-            raise BuilderError(f"params: {exc}") from None
+    p = _vector(params)
     dt = _positive(dt, "dt", "s")
     if duration is not None:
         duration = _positive(duration, "duration", "s")
     lane_width = _positive(lane_width, "lane_width", "m")
+    lead_in = _lead_in(lead_in, duration)
+    ego_len, ego_wid = _size(ego_size, "ego_size")
+    cut_len, cut_wid = _size(cutter_size, "cutter_size")
+    if p.p_y1 == 0.0:
+        raise BuilderError("params.p_y1: is 0, the cutter would not change lanes")
+    path = trajectory(p)  # integrated once: the crossing and both grids below use it
+    tau_c, v_ego = _crossing(p, path, lane_width)
+    geometry = _Geometry(p, path, lead_in, tau_c, v_ego, lane_width, ego_len, ego_wid,
+                         cut_len, cut_wid)
+    # after t_settle nothing changes speed or heading: the resolution is exact from there
+    t_settle, n_settle = _settling(p, lead_in, dt)
+    t_pre = _time_grid(n_settle, dt)
+    ego_pre, cut_pre = geometry.tracks(t_pre)
+    t_res, how = conflict_resolution(t_pre, ego_pre, cut_pre)
+    n_steps = _steps(duration, dt, lead_in, t_res, how, t_settle, n_settle)
+    t = _time_grid(n_steps, dt)
+    ego, cutter = geometry.tracks(t)
+    prov: dict[str, Any] = {
+        "generator": GENERATOR,
+        "lead_in": float(lead_in),
+        "lane_width": lane_width,
+        "t_cross": lead_in + tau_c,
+        "t_resolved": t_res,
+        "resolution": how,
+        "v_ego": v_ego,
+        "cutter_start_side": "right" if p.p_y1 > 0 else "left",
+    }
+    if provenance:
+        prov.update(dict(provenance))
+    return ConcreteScenario(t=t, ego=ego, objects=(cutter,), params=p.as_dict(), seed=seed,
+                            provenance=prov)
+
+
+# the steps of build_scenario, in its order
+def _vector(params: Mapping[str, float] | CutInParams) -> CutInParams:
+    """The parameter vector, checked."""
+    if isinstance(params, CutInParams):
+        return params
+    if not isinstance(params, Mapping):
+        raise BuilderError(f"params: expected a mapping of {PARAM_NAMES}, got {params!r}")
+    try:
+        return CutInParams.from_mapping(params)
+    except (CutInParamError, TypeError, ValueError) as exc:
+        raise BuilderError(f"params: {exc}") from None
+
+
+def _lead_in(lead_in: float, duration: float | None) -> float:
+    """The lead-in as a float in [0, duration)."""
     if isinstance(lead_in, bool) or not isinstance(lead_in, int | float) or not (
             float(lead_in) >= 0.0 and math.isfinite(float(lead_in))):
         raise BuilderError(f"lead_in: must be a finite number >= 0 s, got {lead_in!r}")
     lead_in = float(lead_in)
     if duration is not None and not lead_in < duration:
         raise BuilderError(f"lead_in: must be in [0, duration) s, got {lead_in!r}")
-    ego_len, ego_wid = _size(ego_size, "ego_size")
-    cut_len, cut_wid = _size(cutter_size, "cutter_size")
-    if p.p_y1 == 0.0:
-        raise BuilderError("params.p_y1: is 0, the cutter would not change lanes")
-    path = trajectory(p)  # integrated once: the crossing and both grids below use it
+    return lead_in
+
+
+def _crossing(p: CutInParams, path: CutInTrajectory,
+              lane_width: float) -> tuple[float, float]:
+    """The cutter's crossing time of the marking (from the start of its lateral motion)
+    and the ego's speed, which meets the vector's dv there."""
     try:
         tau_c = path.crossing_time(lane_width / 2.0)
     except CutInParamError as exc:
@@ -180,19 +222,25 @@ def build_scenario(
             f"params: ego speed v_cutter(t_cross) + dv = {v_cut_c:.3f} + {p.dv:.3f} m/s "
             "is not positive"
         )
-    geometry = _Geometry(p, path, lead_in, tau_c, v_ego, lane_width, ego_len, ego_wid,
-                         cut_len, cut_wid)
-    # after t_settle nothing changes speed or heading: the resolution is exact from there
+    return tau_c, v_ego
+
+
+def _settling(p: CutInParams, lead_in: float, dt: float) -> tuple[float, int]:
+    """When the cutter's lane change and pulse are over, and the steps until then."""
     pulse_end = p.p_a2 + p.p_a3 if p.p_a3 > 0 else 0.0
     t_settle = lead_in + max(2.0 * p.p_t, pulse_end, 0.0)
     if t_settle > MAX_DURATION:
         raise BuilderError(
             f"params: the cutter's lane change and acceleration pulse last until "
             f"{t_settle:.1f} s; scenarios are at most {MAX_DURATION:.0f} s")
-    n_settle = math.ceil(t_settle / dt - 1e-9) + 1
-    t_pre = _time_grid(n_settle, dt)
-    ego_pre, cut_pre = geometry.tracks(t_pre)
-    t_res, how = conflict_resolution(t_pre, ego_pre, cut_pre)
+    return t_settle, math.ceil(t_settle / dt - 1e-9) + 1
+
+
+def _steps(duration: float | None, dt: float, lead_in: float, t_res: float, how: str,
+           t_settle: float, n_settle: int) -> int:
+    """The scenario's number of steps: the asked duration, checked against the conflict's
+    resolution and the cutter's settling, or (None) until the resolution plus the risk
+    horizon."""
     need = t_res - 1e-9 * max(1.0, t_res)
     if duration is None:
         # also until the cutter's motion has settled: a reacting ego (the criticality
@@ -219,23 +267,7 @@ def build_scenario(
         raise BuilderError(
             f"params: the conflict is resolved ({how}) only at {t_res:.1f} s; scenarios "
             f"are at most {MAX_DURATION:.0f} s and 100000 steps")
-    t = _time_grid(n_steps, dt)
-    ego, cutter = geometry.tracks(t)
-    t_c = lead_in + tau_c
-    prov: dict[str, Any] = {
-        "generator": GENERATOR,
-        "lead_in": float(lead_in),
-        "lane_width": lane_width,
-        "t_cross": t_c,
-        "t_resolved": t_res,
-        "resolution": how,
-        "v_ego": v_ego,
-        "cutter_start_side": "right" if p.p_y1 > 0 else "left",
-    }
-    if provenance:
-        prov.update(dict(provenance))
-    return ConcreteScenario(t=t, ego=ego, objects=(cutter,), params=p.as_dict(), seed=seed,
-                            provenance=prov)
+    return n_steps
 
 
 class _Geometry:

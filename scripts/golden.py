@@ -1,0 +1,122 @@
+"""Hashes of sampler outputs with fixed seeds, to show a refactoring of the sampler's long
+functions changed nothing bit for bit (issue 26 items 2 and 9; the HTTP/CLI side is
+scripts/behaviour_snapshot.py, which takes minutes).
+
+    .venv/bin/python scripts/golden.py record  /tmp/golden.json
+    .venv/bin/python scripts/golden.py compare /tmp/golden.json
+
+Cases: ``region_limit_state`` of several regions (one quantity, kinematic only, flat
+criticality, layered, support class) evaluated on fixed draws; ``subset_simulation`` on
+``ttc<3``; ``build_scenario`` on fixed vectors (with and without a duration, and its
+refusals); ``sample()`` with rejection and mcmc. Each output's bytes are hashed with
+SHA-256; ``compare`` prints the cases whose hash changed and exits 1 if any did.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from datasets import PARAM_NAMES
+from datasets.embedded import default_parameter_table
+from sampler import CutInGMM, sample
+from sampler.methods.subset import region_limit_state, subset_simulation
+from sampler.region.constraints import Region
+from sampler.scenario import build_scenario
+
+REGIONS = [["ttc<3"], ["ttc<2", "thw<1"], ["btn>0.5"], ["ttc<4", "btn>0.3"],
+           ["ttc<5", "gap<40", "ttr_true<3", "btn>0.05"], ["ttc<3", "support<=near"],
+           ["r157_impact_speed>0"], ["a_req>=3", "btn<=0.9"]]
+
+
+def _digest(*arrays: Any) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        if isinstance(a, np.ndarray | float | int):
+            h.update(np.ascontiguousarray(np.asarray(a, dtype=np.float64)).tobytes())
+        else:
+            h.update(json.dumps(a, sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
+def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
+    cases: dict[str, Callable[[], str]] = {}
+    z = model.sample_z(3000, np.random.default_rng(3))
+    for cons in REGIONS:
+        region = Region.from_constraints(cons, lane_width=model.lane_width_)
+
+        def g_case(region: Region = region) -> str:
+            return _digest(region_limit_state(model, region, np.random.default_rng(0))(z))
+        cases["limit_state " + " & ".join(cons)] = g_case
+
+    def subset_case() -> str:
+        region = Region.from_constraints(["ttc<3"], lane_width=model.lane_width_)
+        r = subset_simulation(model, region_limit_state(model, region,
+                                                        np.random.default_rng(5)), 5,
+                              n_per_level=500)
+        return _digest(r.probability, r.cov, r.cov_upper, r.n_evaluations, r.thresholds,
+                       r.conditional, r.gamma, r.delta, r.z)  # not r.seconds (wall clock)
+    cases["subset_simulation ttc<3"] = subset_case
+
+    x = model.params_matrix(model.sample(40, np.random.default_rng(11)))
+    rows = [dict(zip(PARAM_NAMES, map(float, r), strict=True)) for r in x]
+
+    def build_case() -> str:
+        out = []
+        for row in rows:
+            for kw in ({}, {"duration": 20.0}, {"lead_in": 0.0, "dt": 0.05},
+                       {"lane_width": 3.2, "ego_size": (4.0, 1.7), "seed": 3}):
+                try:
+                    s = build_scenario(row, **kw)  # type: ignore[arg-type]
+                except Exception as exc:  # a refusal is an output too
+                    out.append(f"{type(exc).__name__}: {exc}")
+                    continue
+                out.append(_digest(s.t, *(getattr(o, k) for o in (s.ego, *s.objects)
+                                          for k in ("x", "y", "psi", "v", "a")),
+                                   s.provenance, s.params))
+        for bad in ({"p_y1": 0.0}, {"dv": -40.0}):
+            try:
+                build_scenario({**rows[0], **bad})
+            except Exception as exc:
+                out.append(f"{type(exc).__name__}: {exc}")
+        return _digest(out)
+    cases["build_scenario"] = build_case
+
+    for method in ("rejection", "mcmc"):
+        def sample_case(method: str = method) -> str:
+            s = sample(model, ["ttc<3"], n=200, seed=7, method=method)
+            return _digest(np.asarray(s.params if hasattr(s, "params") else s))
+        cases[f"sample {method}"] = sample_case
+    return cases
+
+
+def main() -> None:
+    mode, path = sys.argv[1], sys.argv[2]
+    model = CutInGMM(k_range=(1, 6), n_report_samples=500).fit(default_parameter_table())
+    got = {}
+    for name, case in _cases(model).items():
+        try:
+            got[name] = case()
+        except Exception as exc:
+            got[name] = f"error {type(exc).__name__}: {exc}"
+        print(f"{got[name][:16]}  {name}")
+    if mode == "record":
+        with open(path, "w") as f:
+            json.dump(got, f, indent=1)
+        return
+    with open(path) as f:
+        before = json.load(f)
+    changed = [k for k in sorted(set(before) | set(got)) if before.get(k) != got.get(k)]
+    for k in changed:
+        print(f"CHANGED {k}: {before.get(k)} -> {got.get(k)}")
+    print("identical" if not changed else f"{len(changed)} changed")
+    sys.exit(1 if changed else 0)
+
+
+if __name__ == "__main__":
+    main()
