@@ -60,3 +60,31 @@ def test_executors_are_what_the_settings_say(cluster: Any) -> None:
     finally:
         dask.close()
         local.close()
+
+
+def _evaluate(data_dir: Path, **settings: Any) -> tuple[dict[str, Any], str]:
+    from app.services import evaluations
+
+    ctx = open_context(make_settings(data_dir, **settings))
+    try:
+        row = evaluations.create(ctx, sut="acc", n=240, seed=5, batch_size=120)
+        assert evaluations.run_job(ctx, row.id) == "done"
+        return evaluations.describe(ctx, row.id)["summary"], ctx.executor.name
+    finally:
+        ctx.close()
+
+
+@pytest.mark.slow
+def test_an_evaluation_gives_the_same_summary_inline_on_the_pool_and_on_dask(
+        cluster: Any, tmp_path: Path, model_cache_dir: Path) -> None:
+    """Issue 24 item 9: an evaluation job runs on the same executors as catalogues (the
+    local process pool, a dask.distributed cluster) with the same result as inline."""
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    inline, k0 = _evaluate(data_dir, local_workers=0)
+    local, k1 = _evaluate(data_dir, local_workers=2)
+    dask, k2 = _evaluate(data_dir, dask_scheduler=cluster.scheduler_address)
+    assert (k0, k1, k2) == ("inline", "local", "dask")
+    assert inline["runs"] == 240 and inline["sut_runs"] > 0
+    assert local == inline
+    assert dask == inline
