@@ -510,7 +510,7 @@
         ["τ (max)", esc(fmt(d.tau_max) + (d.tau_max === null ? " (no MCMC chain)" : ""))],
         ["effective sample size", esc(fmt(d.ess_total, 4))],
       ];
-      if (c.status !== "done") rows.push(["progress", esc(Math.round(100 * c.progress) + "%")]);
+      if (c.status !== "done") rows.push(["progress", esc(progressText(c))]);
       if (c.stage) rows.push(["stage", esc(stageText(c.stage))]);
       if (c.status === "done") {
         const href = "/catalogues/" + encodeURIComponent(c.id) + "/export?format=";
@@ -1113,14 +1113,25 @@
     return stage.name + counts;
   }
 
+  // "11 % (33 of 300 scenarios computed, 0 stored)": the percentage counts the scenarios
+  // the workers report done, chunks are stored whole (before, the counts were the stored
+  // ones only: "running 11 % (0 of 300 scenarios)")
+  function progressText(info) {
+    const done = info.scenarios_done === undefined ? info.scenarios_stored
+      : info.scenarios_done;
+    return Math.round(100 * info.progress) + " % (" + done.toLocaleString("en") + " of " +
+      info.n.toLocaleString("en") + " scenarios computed" +
+      (info.scenarios_stored !== done ? ", " + info.scenarios_stored.toLocaleString("en") +
+       " stored" : "") + ")";
+  }
+
   function waitFor(id, status) {
     return new Promise((resolve, reject) => {
       const tick = async () => {
         try {
           const info = await api("/catalogues/" + encodeURIComponent(id));
           status.textContent = "catalogue " + id + ": " + info.status + " " +
-            Math.round(100 * info.progress) + "% (" + info.scenarios_stored + " of " + info.n +
-            " scenarios)" + (info.stage ? " · " + stageText(info.stage) : "");
+            progressText(info) + (info.stage ? " · " + stageText(info.stage) : "");
           if (info.status === "queued" || info.status === "running") {
             setTimeout(tick, 400);
           } else {

@@ -248,3 +248,31 @@ def test_the_riskiest_table_sorts_filters_and_fits(server: Server, real_catalogu
     n = sum(status["support"].values())
     for name, k in status["support"].items():
         assert f"{name} {k} ({100 * k / n:.2g} %)" in info or f"{name} {k} (" in info, info
+
+
+# --------------------------------------------------------------------------- progress
+def test_a_running_catalogues_progress_counts_what_is_computed(server: Server,
+                                                               page: Page) -> None:
+    """The draw status said "running 11 % (0 of 300 scenarios)": the percentage counts the
+    scenarios the workers have computed, the count was the stored ones (whole chunks)."""
+    from app.db import chunkfile
+    from app.db import repository as repo
+
+    cid = server.catalogue(n=30, seed=4, chunk_size=10)  # three chunks stored
+    db = server.db()
+    try:
+        with db.session() as s:  # ... of 300, the fourth chunk computing
+            row = repo.get_catalogue(s, cid)
+            row.status, row.n, row.n_chunks = "running", 300, 30
+    finally:
+        db.dispose()
+    folder = chunkfile.progress_dir(server.data_dir, cid)
+    folder.mkdir(parents=True, exist_ok=True)
+    chunkfile.write_progress(folder, 3, 7)
+    status = httpx.get(f"{server.base}/catalogues/{cid}").json()
+    assert (status["scenarios_done"], status["scenarios_stored"]) == (37, 30)
+    page.goto(f"{server.base}/dashboard/catalogues/{cid}")
+    settle(page)
+    info = page.locator("#catalogue-info").inner_text()
+    assert "12 % (37 of 300 scenarios computed, 30 stored)" in info, info
+    shot(page, "#catalogue-info", "ux-3-running-progress.png")
