@@ -95,10 +95,15 @@ MAX_CORNER_POINTS = 400
 DENSITY_POINTS = 120
 #: bins of the per-parameter histograms
 PARAM_BINS = 30
-#: bins of the risk histograms over [0, 1] (width 0.05)
-RISK_BINS = 20
+#: edges of the r_dep-at-t_p histograms: [0, 1e-8), then half decades up to 1. r_dep at
+#: t_p is exactly 0 for most cut-ins and spans 1e-7 ... 1 for the rest, so 20 bins of 0.05
+#: showed one spike at 0 (issue 25)
+RISK_LOG_EDGES: tuple[float, ...] = (0.0, *(10.0 ** (k / 2) for k in range(-16, 1)))
 #: largest number of bins of the other criticality histograms (``nice_edges``)
 CRITICALITY_BINS = 40
+#: largest number of bins of the impact-speed histograms (three drivers side by side:
+#: 40 bins made a comb of thin bars)
+IMPACT_BINS = 20
 #: rows of the "riskiest scenarios" table
 TOP_N = 10
 #: what each criticality class means, for the page (docs/criticality.md)
@@ -435,12 +440,12 @@ def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, A
             for _, c, hit in speeds:
                 rng = queries.finite_range(s, catalogue_id, c, [hit])
                 hi = max(hi, rng[1]) if rng else hi
-            speed_edges = nice_edges(0.0, hi, CRITICALITY_BINS)
+            speed_edges = nice_edges(0.0, hi, IMPACT_BINS)
             impact = [{"driver": d, "label": DRIVER_LABELS[d],
                        "histogram": queries.column_histogram(s, catalogue_id, c, speed_edges,
                                                              [hit])}
                       for d, c, hit in speeds]
-            risk_edges = nice_edges(0.0, 1.0, RISK_BINS)
+            risk_edges = np.asarray(RISK_LOG_EDGES)
             r_dep_tp = {name: queries.column_histogram(s, catalogue_id, col(field),
                                                        risk_edges, [scored])
                         for name, field in (("scripted", "r_dep_tp"),

@@ -602,18 +602,30 @@
 
   async function drawClasses(div, view, id) {
     const total = view.classes.reduce((a, k) => a + k.count, 0);
+    const counts = view.classes.map((k) => k.count);
+    const top = Math.max(1, ...counts);
+    // a class with a handful of scenarios beside one with hundreds is a bar of one pixel:
+    // then the counts go on a log axis (a lone unpreventable cut-in was invisible)
+    const log = counts.some((c) => c > 0 && c < 0.01 * top);
+    const label = (c) => c + " (" + fmt(total ? 100 * c / total : 0, 3) + "%)";
+    const x = view.classes.map((k) => wrapLabel(k.label, 24));
     await draw(div, [{
-      type: "bar", x: view.classes.map((k) => wrapLabel(k.label, 24)),
-      y: view.classes.map((k) => k.count),
+      type: "bar", x: x,
+      y: log ? counts.map((c) => (c > 0 ? c : null)) : counts,
       customdata: view.classes.map((k) => k.name),
-      text: view.classes.map((k) => k.count + " (" + fmt(total ? 100 * k.count / total : 0, 3) +
-                             "%)"),
+      text: counts.map((c) => (log && c === 0 ? "" : label(c))),
       textposition: "outside", cliponaxis: false,
       marker: { color: view.classes.map((k) => CLASS_COLORS[k.name]) },
       hovertemplate: "%{customdata}: %{y} scenarios<extra></extra>",
-    }], { title: { text: "Criticality classes (" + total + " scored scenarios)",
-                   font: { size: 12 } },
-          yaxis: { title: { text: "scenarios" }, rangemode: "tozero" },
+    }], { title: { text: "Criticality classes (" + total + " scored scenarios)" +
+                         (log ? ", log scale" : ""), font: { size: 12 } },
+          yaxis: log ? { title: { text: "scenarios (log scale)" }, type: "log", dtick: 1,
+                         range: [Math.log10(0.5), Math.log10(top * 4)] }
+            : { title: { text: "scenarios" }, rangemode: "tozero" },
+          // on the log axis an empty class has no bar: its "0" is written at the bottom
+          annotations: log ? counts.map((c, i) => (c > 0 ? null : {
+            x: x[i], y: Math.log10(0.7), text: label(0), showarrow: false,
+            font: { size: 11 } })).filter((a) => a) : [],
           xaxis: { automargin: true, tickfont: { size: 10 } },
           margin: { l: 48, r: 12, t: 36, b: 20 }, showlegend: false }, id);
   }
@@ -670,35 +682,60 @@
       return;
     }
     const n = view.n_scored;
-    await draw(div, drivers.map((d) => bars(
+    // only the drivers that collide get bars (an empty driver's share of each group made
+    // the others' bars a comb of thin lines); the others are named in a note
+    const none = drivers.filter((d) => d.histogram.n === 0)
+      .map((d) => d.label + ": 0 of " + n + " collide");
+    await draw(div, hits.map((d) => bars(
       d.histogram, d.label + ": " + d.histogram.n + " of " + n + " collide",
       DRIVER_COLORS[d.driver], "counts", { width: null })), {
-      barmode: "group", bargap: 0.1,
+      barmode: "group", bargap: 0.08, bargroupgap: 0,
       title: { text: "Impact speed of the colliding scenarios, per reference driver",
                font: { size: 12 } },
       legend: { orientation: "h", x: 0, y: -0.22, font: { size: 10 } },
+      showlegend: true,
       margin: { l: 48, r: 12, t: 30, b: 78 },
       xaxis: { title: { text: "relative speed at contact [m/s]" } },
       yaxis: { title: { text: "scenarios" } },
+      annotations: none.length ? [note(none.join("<br>"))] : [],
     }, id);
   }
 
+  // r_dep at t_p on a log axis: most cut-ins have exactly 0 at t_p (the first bin,
+  // [0, 1e-8), is counted in the legend, not drawn: as a bar it flattened the others), the
+  // others spread over seven decades in half-decade bins
   async function drawRiskAtTp(div, view, id) {
     const h = view.r_dep_tp;
     if (!h.scripted.n_finite) {
       clearPlot(div, "No scenario has Wagner's risk at t_p (no perception moment found).");
       return;
     }
+    const trace = (hist, name, color) => {
+      const e = hist.edges.slice(1).map((v) => Math.log10(v));
+      return { type: "bar", name: name + ": " + hist.counts[0] + " of " + hist.n_finite +
+               " below 1e-8 (most exactly 0), not drawn",
+               x: centres(e), y: hist.counts.slice(1), marker: { color: color },
+               customdata: hist.counts.slice(1).map((_, i) => fmt(hist.edges[i + 1], 2) +
+                                                     " … " + fmt(hist.edges[i + 2], 2)),
+               hovertemplate: "r_dep %{customdata}: %{y} scenarios<extra>" + name +
+                 "</extra>" };
+    };
+    const low = Math.round(Math.log10(h.scripted.edges[1]));
+    const ticks = [];
+    for (let k = low; k <= 0; k++) ticks.push(k);
+    const drawn = h.scripted.counts.slice(1).concat(h.r157.counts.slice(1));
     await draw(div, [
-      bars(h.scripted, "scripted ego", COLORS.r_dep, "counts", { width: null }),
-      bars(h.r157, "R157 driver's ego", COLORS.r_ind, "counts", { width: null }),
+      trace(h.scripted, "scripted ego", COLORS.r_dep),
+      trace(h.r157, "R157 driver's ego", COLORS.r_ind),
     ], {
-      barmode: "group", bargap: 0.1,
-      title: { text: "Wagner's risk r_dep at the perception moment t_p", font: { size: 12 } },
-      legend: { x: 0.98, xanchor: "right", y: 0.98, orientation: "v",
-                bgcolor: "rgba(255,255,255,0.85)", font: { size: 10 } },
-      xaxis: { title: { text: "r_dep at t_p (0 … 1)" }, range: [0, 1] },
-      yaxis: { title: { text: "scenarios" } },
+      barmode: "group", bargap: 0.1, bargroupgap: 0,
+      title: { text: "Wagner's risk r_dep at the perception moment t_p (log scale)",
+               font: { size: 12 } },
+      legend: { orientation: "h", x: 0, y: -0.22, font: { size: 10 } },
+      margin: { l: 48, r: 12, t: 30, b: 78 },
+      xaxis: { title: { text: "r_dep at t_p (half-decade bins)" }, tickvals: ticks,
+               ticktext: ticks.map((k) => (k === 0 ? "1" : "1e" + k)), range: [low, 0] },
+      yaxis: { title: { text: "scenarios" }, range: [0, 1.15 * Math.max(1, ...drawn)] },
     }, id);
   }
 

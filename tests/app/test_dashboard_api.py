@@ -199,16 +199,19 @@ def test_catalogue_criticality_view_counts_by_hand(client: TestClient) -> None:
     ttr = view["ttr_true"]
     assert _nonzero(ttr) == {0.0: 1, 0.4: 1, 1.0: 1, 1.3: 1, 1.95: 1}
     assert ttr["n_inf"] == 1 and ttr["n_null"] == 0
-    # impact speeds of the colliding ones only: largest 10 m/s -> width 0.25 on 0 ... 10
+    # impact speeds of the colliding ones only: largest 10 m/s -> width 0.5 on 0 ... 10
+    # (at most 20 bins: 40 made a comb of thin bars, issue 25)
     speeds = {d["driver"]: d["histogram"] for d in view["impact_speed"]}
     assert speeds["none"]["n"] == 5 and speeds["r157_cc"]["n"] == 2 and speeds["rss"]["n"] == 3
-    assert speeds["none"]["edges"][1] == 0.25 and speeds["none"]["edges"][-1] == 10.0
-    assert _nonzero(speeds["r157_cc"]) == {2.0: 1, 7.75: 1}
-    assert _nonzero(speeds["none"]) == {3.0: 1, 4.0: 1, 6.0: 1, 8.5: 1, 9.75: 1}
-    # r_dep at t_p on 20 bins of 0.05 over [0, 1]
+    assert speeds["none"]["edges"][1] == 0.5 and speeds["none"]["edges"][-1] == 10.0
+    assert _nonzero(speeds["r157_cc"]) == {2.0: 1, 7.5: 1}
+    assert _nonzero(speeds["none"]) == {3.0: 1, 4.0: 1, 6.0: 1, 8.5: 1, 9.5: 1}
+    # r_dep at t_p: [0, 1e-8), then half decades 1e-8, 10^-7.5, ..., 1 (issue 25: 20 linear
+    # bins drew one spike); 0 | 0.02 in [0.01, 0.0316) | 0.07 in [0.0316, 0.1) | 0.3 in
+    # [0.1, 0.316) | 0.5 and 0.95 in [0.316, 1]
     r_dep = view["r_dep_tp"]["scripted"]
-    assert len(r_dep["counts"]) == 20
-    assert _nonzero(r_dep) == {0.0: 2, 0.05: 1, 0.3: 1, 0.5: 1, 0.95: 1}
+    assert len(r_dep["counts"]) == 17 and r_dep["edges"][:2] == [0.0, 1e-8]
+    assert _nonzero(r_dep) == {0.0: 1, 0.01: 1, 0.031622777: 1, 0.1: 1, 0.316227766: 2}
     assert _nonzero(view["r_dep_tp"]["r157"]) == {0.0: 6}
     # alarm time: 4 values, 2 never (null)
     alarm = view["alarm_time"]

@@ -276,3 +276,64 @@ def test_a_running_catalogues_progress_counts_what_is_computed(server: Server,
     info = page.locator("#catalogue-info").inner_text()
     assert "12 % (37 of 300 scenarios computed, 30 stored)" in info, info
     shot(page, "#catalogue-info", "ux-3-running-progress.png")
+
+
+# --------------------------------------------------------------------------- view 3 plots
+def _lopsided_rows(n: int) -> list[dict[str, Any]]:
+    """n synthetic rows: one unpreventable cut-in among preventable ones, r_dep at t_p
+    exactly 0 for 5 in 6 and 1e-7 ... 1e-1 for the rest, no RSS collision."""
+    import numpy as np
+
+    from tests.browser.factories import synthetic_rows
+
+    rows = synthetic_rows(n, 21, 100)
+    rng = np.random.default_rng(5)
+    for i, r in enumerate(rows):
+        r["class_"] = "unpreventable" if i == 7 else "preventable"
+        r["r_dep_tp"] = 0.0 if i % 6 else float(10.0 ** rng.uniform(-7.0, -1.0))
+        r["rss_collision"], r["rss_impact_speed"] = False, 0.0
+    return rows
+
+
+def test_class_bars_risk_at_tp_and_impact_speeds_are_readable(server: Server,
+                                                              page: Page) -> None:
+    """A single unpreventable case was invisible in the class bars, the r_dep-at-t_p
+    histogram one spike at 0 and the impact speeds a comb of thin bars."""
+    n = 300
+    rows = _lopsided_rows(n)
+    cid = server.catalogue(rows=rows, n=n, seed=21, chunk_size=100)
+    page.goto(f"{server.base}/dashboard/catalogues/{cid}")
+    settle(page)
+    # the lone unpreventable bar is drawn tall enough to see (log axis)
+    bars = page.locator("#class-counts .barlayer .point path")
+    heights = [(bars.nth(i).bounding_box() or {"height": 0.0})["height"]
+               for i in range(bars.count())]
+    classes = traces(page, "class-counts")[0]
+    assert classes["y"][2] == 1  # unpreventable
+    assert heights[2] >= 10, heights
+    # r_dep at t_p: the positive values on half decades, the zeros counted, not drawn
+    positive = [r["r_dep_tp"] for r in rows if r["r_dep_tp"] > 0]
+    drawn = {t["name"].split(":")[0]: t for t in traces(page, "rdep-hist")}
+    scripted = drawn["scripted ego"]
+    assert sum(scripted["y"]) == len(positive) == 50
+    assert min(scripted["x"]) > -8 and max(scripted["x"]) < 0  # log10 of the bin centres
+    assert f"{n - len(positive)} of {n} below 1e-8" in scripted["name"]
+    # hand binning: half decade k holds [10^(k/2), 10^((k+1)/2)); bar centres are log10
+    got = {math.floor(2 * x): y for x, y in zip(scripted["x"], scripted["y"], strict=True)
+           if y}
+    want: dict[int, int] = {}
+    for v in positive:
+        k = math.floor(2 * math.log10(v))
+        want[k] = want.get(k, 0) + 1
+    assert got == want
+    # impact speeds: only the colliding drivers get bars (RSS: none), at most 20 bins
+    impact = traces(page, "impact-hist")
+    assert [t["name"].split(":")[0] for t in impact] == ["no reaction (scripted ego)",
+                                                         "R157 careful driver"]
+    assert all(len(t["x"]) <= 20 for t in impact)
+    assert "RSS response: 0 of 300 collide" in (page.locator("#impact-hist").text_content()
+                                                or "")
+    widths = [(b.bounding_box() or {"width": 0.0})["width"]
+              for b in page.locator("#impact-hist .barlayer .point path").all()]
+    assert min(w for w in widths if w > 0) >= 6, widths
+    shot(page, "#view-risk", "ux-3-readable-histograms.png")
