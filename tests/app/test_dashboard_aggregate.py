@@ -319,6 +319,6 @@ def test_shift_bins_hold_both_samples() -> None:
     views = _shift(pd.DataFrame({n: ref for n in domain.PARAM_NAMES}),
                    pd.DataFrame({n: con for n in domain.PARAM_NAMES}))
     for view in views:
-        hist = view["constrained"]
-        assert hist["below"] + hist["above"] <= 2, view["name"]  # only the 0.5 % tails
-        assert sum(hist["counts"]) >= 98
+        hist = view.constrained
+        assert hist.below + hist.above <= 2, view.name  # only the 0.5 % tails
+        assert sum(hist.counts) >= 98
