@@ -170,32 +170,13 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
     to_z: Callable[[FloatArray], FloatArray] = (
         from_normal if from_normal is not None
         else (lambda u: mixture_from_normal(model, u)))
-    state: dict[str, Any] = {"evals": 0, "best": math.inf, "stopped": False,
-                             "exhausted": False, "inside": 0}
-    deadline = time.monotonic() + float(max_seconds)
-
     # levels needed to go below min_probability, plus slack: a region that the levels
     # cannot reach (empty, or g stuck above 0) ends here instead of running on
     max_levels = math.ceil(math.log(min_probability) / math.log(p0)) + 5
-    max_evals = (max_levels + 1) * blocks * chains
+    budget = _Budget(limit_state, to_z, deadline=time.monotonic() + float(max_seconds),
+                     max_evals=(max_levels + 1) * blocks * chains)
 
-    def g_u(u_sample: Any) -> Any:
-        if time.monotonic() > deadline:
-            state["stopped"] = True
-            raise _Stop
-        if int(state["evals"]) >= max_evals:
-            state["exhausted"] = True
-            raise _Stop
-        u = np.asarray(u_sample, dtype=np.float64)
-        g = np.asarray(limit_state(to_z(u)), dtype=np.float64)
-        state["evals"] = int(state["evals"]) + u.shape[0]
-        g = np.where(np.isfinite(g), g, _BIG)
-        if g.size:
-            state["best"] = min(float(state["best"]), float(g.min()))
-            state["inside"] = int(state["inside"]) + int(np.count_nonzero(g <= 0))
-        return g[:, None]
-
-    fun = ot.PythonFunction(d + 1, 1, func_sample=g_u)
+    fun = ot.PythonFunction(d + 1, 1, func_sample=budget)
     event = ot.ThresholdEvent(ot.CompositeRandomVector(fun, ot.RandomVector(ot.Normal(d + 1))),
                               ot.LessOrEqual(), 0.0)
     t0 = time.monotonic()
@@ -211,40 +192,8 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         try:
             algo.run()
         except RuntimeError as exc:
-            if state["stopped"]:
-                raise SamplerError(
-                    f"subset simulation: stopped after max_seconds={max_seconds:g} s "
-                    f"({state['evals']} evaluations, lowest g so far {state['best']:.3g}); "
-                    "raise max_seconds or n_per_level's budget") from None
-            stall = _stalled([float(b) for b in algo.getThresholdPerStep()])
-            if state["exhausted"]:
-                if int(state["inside"]) > 0:
-                    # rows inside A were met, but the thresholds never reached 0: the
-                    # levels' chains barely move (a thin region); their product of
-                    # conditional probabilities is then no bound on P(A)
-                    raise LevelsNotConvergedError(
-                        f"subset simulation met the region ({state['inside']} evaluated rows "
-                        f"inside it) but its levels did not converge on it in {max_levels} "
-                        f"levels ({state['evals']} evaluations): the region is probably too "
-                        "thin for the levels' Markov chains (e.g. a narrow ttc band)",
-                        n_draws=int(state["evals"]), n_hits=int(state["inside"])) from None
-                raise EmptyRegionError(
-                    f"subset simulation did not reach the region in {max_levels} levels "
-                    f"({state['evals']} evaluations, lowest g {state['best']:.3g} > 0): it is "
-                    f"empty or holds less than min_probability={min_probability:g}"
-                    + _stall_note(stall),
-                    n_draws=int(state["evals"]), n_hits=0, p_upper=min_probability,
-                    stalled=stall) from None
-            if "too small" not in str(exc):
-                raise SamplerError(f"subset simulation failed: {str(exc).splitlines()[0]}"
-                                   ) from None
-            cumulative = [float(p) for p in algo.getProbabilityEstimatePerStep()]
-            p_up = min([*cumulative, 1.0])
-            raise EmptyRegionError(
-                f"subset simulation went below min_probability={min_probability:g} "
-                f"(P = {p_up:.3g} after {algo.getStepsNumber()} levels) without reaching "
-                "the region: it holds less mass than that" + _stall_note(stall),
-                n_draws=int(state["evals"]), n_hits=0, p_upper=p_up, stalled=stall) from None
+            raise _failure(exc, algo, budget, max_seconds=max_seconds, max_levels=max_levels,
+                           min_probability=min_probability) from None
         except TypeError as exc:
             # OpenTURNS 1.27 refuses to finish when the last level holds every sample
             # (conditional probability 1: zero variance, gamma NaN); the levels are complete
@@ -257,29 +206,109 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         gamma = [float(x) if math.isfinite(x) else 0.0 for x in algo.getGammaPerStep()]
         u_final = np.asarray(algo.getInputSample(steps - 1, ot.SubsetSampling.EVENT1),
                              dtype=np.float64)
-        probability = cumulative[-1]
-    n = blocks * chains
-    stall = _stalled(thresholds)
     if thresholds[-1] > 0:
         raise EmptyRegionError(
             f"subset simulation reached P = {cumulative[-1]:.3g} after {steps} levels "
             f"(min_probability={min_probability:g}) with the limit state still above 0 "
             f"(threshold {thresholds[-1]:.3g}): the region holds less mass than that"
+            + _stall_note(_stalled(thresholds)),
+            n_draws=budget.evals, n_hits=0, p_upper=cumulative[-1],
+            stalled=_stalled(thresholds))
+    return _levels_result(cumulative, thresholds, gamma, steps, blocks * chains,
+                          n_evaluations=budget.evals,
+                          z=to_z(u_final) if u_final.size else np.zeros((0, d)),
+                          seconds=time.monotonic() - t0)
+
+
+@dataclass
+class _Budget:
+    """The limit state as OpenTURNS calls it, on standard normal rows: counts the
+    evaluations, the rows inside and the lowest g, and stops the run (``_Stop``) past the
+    deadline (``stopped``) or the evaluation budget (``exhausted``)."""
+
+    limit_state: LimitState
+    to_z: Callable[[FloatArray], FloatArray]
+    deadline: float
+    max_evals: int
+    evals: int = 0
+    best: float = math.inf
+    inside: int = 0
+    stopped: bool = False
+    exhausted: bool = False
+
+    def __call__(self, u_sample: Any) -> Any:
+        if time.monotonic() > self.deadline:
+            self.stopped = True
+            raise _Stop
+        if self.evals >= self.max_evals:
+            self.exhausted = True
+            raise _Stop
+        u = np.asarray(u_sample, dtype=np.float64)
+        g = np.asarray(self.limit_state(self.to_z(u)), dtype=np.float64)
+        self.evals += u.shape[0]
+        g = np.where(np.isfinite(g), g, _BIG)
+        if g.size:
+            self.best = min(self.best, float(g.min()))
+            self.inside += int(np.count_nonzero(g <= 0))
+        return g[:, None]
+
+
+def _failure(exc: RuntimeError, algo: Any, budget: _Budget, *, max_seconds: float,
+             max_levels: int, min_probability: float) -> Exception:
+    """What a run OpenTURNS stopped with ``exc`` means: out of time, levels that met the
+    region but did not converge on it, a region not reached (empty or below
+    ``min_probability``), or another failure."""
+    if budget.stopped:
+        return SamplerError(
+            f"subset simulation: stopped after max_seconds={max_seconds:g} s "
+            f"({budget.evals} evaluations, lowest g so far {budget.best:.3g}); "
+            "raise max_seconds or n_per_level's budget")
+    stall = _stalled([float(b) for b in algo.getThresholdPerStep()])
+    if budget.exhausted:
+        if budget.inside > 0:
+            # rows inside A were met, but the thresholds never reached 0: the
+            # levels' chains barely move (a thin region); their product of
+            # conditional probabilities is then no bound on P(A)
+            return LevelsNotConvergedError(
+                f"subset simulation met the region ({budget.inside} evaluated rows "
+                f"inside it) but its levels did not converge on it in {max_levels} "
+                f"levels ({budget.evals} evaluations): the region is probably too "
+                "thin for the levels' Markov chains (e.g. a narrow ttc band)",
+                n_draws=budget.evals, n_hits=budget.inside)
+        return EmptyRegionError(
+            f"subset simulation did not reach the region in {max_levels} levels "
+            f"({budget.evals} evaluations, lowest g {budget.best:.3g} > 0): it is "
+            f"empty or holds less than min_probability={min_probability:g}"
             + _stall_note(stall),
-            n_draws=int(state["evals"]), n_hits=0, p_upper=cumulative[-1], stalled=stall)
+            n_draws=budget.evals, n_hits=0, p_upper=min_probability, stalled=stall)
+    if "too small" not in str(exc):
+        return SamplerError(f"subset simulation failed: {str(exc).splitlines()[0]}")
+    cumulative = [float(p) for p in algo.getProbabilityEstimatePerStep()]
+    p_up = min([*cumulative, 1.0])
+    return EmptyRegionError(
+        f"subset simulation went below min_probability={min_probability:g} "
+        f"(P = {p_up:.3g} after {algo.getStepsNumber()} levels) without reaching "
+        "the region: it holds less mass than that" + _stall_note(stall),
+        n_draws=budget.evals, n_hits=0, p_upper=p_up, stalled=stall)
+
+
+def _levels_result(cumulative: list[float], thresholds: list[float], gamma: list[float],
+                   steps: int, n: int, *, n_evaluations: int, z: FloatArray,
+                   seconds: float) -> SubsetResult:
+    """The estimate of converged levels: the product of the levels' conditional
+    probabilities and its coefficient of variation (Au & Beck 2001; delta_j per level)."""
     conditional = [cumulative[0]] + [cumulative[j] / cumulative[j - 1] if cumulative[j - 1] > 0
                                      else 0.0 for j in range(1, steps)]
     gamma = [0.0, *gamma[1:steps]]
     delta = [math.sqrt((1 - p) / (n * p) * (1 + g)) if p > 0 else math.inf
              for p, g in zip(conditional, gamma, strict=True)]
     return SubsetResult(
-        probability=probability,
+        probability=cumulative[-1],
         cov=float(math.sqrt(sum(x * x for x in delta))),
         cov_upper=float(sum(delta)),
-        n_evaluations=int(state["evals"]),
+        n_evaluations=n_evaluations,
         thresholds=thresholds, conditional=conditional, gamma=gamma, delta=delta,
-        z=to_z(u_final) if u_final.size else np.zeros((0, d)),
-        n_per_level=n, seconds=time.monotonic() - t0)
+        z=z, n_per_level=n, seconds=seconds)
 
 
 #: this many levels in a row with one and the same threshold: the levels have stalled
