@@ -43,17 +43,28 @@ def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
     return {k: summary.get(k) for k in keys}
 
 
-def careful_evaluation(ctx: ServiceContext, model_id: str,
-                       constraints: list[str]) -> dict[str, Any] | None:
+def _sim_key(settings: dict[str, Any] | None) -> dict[str, Any]:
+    """Simulator settings with the defaults filled in ({} and {"dt": 0.01} are the same
+    simulator); settings that no longer parse are compared as given."""
+    rs = importlib.import_module("riskcore.sut")
+    try:
+        return dict(rs.SimSettings.from_dict(dict(settings or {})).to_dict())
+    except (TypeError, ValueError, KeyError):
+        return dict(settings or {})
+
+
+def careful_evaluation(ctx: ServiceContext, model_id: str, constraints: list[str],
+                       settings: dict[str, Any] | None = None) -> dict[str, Any] | None:
     """The latest finished evaluation of the careful driver on the same model and region
-    (``status`` "done", its ``figures``); else the latest one still queued or running
-    (``figures`` null, its progress); else None."""
+    under the same simulator settings (``status`` "done", its ``figures``); else the
+    latest one still queued or running (``figures`` null, its progress); else None."""
     best = None
     pending = None
     for row in service.list_all(ctx):
         spec = row.spec or {}
         if (row.sut == CAREFUL and row.model_id == model_id
-                and list(spec.get("constraints", [])) == list(constraints)):
+                and list(spec.get("constraints", [])) == list(constraints)
+                and _sim_key(spec.get("settings")) == _sim_key(settings)):
             if row.status == "done":
                 best = row
             elif row.status in ("queued", "running"):
@@ -119,7 +130,8 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
     return EvaluationOverview(
         evaluation=EvaluationBrief(**{k: st[k] for k in EvaluationBrief.model_fields}),
         figures=_figures(st["summary"]),
-        careful=careful_evaluation(ctx, st["model"], list(st["constraints"])),
+        careful=careful_evaluation(ctx, st["model"], list(st["constraints"]),
+                                   st["spec"].get("settings")),
         careful_request=careful_request(st),
         failures_total=failures_total,
         failures=jsonconv.encode(failures),

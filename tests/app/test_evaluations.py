@@ -427,3 +427,36 @@ def test_the_dashboard_says_how_to_get_the_careful_drivers_rate(eval_client: Any
     req2 = eval_client.get(f"/dashboard/api/evaluations/{eid2}").json()["careful_request"]
     assert req2 == {"sut": "r157_cc", "model": model, "constraints": ["v_ego>26"], "seed": 4,
                     "rhw": 0.5, "max_runs": 40}
+
+
+def test_the_careful_drivers_rate_is_one_under_the_same_simulator_settings(
+        eval_client: Any) -> None:
+    """The careful driver's figures shown beside a SUT's come from an evaluation with the
+    same simulator settings (a perception delay or a coarser step changes its rate): one
+    under other settings is not shown, and the view offers the request that makes it."""
+    ctx = eval_client.app.state.ctx
+    settings = {"perception_delay": 0.3}
+    eid = eval_client.post("/evaluations", json={
+        "sut": "acc", "n": 40, "seed": 6, "constraints": ["v_ego>27"],
+        "settings": settings}).json()["id"]
+    _done(eval_client, eid)
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    model = view["evaluation"]["model"]
+    other = service.create(ctx, sut="r157_cc", model=model, constraints=["v_ego>27"],
+                           seed=6, n=40)  # default settings
+    assert service.run_job(ctx, other.id) == "done"
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    assert view["careful"] is None
+    assert view["careful_request"]["settings"] == settings
+    same = service.create(ctx, **view["careful_request"])
+    assert service.run_job(ctx, same.id) == "done"
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    assert view["careful"]["id"] == same.id
+    # and a SUT evaluation with the default settings (dt 0.01 given explicitly is the
+    # default) is shown beside the default-settings one
+    eid2 = eval_client.post("/evaluations", json={
+        "sut": "acc", "n": 40, "seed": 6, "constraints": ["v_ego>27"],
+        "settings": {"dt": 0.01}}).json()["id"]
+    _done(eval_client, eid2)
+    assert eval_client.get(f"/dashboard/api/evaluations/{eid2}").json()[
+        "careful"]["id"] == other.id
