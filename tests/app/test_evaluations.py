@@ -120,6 +120,7 @@ def test_suts_route_lists_what_the_registry_holds(eval_client: Any) -> None:
 
 
 # --------------------------------------------------------------------------- job
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_an_evaluation_runs_stores_its_runs_and_pages_them(eval_client: Any) -> None:
     r = eval_client.post("/evaluations", json={"sut": "acc", "n": 3000, "batch_size": 1000,
                                                "seed": 3})
@@ -199,6 +200,7 @@ def test_delete_cancels_and_removes(eval_client: Any) -> None:
 
 
 # --------------------------------------------------------------------------- resume
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_an_interrupted_job_resumes_from_its_stored_chunks(
         model_cache_dir: Path, tmp_path: Path, database_url: str) -> None:
     """Stop after 2 of 5 chunks, resume: the stored chunks are replayed, not simulated
@@ -276,6 +278,7 @@ def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
     return runner
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_cli_evaluate_prints_the_summary_and_writes_every_run(
         store: Path, tmp_path: Path, cli_runner: CountingRunner,
         capsys: pytest.CaptureFixture[str]) -> None:
@@ -306,6 +309,7 @@ def test_cli_evaluate_prints_the_summary_and_writes_every_run(
     assert rates and max(rates) < 1e7
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_cli_evaluate_is_deterministic(store: Path, cli_runner: CountingRunner,
                                        capsys: pytest.CaptureFixture[str]) -> None:
     from app.cli import main
@@ -317,6 +321,7 @@ def test_cli_evaluate_is_deterministic(store: Path, cli_runner: CountingRunner,
     assert capsys.readouterr().out == first
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_cli_evaluate_takes_a_module_path(store: Path, cli_runner: CountingRunner,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     from app.cli import main

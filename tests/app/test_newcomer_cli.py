@@ -62,6 +62,7 @@ def test_a_read_command_elsewhere_creates_nothing_and_names_the_store(
     assert not no_store_env.exists()                # and no empty store either
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_not_found_names_the_store_and_data_dir_works_before_and_after_the_command(
         store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
@@ -141,6 +142,7 @@ def test_sample_uses_the_default_model_when_none_is_given(
 
 
 # --------------------------------------------------------------------------- item 4
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_export_to_a_missing_directory_is_one_line_exit_2(
         store: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["catalogue", "create", "-n", "2", "--no-score", "-q"]) == 0
@@ -152,6 +154,7 @@ def test_export_to_a_missing_directory_is_one_line_exit_2(
     assert "/nonexistent" in err and "Traceback" not in err
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_an_export_failure_inside_the_service_is_one_line(
         store: Path, capsys: pytest.CaptureFixture[str],
         monkeypatch: pytest.MonkeyPatch) -> None:

@@ -49,6 +49,7 @@ def quota_app(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory) -
     yield make_app(make_settings(data_dir, **LIMITS))
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_a_flooding_client_gets_429_and_others_still_get_in(quota_app: Any) -> None:
     from fastapi.testclient import TestClient
 

@@ -116,6 +116,7 @@ def _case(data: st.DataObject) -> tuple[np.ndarray, np.ndarray]:
 
 @settings(max_examples=150, deadline=None)
 @given(st.data())
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_r_dep_equals_brute_force_enumeration(data: st.DataObject) -> None:
     g, p = _case(data)
     expected = ref_r_dep(list(g), list(p))

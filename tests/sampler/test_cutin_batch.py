@@ -47,6 +47,7 @@ def _check_rows(x: np.ndarray, lane_width: float = 3.75) -> int:
     return checked
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_equal_to_the_builder_on_many_vectors() -> None:
     table = synthetic_parameter_table(120, seed=5)
     x = table[list(PARAM_NAMES)].to_numpy(dtype=np.float64).copy()

@@ -189,6 +189,7 @@ def test_independence_chain_moves_by_hand() -> None:
     assert acc[0] == pytest.approx(0.5 * 1.0 + 0.5 * 0.5, abs=0.01)
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_kernel_density_is_normalised() -> None:
     """g integrates to 1: the mean of g / (a Gaussian it is drawn against) is 1."""
     model = _two_component(3)
@@ -203,6 +204,7 @@ def test_kernel_density_is_normalised() -> None:
     assert far.mean() < 0.01
 
 
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_kernel_mixture_by_hand_and_normalised() -> None:
     """q = (1 - alpha)(s g1 + (1 - s) g2) + alpha p, by hand from its parts; it integrates to
     1; its draws come from the parts in their shares; the IS identity E_q[p / q] = 1."""
