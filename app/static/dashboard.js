@@ -44,15 +44,54 @@
     }
   }
 
+  // With SCENGEN_API_KEY set the service wants the key on writes and on its costly reads
+  // (shift, rates, fit): the header's "API key" field keeps it for this tab only
+  // (sessionStorage) and every request below sends it as X-API-Key.
+  const KEY_STORE = "scengen-api-key";
+
+  function apiKey() {
+    try { return sessionStorage.getItem(KEY_STORE) || ""; } catch (e) { return ""; }
+  }
+
+  function keyField() {
+    const input = $("api-key-input");
+    if (!input) return;
+    input.value = apiKey();
+    input.addEventListener("change", () => {
+      try { sessionStorage.setItem(KEY_STORE, input.value.trim()); } catch (e) { /* none */ }
+      window.location.reload();  // every view asks again, with the key
+    });
+  }
+
+  function keyRefused() {
+    const form = $("key-form");
+    if (form) form.dataset.needed = "1";
+    return apiKey()
+      ? "the service refused the API key entered in the header's \"API key\" field; " +
+        "enter its key (SCENGEN_API_KEY) there"
+      : "this service needs its API key (SCENGEN_API_KEY): enter it in the header's " +
+        "\"API key\" field";
+  }
+
   async function api(path, options) {
+    const opts = Object.assign({}, options || {});
+    const key = apiKey();
+    if (key) {
+      const headers = new Headers(opts.headers || {});
+      headers.set("X-API-Key", key);
+      opts.headers = headers;
+    }
     let response;
     try {
-      response = await fetch(path, options);
+      response = await fetch(path, opts);
     } catch (e) {
       throw new ApiError(0, "the service did not answer (" + e.message + ")");
     }
     let body = null;
     try { body = await response.json(); } catch (e) { body = null; }
+    if (response.status === 401) {
+      throw new ApiError(401, keyRefused(), "header.x-api-key");
+    }
     if (!response.ok) {
       const err = body && body.error ? body.error : {};
       throw new ApiError(response.status, err.message || response.statusText, err.field);
@@ -1247,6 +1286,7 @@
   }
 
   async function init() {
+    keyField();
     $("draw-form").addEventListener("submit", drawSample);
     $("play-button").addEventListener("click", togglePlay);
     $("time-slider").addEventListener("input", (e) => {
