@@ -17,9 +17,10 @@ within about half a second of the budget.
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import time
-from collections.abc import Awaitable, Callable, MutableMapping
+from collections.abc import Awaitable, Callable, Iterator, MutableMapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,7 +31,7 @@ from app.errors import InvalidInput, ServiceError
 from app.settings import Settings
 
 __all__ = ["BUDGET", "Budget", "BudgetGuard", "ClientGone", "OverBudget", "check",
-           "check_client", "checked", "precheck"]
+           "check_client", "checked", "limited", "precheck"]
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -98,6 +99,18 @@ def check_client() -> None:
     budget = BUDGET.get()
     if budget is not None:
         budget.check_client()
+
+
+@contextlib.contextmanager
+def limited(seconds: float, what: str) -> Iterator[Budget | None]:
+    """A budget of ``seconds`` for the work of the block outside a request (the CLI's
+    ``--budget``): the same checks as a request's, ``OverBudget`` past it; 0: no limit."""
+    budget = Budget(seconds, what=what) if seconds > 0 else None
+    token = BUDGET.set(budget)
+    try:
+        yield budget
+    finally:
+        BUDGET.reset(token)
 
 
 #: seconds a job's request may spend checking its region before the job is queued

@@ -100,6 +100,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     s.add_argument("--scenarios", action="store_true",
                    help="include each concrete scenario (JSON form) in its line")
     s.add_argument("--workers", type=int, default=1, help="processes for scoring (1)")
+    s.add_argument("--budget", type=float, default=None, metavar="SECONDS",
+                   help="stop a draw that would take longer, with a message (default: "
+                        "SCENGEN_SYNC_BUDGET_SECONDS, 10 s, the service's budget for "
+                        "POST /scenarios; 0: no limit)")
     add_out(s, required=False, default="-", metavar="OUT.jsonl",
             help="output file ('-' = stdout, the default)")
     s.add_argument("--summary-json", default=None, metavar="FILE",
@@ -232,8 +236,19 @@ def _load_model(ref: str | None) -> CutInGMM:
                           f"{store_label()}") from None
 
 
+def _budget_seconds(given: float | None) -> float:
+    """``--budget`` (0: no limit), by default the service's synchronous budget."""
+    if given is None:
+        from app.settings import get_settings
+
+        return float(get_settings().sync_budget_seconds)
+    if not math.isfinite(given) or given < 0:
+        raise CliError(f"--budget: seconds >= 0 (0: no limit), got {given:g}")
+    return given
+
+
 def _sample(args: argparse.Namespace) -> int:
-    from app import jsonconv
+    from app import budget, jsonconv
     from app.services import sampling as sampling_service
     from sampler.rates import region_report, report_text
 
@@ -241,12 +256,21 @@ def _sample(args: argparse.Namespace) -> int:
         raise CliError(f"--workers: must be >= 1, got {args.workers}")
     if args.model is not None and args.model_option is not None:
         raise CliError("give the model once: as MODEL or as --model")
+    seconds = _budget_seconds(args.budget)
     model = _load_model(args.model if args.model is not None else args.model_option)
     progress = StageBars(args.quiet)
     try:
-        drawn = sampling_service.sample_local(
-            model, args.constraints or [], args.n, args.seed, method=args.sampler,
-            lane_width=args.lane_width, use_envelope=not args.no_envelope, progress=progress)
+        with budget.limited(seconds, "scengen sample"):
+            drawn = sampling_service.sample_local(
+                model, args.constraints or [], args.n, args.seed, method=args.sampler,
+                lane_width=args.lane_width, use_envelope=not args.no_envelope,
+                progress=progress)
+    except budget.OverBudget:
+        raise CliError(
+            f"this draw takes longer than the budget of {seconds:g} s (--budget, default "
+            "SCENGEN_SYNC_BUDGET_SECONDS), so it was stopped; run it without the limit "
+            "with --budget 0 (or a larger --budget), or narrow it (fewer samples, a less "
+            "rare region)") from None
     finally:
         progress.close()
     ss = drawn.sample_set

@@ -66,6 +66,8 @@ def store(tmp_path: Path, model_cache_dir: Path,
     monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
     monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
     monkeypatch.setenv("SCENGEN_WARM_START", "0")
+    # as make_settings: a loaded test machine must not hit the CLI's time budget
+    monkeypatch.setenv("SCENGEN_SYNC_BUDGET_SECONDS", "600")
     monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
     monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
     monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
