@@ -327,11 +327,24 @@ def _list(args: argparse.Namespace) -> int:
 
     ctx = _context(load_defaults=False)
     try:
-        for r in catalogues.list_catalogues(ctx):
-            print(f"{r.id}\t{r.status}\tn={r.n}\tseed={r.seed}\t{r.created_at:%Y-%m-%d %H:%M}")
+        rows = [(r.id, r.status, str(r.n), str(r.seed),
+                 "; ".join(r.spec.get("constraints", [])) or "(none)", r.model_id,
+                 f"{r.created_at:%Y-%m-%d %H:%M}") for r in catalogues.list_catalogues(ctx)]
     finally:
         ctx.close()
+    # a header and the constraints: two catalogues of the same n and seed looked alike
+    head = ("id", "status", "n", "seed", "constraints", "model", "created (UTC)")
+    print_columns([head, *rows], right=(2, 3))
     return 0
+
+
+def print_columns(rows: list[tuple[str, ...]], right: tuple[int, ...] = ()) -> None:
+    """Rows as aligned columns two blanks apart (``right``: columns aligned right)."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for r in rows:
+        cells = [c.rjust(w) if i in right else c.ljust(w)
+                 for i, (c, w) in enumerate(zip(r, widths, strict=True))]
+        print("  ".join(cells).rstrip())
 
 
 def _export(args: argparse.Namespace) -> int:

@@ -35,7 +35,12 @@ def test_create_status_list_export(store: Path, tmp_path: Path,
     assert err[0].startswith("P(A) ") and err[0].index("model [") < err[0].index("Monte Carlo")
     assert any(line.startswith("model interval: where P(A) could lie") for line in err)
     assert main(["catalogue", "list"]) == 0
-    assert cid in capsys.readouterr().out
+    listing = capsys.readouterr().out.splitlines()
+    # issue 25: a header, and the constraints (two catalogues of one n and seed looked alike)
+    assert listing[0].split() == ["id", "status", "n", "seed", "constraints", "model",
+                                  "created", "(UTC)"]
+    line = next(x for x in listing if x.startswith(cid))
+    assert line.split()[:5] == [cid, "done", "4", "3", "ttc<3"]
     target = tmp_path / "out.csv"
     assert main(["catalogue", "export", cid, "--format", "csv", "--out", str(target)]) == 0
     assert len(target.read_text().strip().splitlines()) == 5
