@@ -187,7 +187,17 @@ def _clean(value: Any) -> Any:
 class StageBars:
     """tqdm bars on stderr, one per stage. A stage's ``total`` is its budget (the pilot's
     is its largest number of draws), which it may not use up: when the next stage starts,
-    or at the end, a stage's bar ends at the count it really reached (100 %), not at 2 %."""
+    or at the end, a stage that stopped early says so ("16,384 (enough before the budget
+    of 1,048,576)") instead of ending at 2 %.
+
+    No rate is shown: a stage reports its count in jumps (the pilot's first report is
+    16,384 draws a few microseconds after its bar appears), so tqdm's rate read
+    "2454267026.29it/s"; and the total stays the budget (it jumped from 1,048,576 to
+    16,384 at the end) (issue 25)."""
+
+    #: the counts with thousands separators, written into the format (tqdm has none)
+    RUNNING = "{{desc}}: {{percentage:3.0f}}%|{{bar}}| {n:,}/{total:,} [{{elapsed}}]"
+    EARLY = "{{desc}}: {n:,} (enough before the budget of {total:,}) [{{elapsed}}]"
 
     def __init__(self, quiet: bool) -> None:
         self.quiet = quiet
@@ -204,16 +214,19 @@ class StageBars:
             self.current = stage
         bar = self.bars.get(stage)
         if bar is None:
-            bar = self.bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr,
-                                          leave=False)
+            bar = self.bars[stage] = tqdm(
+                total=total, initial=min(done, total), desc=stage, file=sys.stderr, leave=False,
+                bar_format=self.RUNNING.format(n=min(done, total), total=total))
         bar.total = total
         bar.n = min(done, total)
+        bar.bar_format = self.RUNNING.format(n=bar.n, total=total)
         bar.refresh()
 
     def _finish(self, stage: str | None) -> None:
         bar = self.bars.get(stage) if stage is not None else None
         if bar is not None and bar.n < (bar.total or 0):
-            bar.total = bar.n  # the stage ended early: that was its real total
+            # the stage ended early: it needed no more
+            bar.bar_format = self.EARLY.format(n=bar.n, total=bar.total)
             bar.refresh()
 
     def close(self) -> None:

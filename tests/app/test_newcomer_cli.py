@@ -265,4 +265,9 @@ def test_a_stage_that_ends_early_shows_its_real_total(
     bars.close()
     err = capsys.readouterr().err
     pilot = [part for part in re.split(r"[\r\n]", err) if part.startswith("pilot")]
-    assert pilot and "100%" in pilot[-1] and "20480/20480" in pilot[-1], pilot
+    assert pilot and "20,480 (enough before the budget of 1,048,576)" in pilot[-1], pilot
+    # issue 25: the total stays the budget (it jumped from 1,048,576 to 16,384 at the end),
+    # and no rate (a stage reports in jumps: the pilot's first report read 2454267026it/s)
+    assert "20480/20480" not in err and "20,480/20,480" not in err
+    assert "it/s" not in err and "/s]" not in err
+    assert "rejection: 100%" in err and "10/10" in err
