@@ -89,9 +89,19 @@ class Database:
         #: the same pool; on SQLite its transactions are deferred (see _sqlite_begin)
         self.read_engine = self.engine.execution_options(**{READ_ONLY: True})
         self.read_sessions = sessionmaker(self.read_engine, expire_on_commit=False)
+        self._probe: Engine | None = None
 
     def migrate(self) -> None:
         migrate(self.engine)
+
+    def ping(self) -> None:
+        """``select 1`` on a connection of its own (an engine without a pool, made once):
+        the liveness probe never waits for a connection of the pool that the jobs and the
+        requests share, however busy it is."""
+        if self._probe is None:
+            self._probe = create_engine(self.url, poolclass=NullPool)
+        with self._probe.connect() as conn:
+            conn.exec_driver_sql("select 1")
 
     @contextmanager
     def session(self) -> Iterator[Session]:
@@ -108,3 +118,5 @@ class Database:
 
     def dispose(self) -> None:
         self.engine.dispose()
+        if self._probe is not None:
+            self._probe.dispose()
