@@ -51,23 +51,24 @@ class ModelList(ApiModel):
     models: list[ModelInfo]
 
 
-def _info(row: ModelRow) -> dict[str, Any]:
-    return {"id": row.id, "dataset": row.dataset_id, "default": row.is_default,
-            "n_components": row.n_components, "model_hash": row.model_hash,
-            "options": row.options, "created_at": row.created_at.isoformat()}
+def _info(row: ModelRow) -> ModelInfo:
+    return ModelInfo(id=row.id, dataset=row.dataset_id, default=row.is_default,
+                     n_components=row.n_components, model_hash=row.model_hash,
+                     options=jsonconv.encode(row.options),
+                     created_at=row.created_at.isoformat())
 
 
 def model_view(row: ModelRow, components: list[dict[str, Any]]) -> ModelDetail:
-    return ModelDetail.model_validate(jsonconv.encode({
-        **_info(row), "bic_curve": row.bic_curve, "fit_report": row.fit_report,
-        "components": components}))
+    # the free-form parts pass through jsonconv.encode (non-finite floats inside Any)
+    return ModelDetail(**dict(_info(row)), bic_curve=jsonconv.encode(row.bic_curve),
+                       fit_report=jsonconv.encode(row.fit_report),
+                       components=jsonconv.encode(components))
 
 
 @router.get("", response_model=ModelList,
             summary="List fitted models (the default model first)")
 def list_models(ctx: ContextDep) -> ModelList:
-    return ModelList.model_validate({"models": [_info(r)
-                                                for r in models_service.list_models(ctx)]})
+    return ModelList(models=[_info(r) for r in models_service.list_models(ctx)])
 
 
 @router.get("/compare", response_model=ModelComparison,
