@@ -38,11 +38,23 @@ def read_scenario_file(path: str | Path) -> Any:
         raise ScenarioError(f"{path}: not valid JSON ({exc})") from None
 
 
+#: which ego the summary describes (issue 25: a summary of risk 1 and min THW 0.05 s beside
+#: a "preventable" class read as a contradiction; it is the drive of an ego that never
+#: reacts, the class is what a careful driver does)
+SUMMARY_EGO = ("scripted: the ego drives its track as given and never reacts to the other "
+               "vehicles; risk, min_ttr, min_ttc, min_thw are of that drive. How reacting "
+               "drivers fare (the careful R157 driver, RSS) is in 'criticality' "
+               "(docs/criticality.md)")
+
+
 def score(data: Any, *, samples: bool = False, settings: RiskSettings | None = None,
           surfaces: InputSurfaces | None = None) -> dict[str, Any]:
     """The risk report of a concrete scenario given in its JSON form; ``samples`` adds
-    each object's per-sample Monte-Carlo arrays."""
-    return domain.score_posted(data, samples=samples, settings=settings, surfaces=surfaces)
+    each object's per-sample Monte-Carlo arrays. Its summary names the ego it describes
+    (``summary["ego"]``: the scripted one)."""
+    report = domain.score_posted(data, samples=samples, settings=settings, surfaces=surfaces)
+    report["summary"] = {"ego": SUMMARY_EGO, **report["summary"]}
+    return report
 
 
 #: a track's time series (``riskcore.scenario``); ``a`` and ``yaw_rate`` may be null

@@ -39,6 +39,9 @@ def test_a_stopped_car_just_ahead_in_the_ego_lane_is_high_risk(client: Any) -> N
     body = r.json()
     assert body["summary"]["risk"] > 0.5
     assert max(body["series"]["r_dep"]) == body["summary"]["risk"]
+    # issue 25: the summary says which ego it describes (one that never reacts)
+    assert body["summary"]["ego"].startswith("scripted: the ego drives its track as given "
+                                             "and never reacts")
     assert "samples" not in body["objects"][0]  # the summary by default (issue 13)
     full = client.post("/risk", params={"samples": True},
                        json=_scenario(cutter_y=0.0, cutter_x0=19.5, cutter_v=0.0)).json()
