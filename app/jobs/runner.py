@@ -359,7 +359,6 @@ class CatalogueRunner:
                 if done:
                     return future.result()
                 if halt.is_set():  # cancelled or shutting down: the worker stops too
-                    chunkfile.request_stop(folder)
                     raise JobCancelled()
                 current = chunkfile.read_stage(folder)
                 if stages.listener is not None and current is not None \
@@ -367,8 +366,10 @@ class CatalogueRunner:
                     relayed = current
                     stages.listener(f"P(A): {current['name'].removeprefix(_ESTIMATING)}",
                                     current.get("done") or 0, current.get("total") or 0)
-        finally:
-            future.cancel()  # not started yet: never starts
+        except BaseException:  # halted, Ctrl-C in the CLI, ...: the worker stops as well
+            if not future.cancel():  # running already: it stops at its next stage
+                chunkfile.request_stop(folder)
+            raise
 
     def _refine_region(self, catalogue_id: str, spec: CatalogueSpec,
                        note: Callable[[str], None] | None, stage: _StageFile,

@@ -132,6 +132,40 @@ def test_a_job_cancelled_during_an_estimate_on_a_worker_stops_the_worker(
         assert repo.get_catalogue(s, "c").p_region is None  # estimated again on resume
 
 
+def test_an_interrupt_while_waiting_for_the_worker_stops_the_worker(tmp_path: Path) -> None:
+    """Ctrl-C in ``scengen catalogue create`` arrives in the thread that waits for the
+    worker (here: raised by the stage listener): the worker's estimate stops too, at its
+    next stage, instead of running to its end while the CLI waits to close the pool."""
+    db = _db(tmp_path)
+    _catalogue(db, "k")
+    stages: list[int] = []
+    stopped = threading.Event()
+
+    def slow_region(spec: CatalogueSpec, stage: Any) -> dict[str, Any]:
+        try:
+            for k in range(200):
+                stages.append(k)
+                stage("pilot", k, 200)
+                threading.Event().wait(0.05)
+        except BaseException:
+            stopped.set()
+            raise
+        return {"estimate": 0.25, "ci": [0.2, 0.3]}
+
+    def interrupt(name: str, done: int, total: int) -> None:
+        if name == "P(A): pilot":
+            raise KeyboardInterrupt
+
+    executor = ChunksInlineWorkersInPool()
+    try:
+        runner = CatalogueRunner(db, tmp_path, executor, region=slow_region)
+        with pytest.raises(KeyboardInterrupt):
+            runner.run("k", stage=interrupt)
+    finally:
+        executor.close()  # waits for the worker
+    assert stopped.is_set() and len(stages) < 200  # before: all 200 stages ran
+
+
 def pid_region(spec: CatalogueSpec, stage: Any) -> dict[str, Any]:
     """A region function for a real worker process: says where it ran."""
     stage("pilot", 0, 1)
