@@ -62,3 +62,20 @@ def test_convert_tno_needs_an_output_and_keeps_the_packaged_data(
                  str(DEFAULT_EVENTS_PATH)]) == 2
     assert "--replace-embedded" in capsys.readouterr().err
     assert DEFAULT_EVENTS_PATH.read_bytes() == before
+
+
+def test_the_readme_lists_every_doc_and_the_dashboards_views() -> None:
+    """Issue 25: the README's docs table left out docs/criticality.md and its dashboard
+    paragraph described views that no longer exist (evasion types, minimum TTR)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    table = readme[readme.index("### Documentation"):]
+    for doc in sorted((ROOT / "docs").glob("*.md")):
+        assert f"| `docs/{doc.name}` |" in table, doc.name
+    page = (ROOT / "app" / "static" / "dashboard.html").read_text(encoding="utf-8")
+    views = re.findall(r'<a href="#view-[a-z]+">(\d) ([^<]+)</a>', page)
+    assert len(views) == 7
+    section = " ".join(readme[readme.index("### Dashboard"):
+                              readme.index("### Command line")].split())
+    for number, name in views:
+        assert f"**{number} {name}**" in section, name
+    assert "evasion types" not in section and "minimum TTR" not in section
