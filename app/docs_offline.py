@@ -28,6 +28,21 @@ ASSETS = {
     "favicon.png": "image/png",
 }
 
+#: ReDoc's bundle shows a "powered by" logo fetched from this address: the page asked the
+#: network for it (issue 25). The served bundle points at a local, plain stand-in.
+REDOC_CDN_LOGO = b"https://cdn.redoc.ly/redoc/logo-mini.svg"
+LOGO_NAME = "redoc-logo.svg"
+LOGO_SVG = (b'<svg xmlns="http://www.w3.org/2000/svg" width="16" height="16" '
+            b'viewBox="0 0 16 16"><rect width="16" height="16" rx="3" fill="#8a94a3"/></svg>')
+
+
+@lru_cache(maxsize=1)
+def _redoc_js() -> bytes:
+    """The ReDoc bundle with its CDN logo address replaced by the local stand-in's."""
+    raw = (assets_dir() / "redoc.standalone.js").read_bytes()
+    return raw.replace(REDOC_CDN_LOGO, f"{STATIC_PREFIX}/{LOGO_NAME}".encode())
+
+
 _LANDING = """<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
 <link rel="icon" href="{static}/favicon.png">
@@ -84,6 +99,12 @@ def install_offline_docs(app: FastAPI) -> None:
 
     @app.get(STATIC_PREFIX + "/{name}", include_in_schema=False)
     def asset(name: str) -> Response:
+        if name == "redoc.standalone.js":
+            return Response(_redoc_js(), media_type=ASSETS[name],
+                            headers={"Cache-Control": "public, max-age=86400"})
+        if name == LOGO_NAME:
+            return Response(LOGO_SVG, media_type="image/svg+xml",
+                            headers={"Cache-Control": "public, max-age=86400"})
         media_type = ASSETS.get(name)
         if media_type is None:
             raise NotFound(f"no documentation asset {name[:64]!r}", field="path.name")

@@ -36,3 +36,15 @@ def test_unknown_asset_is_404_in_the_error_shape(client: Any) -> None:
     r = client.get("/docs-static/..%2Fcore.py")
     assert r.status_code == 404
     assert r.json()["error"]["status"] == 404
+
+
+def test_the_redoc_bundle_asks_no_cdn_for_its_logo(client: Any) -> None:
+    """Issue 25: /redoc's page fetched https://cdn.redoc.ly/redoc/logo-mini.svg (seen in
+    Chromium); the served bundle names no outside address and its logo is local."""
+    js = client.get("/docs-static/redoc.standalone.js")
+    assert js.status_code == 200 and len(js.content) > 100_000
+    assert re.findall(rb"https?://cdn[\w./-]*", js.content) == []
+    assert b"/docs-static/redoc-logo.svg" in js.content
+    logo = client.get("/docs-static/redoc-logo.svg")
+    assert logo.status_code == 200 and logo.headers["content-type"] == "image/svg+xml"
+    assert logo.content.startswith(b"<svg")
