@@ -108,6 +108,14 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
             assert rows.count() == len(view["failures"])
             # an evaluation without `risk` has no r_dep: the table says so, not "NaN"
             assert "NaN" not in page.locator("#sut-failures").inner_text()
+            # every value of the failures list on one line (a weight like 8.25e-4 was
+            # broken after its "e-", seen at 1400 px)
+            lines = page.evaluate("""() => [...document.querySelectorAll(
+                '#sut-failures tr[data-run] td')].map((td) => {
+                  const r = document.createRange(); r.selectNodeContents(td);
+                  return [td.innerText, new Set([...r.getClientRects()].map(
+                    (q) => Math.round(q.top))).size]; })""")
+            assert lines and all(n == 1 for _, n in lines), [t for t, n in lines if n != 1]
             if view["failures"]:
                 page.wait_for_selector("#sut-run-plot[data-rendered='1']", timeout=TIMEOUT_MS)
                 first = view["failures"][0]["run"]
