@@ -201,6 +201,10 @@ def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
             bar.update(done - bar.n)
 
     stages = StageBars(quiet=not show_progress)  # the P(A) estimate's stages
+    # start the pool's workers and load their kernels now, while this process estimates
+    # P(A): they were started only when the first chunk was sent (issue 25: a 1,000
+    # catalogue took 18.5 s from the CLI, 8.4 s from the service, whose workers are warm)
+    ctx.executor.warm()
     try:
         status = catalogues.run(ctx, catalogue_id, progress=progress,
                                 note=(lambda text: tqdm.write(text, file=sys.stderr))

@@ -78,3 +78,24 @@ def test_scenarios_ranked_and_filtered(store: Path, capsys: pytest.CaptureFixtur
         assert main(["catalogue", "scenarios", cid, *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("scengen: error:") and "\n" not in err
+
+
+def test_create_starts_the_pools_warm_up_before_the_catalogue_runs(
+        store: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 25: `catalogue create` took 18.5 s from the CLI against 8.4 s over HTTP: the
+    service's workers are warm, the CLI's were started only when the first chunk was sent.
+    Now their warm-up starts before the catalogue's P(A) estimate (which runs here)."""
+    from app.jobs.executors import InlineExecutor
+    from app.services import catalogues
+
+    calls: list[str] = []
+    monkeypatch.setattr(InlineExecutor, "warm", lambda self: calls.append("warm"))
+
+    def run(ctx: object, catalogue_id: str, **kw: object) -> str:
+        calls.append("run")
+        return "done"
+
+    monkeypatch.setattr(catalogues, "run", run)
+    assert main(["catalogue", "create", "--n", "3", "--seed", "1", "-q"]) == 0
+    assert calls == ["warm", "run"]
