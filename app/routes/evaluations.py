@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, BackgroundTasks, Query, Request
+from fastapi import APIRouter, BackgroundTasks, Depends, Query, Request
 from fastapi.responses import FileResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -179,7 +179,65 @@ def show_evaluation(evaluation_id: str, ctx: ContextDep) -> EvaluationStatus:
         jsonconv.encode(service.describe(ctx, evaluation_id)))
 
 
-_PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc", "vs_careful"})
+_RANGE_DOCS = {"impact_speed": "impact speed (m/s, 0 without a collision)",
+               "r_dep_peak": "peak r_dep of the SUT (0..1)",
+               "min_gap": "smallest gap to the cutter (m)",
+               "min_ttc": "smallest time to collision (s)"}
+_FLAG_DOCS = {"collided": "the SUT hit the cutter", "must_avoid": "the cut-in is one the "
+              "R157 careful driver avoids", "violation": "the SUT did worse than R157 allows"}
+#: the filter parameters of ``/runs`` and ``/export`` (declared in ``run_filter_params``)
+FILTER_PARAMS = frozenset([f"{f}_{b}" for f in service.RANGE_FIELDS for b in ("min", "max")]
+                          + list(service.FLAG_FIELDS) + ["vs_careful"])
+_Bound = Annotated[float | None, Query(allow_inf_nan=False)]
+
+
+def run_filter_params(
+    request: Request,
+    impact_speed_min: Annotated[float | None, Query(
+        allow_inf_nan=False, description=f"inclusive bounds on the {_RANGE_DOCS['impact_speed']}"
+        "; finite numbers in ASCII digits (leave a side open rather than inf)")] = None,
+    impact_speed_max: _Bound = None,
+    r_dep_peak_min: Annotated[float | None, Query(
+        allow_inf_nan=False, description=f"inclusive bounds on the {_RANGE_DOCS['r_dep_peak']}"
+        )] = None,
+    r_dep_peak_max: _Bound = None,
+    min_gap_min: Annotated[float | None, Query(
+        allow_inf_nan=False, description=f"inclusive bounds on the {_RANGE_DOCS['min_gap']}"
+        )] = None,
+    min_gap_max: _Bound = None,
+    min_ttc_min: Annotated[float | None, Query(
+        allow_inf_nan=False, description=f"inclusive bounds on the {_RANGE_DOCS['min_ttc']}"
+        " (null when the gap opens: such runs never match a bound)")] = None,
+    min_ttc_max: _Bound = None,
+    collided: Annotated[bool | None, Query(description=_FLAG_DOCS["collided"])] = None,
+    must_avoid: Annotated[bool | None, Query(description=_FLAG_DOCS["must_avoid"])] = None,
+    violation: Annotated[bool | None, Query(description=_FLAG_DOCS["violation"])] = None,
+    vs_careful: Annotated[list[Literal["worse", "same", "better"]] | None, Query(
+        description="keep runs the SUT did worse / the same / better than the R157 "
+                    "careful driver (repeatable)")] = None,
+) -> service.RunFilter | None:
+    """The filters given (None: no filter at all). The typed parameters above are the
+    OpenAPI declaration; the raw values are parsed by ``service.run_filter`` (ASCII
+    finite numbers, true|false), which also names any parameter the route does not take."""
+    items = [(k, v) for k, v in request.query_params.multi_items()
+             if k in FILTER_PARAMS and k != "vs_careful"]
+    if not items and not vs_careful:
+        return None
+    return service.run_filter(items, vs_careful or (), where="query")
+
+
+RunFilterDep = Annotated[service.RunFilter | None, Depends(run_filter_params)]
+
+
+def reject_unknown(request: Request, route_params: frozenset[str]) -> None:
+    """A 422 naming the first query parameter the route does not take."""
+    for key in request.query_params:
+        if key not in route_params and key not in FILTER_PARAMS:
+            # parse_filters words the message (the filters and their forms)
+            service.run_filter([(key, request.query_params[key])], where="query")
+
+
+_PAGE_PARAMS = frozenset({"offset", "limit", "order_by", "desc"})
 
 
 @router.get("/evaluations/{evaluation_id}/runs", response_model=RunPage,
@@ -188,6 +246,7 @@ def list_runs(
     evaluation_id: str,
     ctx: ContextDep,
     request: Request,
+    flt: RunFilterDep,
     offset: Annotated[int, Query(ge=0, le=INDEX_MAX)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     order_by: Annotated[str, Query(description="run, impact_speed (default), r_dep_peak, "
@@ -196,37 +255,43 @@ def list_runs(
                         ] = "impact_speed",
     desc: Annotated[bool | None, Query(description="descending (default: true, except for "
                                        "run)")] = None,
-    vs_careful: Annotated[list[Literal["worse", "same", "better"]] | None, Query(
-        description="keep runs the SUT did worse / the same / better than the R157 "
-                    "careful driver (repeatable)")] = None,
 ) -> RunPage:
     """Runs sorted by ``order_by`` (nulls last, ties by run) and filtered by
     ``<field>_min``/``<field>_max`` (impact_speed, r_dep_peak, min_gap, min_ttc),
-    ``collided|must_avoid|violation=true|false`` and ``vs_careful``."""
+    ``collided|must_avoid|violation=true|false`` and ``vs_careful``; any other query
+    parameter is a 422 naming it."""
     service.get(ctx, evaluation_id)  # 404 before the filters' 422
-    items = [(k, v) for k, v in request.query_params.multi_items() if k not in _PAGE_PARAMS]
-    flt = service.run_filter(items, vs_careful or (), where="query")
+    reject_unknown(request, _PAGE_PARAMS)
     descending = service.check_order(order_by, desc, where="query")
-    total, runs = service.page_runs(ctx, evaluation_id, flt, offset, limit,
-                                    order_by=order_by, desc=descending)
+    total, runs = service.page_runs(ctx, evaluation_id, flt or service.RunFilter(), offset,
+                                    limit, order_by=order_by, desc=descending)
     return RunPage(evaluation=evaluation_id, total=total, offset=offset, limit=limit,
                    runs=jsonconv.encode(runs))
 
 
 @router.get("/evaluations/{evaluation_id}/export", response_class=FileResponse,
-            response_model=None, summary="Export the failing runs of a finished evaluation")
+            response_model=None,
+            summary="Export the failing (or the filtered) runs of a finished evaluation")
 def export_evaluation(
     evaluation_id: str,
     ctx: ContextDep,
+    request: Request,
     background: BackgroundTasks,
+    flt: RunFilterDep,
     format: Annotated[Literal["json", "xosc", "commonroad"], Query()] = "json",
 ) -> Response:
-    """The collided runs, each rebuilt from its parameter vector: ``json`` (the summary and
+    """The runs matching the filters of ``/runs`` (without any: the collided runs), highest
+    impact speed first, each rebuilt from its parameter vector: ``json`` (the summary and
     each run's record with its concrete scenario), ``xosc`` (OpenSCENARIO 1.2 in test mode:
-    the ego is the system under test) or ``commonroad`` (zip)."""
+    the ego is the system under test) or ``commonroad`` (zip). Any other query parameter
+    is a 422 naming it."""
+    service.get(ctx, evaluation_id)  # 404 before the filters' 422
+    reject_unknown(request, frozenset({"format"}))
+    name = "failures" if flt is None else "runs"
     return file_response(
-        ctx.data_dir, background, f"{evaluation_id}-failures.{SUFFIXES[format]}",
-        MEDIA_TYPES[format], lambda out: service.export(ctx, evaluation_id, format, out))
+        ctx.data_dir, background, f"{evaluation_id}-{name}.{SUFFIXES[format]}",
+        MEDIA_TYPES[format], lambda out: service.export(ctx, evaluation_id, format, out,
+                                                        flt=flt))
 
 
 @router.delete("/evaluations/{evaluation_id}", status_code=204, response_model=None,

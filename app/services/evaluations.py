@@ -569,12 +569,18 @@ def run_by_index(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str,
         return None if r is None else run_record(r, _p_bounds(row))
 
 
-def failing_runs(ctx: ServiceContext, evaluation_id: str) -> Iterator[dict[str, Any]]:
-    """Every collided run of an evaluation, highest impact speed first."""
+#: the runs exported when no filter is given: the failing (collided) ones
+FAILING = RunFilter(flags=(("collided", True),))
+
+
+def failing_runs(ctx: ServiceContext, evaluation_id: str,
+                 flt: RunFilter = FAILING) -> Iterator[dict[str, Any]]:
+    """Every run of an evaluation matching ``flt`` (default: the collided ones), highest
+    impact speed first."""
     offset = 0
     while True:
-        _, page = page_runs(ctx, evaluation_id, RunFilter(flags=(("collided", True),)),
-                            offset, 500, order_by="impact_speed", desc=True)
+        _, page = page_runs(ctx, evaluation_id, flt, offset, 500,
+                            order_by="impact_speed", desc=True)
         if not page:
             return
         yield from page
@@ -594,10 +600,11 @@ def rebuild(params: Mapping[str, float], lane_width: float, seed: int, run: int,
 
 
 def export(ctx: ServiceContext, evaluation_id: str, fmt: str, out: Path,
-           mode: str | None = None) -> Path:
-    """Write the failing runs of a finished evaluation to ``out``: ``json`` (one document:
-    the summary and each failing run's record with its concrete scenario), ``xosc``
-    (OpenSCENARIO, test mode: the ego is the system under test) or ``commonroad``."""
+           mode: str | None = None, flt: RunFilter | None = None) -> Path:
+    """Write the runs of a finished evaluation matching ``flt`` (None: the failing,
+    i.e. collided, runs) to ``out``: ``json`` (one document: the summary and each run's
+    record with its concrete scenario), ``xosc`` (OpenSCENARIO, test mode: the ego is the
+    system under test) or ``commonroad``."""
     if fmt not in EXPORT_FORMATS:
         raise InvalidInput(f"format: unknown format {fmt!r}; choose one of "
                            f"{', '.join(EXPORT_FORMATS)}", field="query.format")
@@ -609,7 +616,7 @@ def export(ctx: ServiceContext, evaluation_id: str, fmt: str, out: Path,
     summary = jsonconv.decode(row.summary) if row.summary else {}
 
     def items() -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
-        for rec in failing_runs(ctx, evaluation_id):
+        for rec in failing_runs(ctx, evaluation_id, FAILING if flt is None else flt):
             params = {k: float(rec[k]) for k in PARAM_NAMES}
             scenario = rebuild(params, lane_width, row.seed, int(rec["run"]), evaluation_id)
             if scenario is not None:

@@ -192,6 +192,60 @@ def test_export_of_the_failing_runs(eval_client: Any) -> None:
     assert r.status_code == 422 and r.json()["error"]["field"] == "query.format"
 
 
+def test_export_takes_the_filters_of_runs(eval_client: Any) -> None:
+    """The export used to ignore its query besides ``format``: ``vs_careful=same`` answered
+    the collided runs (every one 'worse' under the stand-in's rule)."""
+    eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 1000,
+                                                 "seed": 7}).json()["id"]
+    _done(eval_client, eid)
+    for params in ({"vs_careful": "same"},
+                   {"vs_careful": "worse", "impact_speed_max": 0.5}):
+        listed = eval_client.get(f"/evaluations/{eid}/runs",
+                                 params={**params, "limit": 1000}).json()
+        assert listed["total"] > 0
+        r = eval_client.get(f"/evaluations/{eid}/export", params={**params, "format": "json"})
+        assert r.status_code == 200
+        runs = [item["run"] for item in json.loads(r.content)["runs"]]
+        # each exported run is one /runs lists (a vector the builder refuses is left out)
+        assert 0 < len(runs) <= listed["total"]
+        assert {rec["run"] for rec in runs} <= {rec["run"] for rec in listed["runs"]}
+        for rec in runs:  # the stand-in's hand rule: worse iff collided iff dv > 6
+            assert rec["vs_careful"] == params["vs_careful"]
+            assert rec["collided"] is (params["vs_careful"] == "worse")
+            if "impact_speed_max" in params:
+                assert rec["impact_speed"] <= 0.5
+    # no filter: the failing runs, as before
+    doc = json.loads(eval_client.get(f"/evaluations/{eid}/export").content)
+    assert doc["runs"] and all(item["run"]["collided"] is True for item in doc["runs"])
+
+
+@pytest.mark.parametrize("route", ["runs", "export"])
+def test_unknown_query_parameters_are_named(eval_client: Any, route: str) -> None:
+    eid = eval_client.post("/evaluations", json={"sut": "none", "n": 10}).json()["id"]
+    r = eval_client.get(f"/evaluations/{eid}/{route}", params={"vs_carful": "worse"})
+    assert r.status_code == 422, r.text
+    err = r.json()["error"]
+    assert err["field"] == "query.vs_carful" and "vs_carful" in err["message"]
+    r = eval_client.get(f"/evaluations/{eid}/{route}", params={"impact_speed_max": "inf"})
+    assert r.status_code == 422 and "impact_speed_max" in r.text
+    r = eval_client.get(f"/evaluations/{eid}/{route}", params={"impact_speed_max": "１"})
+    assert r.status_code == 422 and "impact_speed_max" in r.text
+
+
+def test_openapi_declares_the_run_filters(eval_client: Any) -> None:
+    paths = eval_client.get("/openapi.json").json()["paths"]
+    names = ([f"{f}_{b}" for f in ("impact_speed", "r_dep_peak", "min_gap", "min_ttc")
+              for b in ("min", "max")] + ["collided", "must_avoid", "violation", "vs_careful"])
+    for path in ("/evaluations/{evaluation_id}/runs", "/evaluations/{evaluation_id}/export"):
+        declared = {p["name"]: p for p in paths[path]["get"]["parameters"]
+                    if p["in"] == "query"}
+        assert set(names) <= set(declared), (path, sorted(declared))
+        assert declared["impact_speed_min"]["schema"]["anyOf"][0]["type"] == "number"
+        assert declared["collided"]["schema"]["anyOf"][0]["type"] == "boolean"
+        items = declared["vs_careful"]["schema"]["anyOf"][0]["items"]
+        assert items["enum"] == ["worse", "same", "better"]
+
+
 def test_delete_cancels_and_removes(eval_client: Any) -> None:
     eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 500}).json()["id"]
     assert eval_client.delete(f"/evaluations/{eid}").status_code == 204
