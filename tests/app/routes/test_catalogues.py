@@ -6,7 +6,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import zipfile
+from pathlib import Path
 from typing import Any
 
 import pyarrow.parquet as pq
@@ -202,6 +204,12 @@ def test_export_every_format(client: Any, catalogue: dict[str, Any]) -> None:
     # the columns are the record's (no score column of an older schema that stays empty)
     assert not {"risk", "risk_ind", "min_ttr", "min_ttc", "step_of_max_risk"} & set(table[0])
     assert {"exposure_weight", "ttr_true", "class", "risk_peak", "error"} <= set(table[0])
+    # issue 25: every column's unit is documented (docs/exports.md's units table)
+    doc = (Path(__file__).resolve().parents[3] / "docs" / "exports.md").read_text()
+    units = doc[doc.index("| column | unit | what |"):]
+    units = units[:units.index("\n\n")]
+    named = set(re.findall(r"`([a-z0-9_]+)`", units))
+    assert set(table[0]) <= named, set(table[0]) - named
     empty = [c for c in table[0] if c != "error" and all(row[c] == "" for row in table)]
     assert empty == [] or set(empty) <= {"scenario_id", "alarm_time", "r157_cc_t_brake",
                                          "rss_t_brake", "ttr_manoeuvre"}, empty
