@@ -117,6 +117,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     export.add_argument("--mode", default=None, choices=["test", "replay"],
                         help="xosc only: test (default; the ego is the system under test) "
                              "or replay (both vehicles scripted)")
+    add_quiet(export)
     add_data_dir(export)
     export.set_defaults(func=_export)
 
@@ -357,12 +358,30 @@ def _export(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if not out.parent.is_dir():
         raise CliError(f"--out: directory {out.parent} does not exist")
+    bar: Any = None
+
+    def progress(done: int, n: int) -> None:
+        nonlocal bar
+        if args.quiet:
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n, unit="scenario", desc=f"export {args.format}",
+                       file=sys.stderr, leave=False)
+        bar.update(done - bar.n)
+        if done == n:
+            bar.refresh()  # the last count shows even when it came within tqdm's interval
+
     ctx = _context(load_defaults=False)
     try:
-        out = catalogues.export(ctx, args.id, args.format, out, mode=args.mode)
+        out = catalogues.export(ctx, args.id, args.format, out, mode=args.mode,
+                                progress=progress)
     except LookupError as exc:
         raise _in_store(exc) from None
     finally:
+        if bar is not None:
+            bar.close()
         ctx.close()
     print(str(out))
     return 0

@@ -44,6 +44,12 @@ def test_create_status_list_export(store: Path, tmp_path: Path,
     target = tmp_path / "out.csv"
     assert main(["catalogue", "export", cid, "--format", "csv", "--out", str(target)]) == 0
     assert len(target.read_text().strip().splitlines()) == 5
+    # issue 25: an export shows its progress (13 s without a sign before), -q hides it
+    err = capsys.readouterr().err
+    assert "export csv" in err and "4/4" in err, err
+    assert main(["catalogue", "export", cid, "--format", "csv", "--out", str(target),
+                 "-q"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_user_errors_are_one_line_and_exit_2(store: Path,
