@@ -30,7 +30,7 @@ import anyio.from_thread
 from app.errors import InvalidInput, ServiceError
 from app.settings import Settings
 
-__all__ = ["BUDGET", "Budget", "BudgetGuard", "ClientGone", "OverBudget", "check",
+__all__ = ["BUDGET", "Budget", "BudgetGuard", "CheckDone", "ClientGone", "OverBudget", "check",
            "check_client", "checked", "limited", "precheck"]
 
 Scope = MutableMapping[str, Any]
@@ -50,6 +50,10 @@ class OverBudget(InvalidInput):
     """The request's work would take longer than the synchronous budget (422)."""
 
 
+class CheckDone(OverBudget):
+    """A check's work (``precheck``) reached a stage past what it checks: it stops there."""
+
+
 class ClientGone(ServiceError):
     """The client closed the connection: its work stops, nothing is stored."""
 
@@ -59,10 +63,13 @@ class ClientGone(ServiceError):
 @dataclass
 class Budget:
     seconds: float
-    started: float = field(default_factory=time.monotonic)
+    started: float = field(default_factory=lambda: time.monotonic())
     #: asks whether the client has gone (from a worker thread); None: never
     gone: Callable[[], bool] | None = None
     what: str = "this request"
+    #: the stages the work may report (``precheck``); a report of any other stage stops it
+    #: with ``CheckDone``. None: any stage
+    stages: frozenset[str] | None = None
 
     def left(self) -> float:
         return self.seconds - (time.monotonic() - self.started)
@@ -73,9 +80,12 @@ class Budget:
             raise ClientGone("the client closed the connection; the work was stopped and "
                              "nothing was stored")
 
-    def check(self) -> None:
-        """Raise ``ClientGone`` or ``OverBudget`` when the work should stop."""
+    def check(self, stage: str | None = None) -> None:
+        """Raise ``ClientGone`` or ``OverBudget`` when the work should stop (``CheckDone``
+        when it reports a ``stage`` outside ``stages``)."""
         self.check_client()
+        if stage is not None and self.stages is not None and stage not in self.stages:
+            raise CheckDone(f"{self.what}: the check ends where stage {stage!r} starts")
         if self.left() < 0:
             raise OverBudget(
                 f"{self.what} takes longer than the synchronous budget of {self.seconds:g} s "
@@ -113,20 +123,31 @@ def limited(seconds: float, what: str) -> Iterator[Budget | None]:
         BUDGET.reset(token)
 
 
-#: seconds a job's request may spend checking its region before the job is queued
-PRECHECK_SECONDS = 2.0
+#: the stages of ``domain.estimate_region`` that an empty-region check runs: the pilot
+#: (plain Monte Carlo up to its fixed number of draws, ``PRegionEstimator.pilot_max``, or
+#: ``pilot_max_costly`` for a criticality region) and, when it found nothing, the broadened
+#: search (a fixed number of draws too), which ends an empty region with its bound. The
+#: estimate's next stage (subset simulation, subset-is, the extended pilot's probe, MCMC)
+#: means the region has hits or needs the rare-event methods: the check stops there and
+#: leaves the region to the job.
+PRECHECK_STAGES = frozenset({"pilot"})
 
 
-def precheck(work: Callable[[], object]) -> None:
+def precheck(work: Callable[[], object],
+             stages: frozenset[str] = PRECHECK_STAGES) -> None:
     """Run ``work`` (a quick check before a job is stored, e.g. that its region is not
-    empty) for at most ``PRECHECK_SECONDS`` of the request's budget; work that takes
-    longer is left to the job, which fails with the same message if the check would have."""
+    empty) until it reports a stage outside ``stages``; work that gets there is left to
+    the job, which fails with the same message if the check would have. The check is
+    bounded by work (a fixed number of draws: the same verdict on any machine for the same
+    model, region and seed), not by time; the request's time budget
+    (SCENGEN_SYNC_BUDGET_SECONDS, 10 s; the empty-region check takes about 2 s on a quiet
+    machine) is only a safety cap: past it the work is also left to the job."""
     outer = BUDGET.get()
     if outer is None:
         work()
         return
-    inner = Budget(min(PRECHECK_SECONDS, max(outer.left(), 0.0)), gone=outer.gone,
-                   what=outer.what)
+    inner = Budget(max(outer.left(), 0.0), gone=outer.gone, what=outer.what,
+                   stages=stages)
     token = BUDGET.set(inner)
     try:
         work()
@@ -145,7 +166,7 @@ def checked(progress: Callable[[str, int, int], None] | None
         return progress
 
     def call(name: str, done: int, total: int) -> None:
-        budget.check()
+        budget.check(name)
         if progress is not None:
             progress(name, done, total)
 

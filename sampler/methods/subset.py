@@ -666,9 +666,9 @@ class SubsetSampler(Sampler):
     def estimate_alone(self, run: Run, pilot: Pilot) -> PRegion:
         """P(A) without samples: a subset simulation (after the broadened search when the
         pilot found nothing, which ends an empty region with its bound)."""
-        run.starting("subset simulation")
-        if pilot.n_hits == 0:
+        if pilot.n_hits == 0:  # part of the pilot (app.budget.precheck stops at the next stage)
             run.estimator.search(run.problem, run.rng, pilot, 1)
+        run.starting("subset simulation")
         return run.estimator.from_subset(run.problem, self.run(run.problem, 1, run.rng),
                                          run.bounds)
 

@@ -96,11 +96,17 @@ def free_port() -> int:
         return port
 
 
+#: the time budget of test services and CLI runs (SCENGEN_SYNC_BUDGET_SECONDS): a loaded
+#: test machine must not turn slow requests into 422s; tests about the budget set their own
+GENEROUS_BUDGET = "600"
+
+
 def service_env(data_dir: Path, **settings: str) -> dict[str, str]:
     """Environment of a service/CLI subprocess on the store in ``data_dir``."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("SCENGEN_")}
     env["SCENGEN_DATA_DIR"] = str(data_dir)
     env["SCENGEN_DEFAULT_MODEL_OPTIONS"] = json.dumps(TEST_MODEL_OPTIONS)
+    env["SCENGEN_SYNC_BUDGET_SECONDS"] = GENEROUS_BUDGET  # as make_settings
     env.update({f"SCENGEN_{k.upper()}": v for k, v in settings.items()})
     return env
 
@@ -137,7 +143,9 @@ ROOT = Path(__file__).resolve().parents[2]
 def uvicorn_service(env: dict[str, str], log: Path, *args: str) -> Iterator[str]:
     """``uvicorn app.main:app`` in its own session on a free loopback port with ``env``;
     yields its base URL once /health answers (bounded polling), then stops it (SIGTERM,
-    SIGKILL after 60 s). The server's output goes to ``log``."""
+    SIGKILL after 60 s). The server's output goes to ``log``. Without
+    SCENGEN_SYNC_BUDGET_SECONDS in ``env`` the service gets ``GENEROUS_BUDGET``."""
+    env = {"SCENGEN_SYNC_BUDGET_SECONDS": GENEROUS_BUDGET, **env}
     port = free_port()
     with open(log, "wb") as log_file:
         proc = subprocess.Popen(
