@@ -62,7 +62,7 @@ def test_http_evaluation_with_the_real_simulator(model_cache_dir: Path,
 
 def _env(store: Path, extra_path: Path | None = None) -> dict[str, str]:
     env = dict(os.environ, SCENGEN_DATA_DIR=str(store), SCENGEN_LOCAL_WORKERS="0",
-               SCENGEN_WARM_START="0")
+               SCENGEN_WARM_START="0", SCENGEN_SYNC_BUDGET_SECONDS="600")
     if extra_path is not None:
         env["PYTHONPATH"] = os.pathsep.join(
             [str(extra_path), str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)

@@ -49,7 +49,7 @@ from app.main import create_app
 from app.settings import Settings
 
 settings = Settings(data_dir=sys.argv[1], local_workers=0, warm_start=True,
-                    trusted_hosts=["testserver"])
+                    trusted_hosts=["testserver"], sync_budget_seconds=600.0)
 with TestClient(create_app(settings)) as client:
     for _ in range(6000):
         if client.get("/health").json()["status"] == "ok":
