@@ -16,7 +16,10 @@ Measures, against ``uvicorn app.main:app`` started here in a subprocess:
    scenarios and poll its status, on SQLite and (``--pg-url``, a fresh database created and
    dropped there) on PostgreSQL.
 
-``--only status,scenarios,catalogue,health`` runs a subset (default: all).
+7. the same catalogue from the command line (``scengen catalogue create`` in a fresh
+   process on the same store, the service stopped) and the CLI/HTTP ratio.
+
+``--only status,scenarios,catalogue,cli,health`` runs a subset (default: all).
 
 Before/after (issue 13), measured in the same run, in this process, one core:
 
@@ -143,6 +146,23 @@ def latency(base: str, n: int, requests: int) -> dict[str, Any]:
     return {"n": n, "requests": requests, "p50_s": percentile(times, 0.5),
             "p95_s": percentile(times, 0.95), "mean_s": statistics.fmean(times),
             "load": load()}
+
+
+def cli_catalogue(data_dir: Path, n: int, seed: int, chunk_size: int, workers: int) -> float:
+    """Wall clock of ``scengen catalogue create`` (a fresh process, as a user runs it) on
+    the service's store: the CLI against the HTTP catalogue (issue 25)."""
+    scengen = Path(sys.executable).with_name("scengen")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SCENGEN_")}
+    env.update({"SCENGEN_DATA_DIR": str(data_dir), "SCENGEN_LOCAL_WORKERS": str(workers)})
+    t0 = time.perf_counter()
+    done = subprocess.run([str(scengen), "catalogue", "create", "-n", str(n), "--seed",
+                           str(seed), "--chunk-size", str(chunk_size), "-q"], env=env,
+                          capture_output=True, text=True, check=False)
+    elapsed = time.perf_counter() - t0
+    if done.returncode != 0:
+        raise SystemExit(f"scengen catalogue create failed: {done.stderr[-2000:]}")
+    note(f"  scengen catalogue create: {n} scored scenarios in {elapsed:.1f} s")
+    return elapsed
 
 
 def catalogue(base: str, n: int, seed: int, chunk_size: int) -> tuple[float, str]:
@@ -447,7 +467,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="rows of the stored catalogue whose status is timed")
     ap.add_argument("--quick", action="store_true",
                     help="a 1,000-scenario catalogue and 5 requests (minutes, not tens)")
-    ap.add_argument("--only", default="status,scenarios,catalogue,health",
+    ap.add_argument("--only", default="status,scenarios,catalogue,cli,health",
                     help="comma-separated parts to run: status (with the before/after), "
                          "scenarios, catalogue (local and Dask), health")
     ap.add_argument("--health-n", type=int, default=2000,
@@ -509,6 +529,15 @@ def main(argv: list[str] | None = None) -> int:
                 local_csv = export_csv(server.base, local_id)
         finally:
             server.stop()
+        if "cli" in only:
+            note(f"the same catalogue from the command line (scengen catalogue create, "
+                 f"{args.workers} workers, the service stopped)")
+            cli_s = cli_catalogue(data_dir, args.catalogue_n, args.seed, args.chunk_size,
+                                  args.workers)
+            results["catalogue_cli_s"] = cli_s
+            results["catalogue_cli_load"] = load()
+            if "catalogue_local_s" in results:
+                note(f"  CLI / HTTP: {cli_s / results['catalogue_local_s']:.2f}")
         if "health" in only and args.pg_url:
             url, drop = pg_fresh_database(args.pg_url)
             try:
