@@ -1,7 +1,8 @@
 """``scengen evaluate``: a system under test driven through importance-sampled cut-ins
 (issue 24; docs/evaluation.md).
 
-``scengen evaluate --sut NAME [-c C]... [-n N | --rhw 0.3] [--seed S] [--runs FILE]`` runs
+``scengen evaluate --sut NAME [-c C]... [-n N | --rhw 0.3] [--adapt kernels|ce] [--seed S]
+[--runs FILE]`` runs
 a campaign in this process (``sampler.campaign.evaluate``; nothing is stored) and prints
 its summary as JSON on stdout: ``p_collision`` and ``rate_per_hour`` (each ``estimate``,
 ``ci`` and the model interval ``model_ci``), ``runs``, ``collisions``, ``ess``,
@@ -59,6 +60,13 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      "most R, with at least 10 collisions (default 0.3)")
     p.add_argument("--max-runs", type=int, default=None, metavar="M",
                    help="most draws with the stop rule (200000)")
+    p.add_argument("--adapt", choices=("kernels", "ce"), default="kernels",
+                   help="how later chunks adapt the proposal: 'kernels' (default: "
+                   "Student-t kernels on the collisions so far, every run counts) or 'ce' "
+                   "(adaptive cross-entropy on the SUT's performance score: pilot chunks "
+                   "until 20 collided runs, then only the final stage counts; for rare "
+                   "failures of a real SUT; it can miss a failure family, "
+                   "docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed (0)")
     p.add_argument("--batch-size", type=int, default=None, metavar="B",
                    help="draws per chunk (2000)")
@@ -134,7 +142,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         n=args.n, rhw=0.3 if args.rhw is None else float(args.rhw),
         max_runs=args.max_runs or service.DEFAULT_MAX_RUNS, seed=args.seed,
         batch_size=args.batch_size or service.DEFAULT_BATCH,
-        settings=_pairs(args.settings, "--setting") or None, risk=bool(args.risk))
+        settings=_pairs(args.settings, "--setting") or None, risk=bool(args.risk),
+        adapt=args.adapt)
     service.check_spec(spec, limit=10**9, where="")
     runner = service.runner_for(None, factory, spec.settings, spec.risk)
     model = _load_model(args.model)

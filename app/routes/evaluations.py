@@ -57,6 +57,12 @@ class EvaluationRequest(BaseModel):
     risk: bool = Field(default=False, description="also compute Wagner's TTR risk (r_dep, "
                        "r_ind) of the SUT's own drive in every run: r_dep_peak, r_ind_peak, "
                        "r_dep_time_above (null without it; several times the simulation cost)")
+    adapt: Literal["kernels", "ce"] = Field(
+        default="kernels", description="how later chunks adapt the proposal: 'kernels' "
+        "(Student-t kernels on the collisions so far; every run counts) or 'ce' (adaptive "
+        "cross-entropy on the SUT's performance score: pilot chunks, then only the final "
+        "stage's runs count; for rare failures of a real SUT, docs/evaluation.md). The "
+        "summary reports adapt, pilot_runs and proposal")
 
 
 class EvaluationCreated(ApiModel):
@@ -158,7 +164,7 @@ def create_evaluation(body: EvaluationRequest, request: Request, ctx: ContextDep
                              constraints=body.constraints, n=body.n, rhw=body.rhw,
                              max_runs=body.max_runs, seed=body.seed,
                              batch_size=body.batch_size, settings=body.settings,
-                             risk=body.risk)
+                             risk=body.risk, adapt=body.adapt)
     jobs.submit(row.id, quota=quota)
     return EvaluationCreated(id=row.id, status=row.status, href=f"/evaluations/{row.id}")
 

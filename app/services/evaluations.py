@@ -127,6 +127,10 @@ def check_settings(settings: Mapping[str, Any] | None, field: str) -> None:
 
 
 # --------------------------------------------------------------------------- create
+#: the campaign's adaptation stages (``sampler.campaign.evaluate(adapt=...)``), default first
+ADAPT = ("kernels", "ce")
+
+
 @dataclass(frozen=True)
 class CampaignSpec:
     """What a campaign is: everything ``evaluate`` needs besides the model and runner."""
@@ -141,13 +145,16 @@ class CampaignSpec:
     batch_size: int
     settings: dict[str, Any] | None
     risk: bool = False  # r_dep / r_ind of the SUT's drive per run (costly)
+    #: how later chunks adapt their proposal (``sampler.campaign.evaluate``): "kernels"
+    #: or "ce" (cross-entropy); a stored spec without it was a kernels campaign
+    adapt: str = "kernels"
 
     def to_dict(self) -> dict[str, Any]:
         return {"sut": self.sut, "sut_params": self.sut_params,
                 "constraints": self.constraints, "n": self.n, "rhw": self.rhw,
                 "max_runs": self.max_runs, "seed": self.seed,
                 "batch_size": self.batch_size, "settings": self.settings,
-                "risk": self.risk}
+                "risk": self.risk, "adapt": self.adapt}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
@@ -155,7 +162,8 @@ class CampaignSpec:
                    constraints=list(d.get("constraints") or []), n=d.get("n"),
                    rhw=float(d.get("rhw", 0.3)), max_runs=int(d["max_runs"]),
                    seed=int(d.get("seed", 0)), batch_size=int(d["batch_size"]),
-                   settings=d.get("settings"), risk=bool(d.get("risk", False)))
+                   settings=d.get("settings"), risk=bool(d.get("risk", False)),
+                   adapt=str(d.get("adapt") or "kernels"))
 
     @property
     def planned(self) -> int:
@@ -183,13 +191,17 @@ def check_spec(spec: CampaignSpec, limit: int, where: str = "body") -> None:
     if isinstance(spec.seed, bool) or spec.seed < 0:
         raise InvalidInput(f"{f('seed')}: must be an integer >= 0, got {spec.seed}",
                            field=f("seed"))
+    if spec.adapt not in ADAPT:
+        raise InvalidInput(f"{f('adapt')}: must be one of {', '.join(ADAPT)}, got "
+                           f"{spec.adapt!r}", field=f("adapt"))
 
 
 def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | None = None,
            model: str | None = None, constraints: Sequence[str] = (), n: int | None = None,
            rhw: float = 0.3, max_runs: int | None = None, seed: int = 0,
            batch_size: int | None = None,
-           settings: Mapping[str, Any] | None = None, risk: bool = False) -> EvaluationRow:
+           settings: Mapping[str, Any] | None = None, risk: bool = False,
+           adapt: str = "kernels") -> EvaluationRow:
     """Validate and store a queued evaluation job; the caller submits it. ``sut`` must be a
     registered name (a request never names a module)."""
     entry = suts.resolve(sut, allow_import=False, field="body.sut")
@@ -198,7 +210,8 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
                         max_runs=int(max_runs or min(DEFAULT_MAX_RUNS,
                                                      ctx.settings.catalogue_n_limit)),
                         seed=int(seed), batch_size=int(batch_size or DEFAULT_BATCH),
-                        settings=dict(settings) if settings else None, risk=bool(risk))
+                        settings=dict(settings) if settings else None, risk=bool(risk),
+                        adapt=str(adapt))
     check_spec(spec, ctx.settings.catalogue_n_limit)
     model_id = ctx.resolve_model_id(model)
     fitted = ctx.model(model_id)  # 404 before anything is stored
@@ -324,7 +337,7 @@ def campaign(model: CutInGMM, factory: suts.SutFactory, spec: CampaignSpec, *, r
         model, runner, constraints=spec.constraints or None, n=spec.n, rhw=spec.rhw,
         max_runs=spec.max_runs, seed=spec.seed, batch_size=spec.batch_size,
         progress=progress, on_chunk=on_chunk, stored=list(stored), executor=executor,
-        sut=spec.sut)
+        sut=spec.sut, adapt=spec.adapt)
     return result
 
 

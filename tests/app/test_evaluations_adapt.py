@@ -1,0 +1,220 @@
+"""The campaign's adaptation chosen from the CLI and the API (issue 24 item 7/9):
+``scengen evaluate --adapt {kernels,ce}`` and ``POST /evaluations {"adapt": ...}`` reach
+``sampler.campaign.evaluate(adapt=...)``; a stored spec without the field is a kernels
+campaign and resumes as one.
+
+The runner is a stand-in whose outcome is known by hand (a collision iff dv > 6 m/s) and
+which reports the ``margin`` the cross-entropy stage scores (6 - dv: <= 0 iff collided)."""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app import jsonconv
+from app.services import evaluations as service
+from app.services.store import open_context
+from datasets import PARAM_NAMES
+from tests.app.factories import copy_model_cache, make_settings
+from tests.app.test_evaluations import CountingRunner, Outcomes, _done
+
+DV_HIT = 6.0
+
+
+class ScoredOutcomes(Outcomes):
+    def __init__(self, params: np.ndarray, dv_hit: float) -> None:
+        super().__init__(params, dv_hit)
+        dv = params[:, PARAM_NAMES.index("dv")]
+        self.margin = dv_hit - dv  # the signed distance to the collision set
+
+
+class ScoredRunner(CountingRunner):
+    def __call__(self, params: np.ndarray, seeds: np.ndarray) -> Outcomes:
+        self.rows += params.shape[0]
+        return ScoredOutcomes(np.asarray(params), self.dv_hit)
+
+
+@pytest.fixture
+def cli_runner(monkeypatch: pytest.MonkeyPatch) -> ScoredRunner:
+    runner = ScoredRunner(DV_HIT)
+    monkeypatch.setattr(service, "default_runner", lambda factory, settings: runner)
+    return runner
+
+
+@pytest.fixture(scope="module")
+def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory
+           ) -> Iterator[Any]:
+    from fastapi.testclient import TestClient
+
+    from tests.app.factories import make_app
+
+    data_dir = tmp_path_factory.mktemp("evaluations-adapt")
+    copy_model_cache(model_cache_dir, data_dir)
+    runner = ScoredRunner(DV_HIT)
+    app = make_app(make_settings(data_dir))
+    with TestClient(app) as c:
+        app.state.ctx.campaign_runner = lambda factory, settings: runner
+        yield c
+
+
+# --------------------------------------------------------------------------- spec
+def test_a_stored_spec_without_adapt_reads_as_kernels() -> None:
+    old = {"sut": "acc", "sut_params": {}, "constraints": [], "n": 100, "rhw": 0.3,
+           "max_runs": 200000, "seed": 1, "batch_size": 50, "settings": None,
+           "risk": False}
+    spec = service.CampaignSpec.from_dict(old)
+    assert spec.adapt == "kernels"
+    assert service.CampaignSpec.from_dict({**old, "adapt": "ce"}).adapt == "ce"
+    assert spec.to_dict() == {**old, "adapt": "kernels"}
+
+
+# --------------------------------------------------------------------------- CLI
+@pytest.mark.slow  # two campaigns of 1,500 draws on a loaded machine
+def test_cli_adapt_ce_runs_a_cross_entropy_campaign(
+        store: Path, cli_runner: ScoredRunner, capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    argv = ["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4", "--batch-size", "500",
+            "-q"]
+    assert main([*argv, "--adapt", "ce"]) == 0
+    ce = json.loads(capsys.readouterr().out)
+    assert ce["adapt"] == "ce"
+    # chunk 0 is always a pilot chunk (no elite yet); the stand-in collides often enough
+    # (>= 20 collided runs in 500) that the final stage starts at chunk 1
+    assert ce["pilot_runs"] == 500 and ce["runs"] == 1500
+    assert any(str(p.get("part", "")).startswith("ce:") for p in ce["proposal"]), \
+        ce["proposal"]
+    assert main(argv) == 0  # the default is unchanged
+    kernels = json.loads(capsys.readouterr().out)
+    assert kernels["adapt"] == "kernels" and kernels["pilot_runs"] == 0
+    assert kernels["p_collision"] != ce["p_collision"]
+
+
+@pytest.mark.parametrize("value", ["CE", "cem", ""])
+def test_cli_bad_adapt_is_one_line_and_exit_2(store: Path, cli_runner: ScoredRunner,
+                                              capsys: pytest.CaptureFixture[str],
+                                              value: str) -> None:
+    from app.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", "-q", "--sut", "acc", "-n", "5", "--adapt", value])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "--adapt" in err and "kernels" in err and "ce" in err
+    assert cli_runner.rows == 0
+
+
+def test_cli_help_names_the_choices(capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "--adapt {kernels,ce}" in out and "rare failures" in out
+
+
+# --------------------------------------------------------------------------- API
+def test_post_adapt_ce_gives_the_direct_campaign_bit_for_bit(client: Any) -> None:
+    from sampler.campaign import evaluate
+
+    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
+                                          "seed": 5, "adapt": "ce"})
+    assert r.status_code == 202, r.json()
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert st["spec"]["adapt"] == "ce"
+    got = st["summary"]
+    assert got["adapt"] == "ce" and got["pilot_runs"] == 500
+
+    ctx = client.app.state.ctx
+    model = ctx.model(ctx.resolve_model_id(None))
+    direct = evaluate(model, ScoredRunner(DV_HIT), n=1500, batch_size=500, seed=5,
+                      sut="acc", adapt="ce",
+                      max_runs=min(service.DEFAULT_MAX_RUNS,
+                                   ctx.settings.catalogue_n_limit))
+    want = json.loads(json.dumps(jsonconv.encode(direct.summary())))
+    assert got == want  # every number, bit for bit (JSON floats round-trip exactly)
+
+
+def test_post_default_is_kernels(client: Any) -> None:
+    r = client.post("/evaluations", json={"sut": "acc", "n": 200, "batch_size": 100,
+                                          "seed": 2})
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert st["spec"]["adapt"] == "kernels"
+    assert st["summary"]["adapt"] == "kernels" and st["summary"]["pilot_runs"] == 0
+
+
+@pytest.mark.parametrize("value", ["cem", "CE", 1, None])
+def test_post_bad_adapt_is_422_naming_the_field(client: Any, value: Any) -> None:
+    before = len(client.get("/evaluations").json()["evaluations"])
+    r = client.post("/evaluations", json={"sut": "acc", "n": 10, "adapt": value})
+    assert r.status_code == 422, r.json()
+    assert r.json()["error"]["field"] == "body.adapt", r.json()
+    assert len(client.get("/evaluations").json()["evaluations"]) == before
+
+
+def test_openapi_lists_the_adapt_values(client: Any) -> None:
+    schema = client.get("/openapi.json").json()["components"]["schemas"]
+    prop = schema["EvaluationRequest"]["properties"]["adapt"]
+    assert prop["enum"] == ["kernels", "ce"] and prop["default"] == "kernels"
+
+
+def test_service_refuses_an_unknown_adapt_naming_the_field(client: Any) -> None:
+    from app.errors import InvalidInput
+
+    with pytest.raises(InvalidInput) as exc:
+        service.create(client.app.state.ctx, sut="acc", n=10, adapt="nope")
+    assert exc.value.field == "body.adapt"
+
+
+# --------------------------------------------------------------------------- resume
+@pytest.mark.slow  # four campaigns of 1,500 draws on a loaded machine
+def test_old_and_ce_specs_resume_to_the_uninterrupted_result(
+        model_cache_dir: Path, tmp_path: Path) -> None:
+    """An evaluation stored before the field existed (its spec has no "adapt") is
+    interrupted and resumed: it runs as kernels, equal to a fresh kernels run; a ce
+    evaluation interrupted and resumed equals an uninterrupted ce run."""
+    from app.db.models import EvaluationRow
+
+    data_dir = tmp_path / "data"
+    copy_model_cache(model_cache_dir, data_dir)
+    ctx = open_context(make_settings(data_dir))
+    try:
+        runner = ScoredRunner(DV_HIT)
+        ctx.campaign_runner = lambda factory, settings: runner
+        base: dict[str, Any] = {"sut": "acc", "n": 1500, "batch_size": 500, "seed": 7}
+        for adapt in ("kernels", "ce"):
+            a = service.create(ctx, **base, adapt=adapt).id
+            b = service.create(ctx, **base, adapt=adapt).id
+            if adapt == "kernels":  # as stored before the field existed
+                with ctx.db.session() as s:
+                    row = s.get(EvaluationRow, b)
+                    assert row is not None
+                    spec = dict(jsonconv.decode(row.spec))
+                    del spec["adapt"]
+                    row.spec = jsonconv.encode(spec)
+            assert service.run_job(ctx, a) == "done"
+            stop = threading.Event()
+
+            def progress(stage: str, done: int, total: int, stop: Any = stop) -> None:
+                if done >= 500:
+                    stop.set()
+
+            assert service.run_job(ctx, b, stop=stop, progress=progress) == "interrupted"
+            assert service.describe(ctx, b)["chunks_done"] == 1
+            assert service.run_job(ctx, b) == "done"
+            sa, sb = service.describe(ctx, a)["summary"], service.describe(ctx, b)["summary"]
+            assert sb["adapt"] == adapt
+            assert sa == sb
+            if adapt == "ce":
+                assert sb["pilot_runs"] == 500
+    finally:
+        ctx.close()
