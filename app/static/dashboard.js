@@ -108,6 +108,66 @@
     early.set(path, promise);
   }
 
+  // Export links: a plain <a href download> cannot send X-API-Key, so with the key set the
+  // export answered 401. A plain click on a link marked data-export (its value: the file
+  // name to use if the server names none) fetches the file with the key, as api() does,
+  // and saves the body under the server's name (Content-Disposition) through a temporary
+  // object URL; a refusal is said in #error. Without a key the same fetch runs keyless, so
+  // a service without SCENGEN_API_KEY downloads as before. The href stays for "copy link".
+  function dispositionName(header, fallback) {
+    if (!header) return fallback;
+    let m = /filename\*\s*=\s*UTF-8''([^;]+)/i.exec(header);
+    if (m) {
+      try { return decodeURIComponent(m[1].trim()); } catch (e) { /* the plain name below */ }
+    }
+    m = /filename\s*=\s*"([^"]*)"/i.exec(header) || /filename\s*=\s*([^;]+)/i.exec(header);
+    return m && m[1].trim() ? m[1].trim() : fallback;
+  }
+
+  async function download(path, fallback) {
+    const headers = new Headers();
+    const key = apiKey();
+    if (key) headers.set("X-API-Key", key);
+    let response;
+    try {
+      response = await fetch(path, { headers });
+    } catch (e) {
+      throw new ApiError(0, "the service did not answer (" + e.message + ")");
+    }
+    if (response.status === 401) throw new ApiError(401, keyRefused(), "header.x-api-key");
+    if (!response.ok) {
+      let body = null;
+      try { body = await response.json(); } catch (e) { body = null; }
+      const err = body && body.error ? body.error : {};
+      throw new ApiError(response.status, err.message || response.statusText, err.field);
+    }
+    const blob = await response.blob();
+    const url = URL.createObjectURL(blob);
+    const save = document.createElement("a");
+    save.href = url;
+    save.download = dispositionName(response.headers.get("Content-Disposition"), fallback);
+    save.hidden = true;
+    document.body.appendChild(save);
+    save.click();
+    save.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 60_000);
+  }
+
+  function exportLinks() {
+    document.addEventListener("click", (event) => {
+      const link = event.target instanceof Element ? event.target.closest("a[data-export]")
+                                                   : null;
+      if (!link || event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey ||
+          event.altKey) return;
+      event.preventDefault();
+      if (link.getAttribute("aria-busy") === "true") return;  // one download at a time
+      link.setAttribute("aria-busy", "true");
+      download(link.getAttribute("href"), link.dataset.export)
+        .catch((e) => reportError("export " + link.dataset.export, e))
+        .finally(() => link.removeAttribute("aria-busy"));
+    });
+  }
+
   function prefetched(path) {
     const promise = early.get(path);
     early.delete(path);
@@ -554,7 +614,8 @@
       if (c.status === "done") {
         const href = "/catalogues/" + encodeURIComponent(c.id) + "/export?format=";
         rows.push(["export", ["jsonl", "csv", "parquet", "xosc"].map((f) =>
-          "<a href=\"" + href + f + "\" download>" + f + "</a>").join(" · ")]);
+          "<a href=\"" + href + f + "\" download data-export=\"" +
+          esc(c.id + "." + (f === "xosc" ? "zip" : f)) + "\">" + f + "</a>").join(" · ")]);
       }
       if (c.error) rows.push(["error", esc(c.error), "warn"]);
       for (const w of d.warnings) rows.push(["warning", esc(w), "warn"]);
@@ -1287,6 +1348,7 @@
 
   async function init() {
     keyField();
+    exportLinks();
     $("draw-form").addEventListener("submit", drawSample);
     $("play-button").addEventListener("click", togglePlay);
     $("time-slider").addEventListener("input", (e) => {
