@@ -194,7 +194,7 @@ def test_page_loads_without_errors_and_every_plot_has_data(server: Server, page:
 
 
 def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
-        server: Server, page: Page) -> None:
+        server: Server, page: Page, tmp_path: Path) -> None:
     console = Console(page)
     page.goto(f"{server.base}/dashboard")
     settle(page)
@@ -233,6 +233,14 @@ def test_draw_a_sample_updates_the_plots_and_a_click_opens_its_scenario(
     assert href == f"/catalogues/{cid}/export?format=csv"
     exported = httpx.get(server.base + href, timeout=120)
     assert exported.status_code == 200 and len(exported.text.strip().splitlines()) == 1 + 12
+    # a service without an API key: the click downloads the same export (through fetch)
+    with page.expect_download() as started:
+        csv_link.click()
+    download = started.value
+    assert download.failure() is None and download.suggested_filename == f"{cid}.csv"
+    saved = tmp_path / "export.csv"
+    download.save_as(saved)
+    assert saved.read_bytes() == exported.content
     shot(page, "#view-shift", "2-constraint-shift-catalogue.png")
     shot(page, "#view-risk", "3-catalogue-criticality.png")
 
