@@ -104,6 +104,15 @@ class ServiceContext:
                                                local_workers=self.settings.local_workers)
             return self._executor
 
+    def adopt_executor(self, executor: ChunkExecutor) -> None:
+        """Use ``executor`` (made from these settings with ``make_executor``, maybe started
+        already) as this context's; the context closes it. The CLI starts the pool before
+        it opens the store and loads the model, so that the two overlap (issue 25 item 7)."""
+        with self._lock:
+            if self._executor is not None:
+                raise RuntimeError("this context has an executor already")
+            self._executor = executor
+
     def runner(self) -> CatalogueRunner:
         return CatalogueRunner(self.db, self.data_dir, self.executor)
 

@@ -17,18 +17,38 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
-from typing import Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
-from app.jobs.chunk import CatalogueSpec, ChunkResult, compute_chunk, warm_worker
 from app.jobs.fair import Share
 from app.jobs.lifeline import die_with_parent, pool_keeper_thread
 
+if TYPE_CHECKING:
+    from app.jobs.chunk import CatalogueSpec, ChunkResult
+
 log = logging.getLogger("scengen.jobs")
 
-ChunkFn = Callable[[CatalogueSpec, int], ChunkResult]
+ChunkFn = Callable[["CatalogueSpec", int], "ChunkResult"]
 #: seconds between two looks at a job's cancel flag while its chunks run
 CANCEL_POLL = 0.25
 T = TypeVar("T")
+
+
+# This module imports no chunk machinery (the sampler, scikit-learn, numba) at its own
+# import, so that a command can start the pool's workers first and import the rest while
+# they start (issue 25 item 7). The workers are handed these two by reference and import
+# ``app.jobs.chunk`` themselves.
+def compute_chunk(spec: CatalogueSpec, index: int) -> ChunkResult:
+    """``app.jobs.chunk.compute_chunk`` (imported when first called)."""
+    from app.jobs.chunk import compute_chunk as compute
+
+    return compute(spec, index)
+
+
+def warm_worker(hold: float = 0.0) -> int:
+    """``app.jobs.chunk.warm_worker`` (imported when first called)."""
+    from app.jobs.chunk import warm_worker as warm
+
+    return warm(hold)
 
 
 class Flag(Protocol):
@@ -120,6 +140,7 @@ class FuturesExecutor:
         self.fn = fn
         self._executor: Executor | None = None
         self._lock = threading.Lock()
+        self._warm_thread: threading.Thread | None = None
 
     # what a subclass provides
     def _make(self) -> Executor:
@@ -213,7 +234,11 @@ class FuturesExecutor:
         """Start the workers and have each import the chunk machinery and load its compiled
         kernels (``app.jobs.chunk.warm_worker``) in the background, so the first catalogue
         or ``POST /scenarios`` after a start does not wait for that. Failures are logged
-        only: a worker that could not warm up does so at its first chunk."""
+        only: a worker that could not warm up does so at its first chunk. Once per pool:
+        a second call returns the first call's thread."""
+        with self._lock:
+            if self._warm_thread is not None:
+                return self._warm_thread
 
         def run() -> None:
             try:
@@ -222,6 +247,8 @@ class FuturesExecutor:
                 log.warning("warming the %s workers failed: %r", self.name, exc)
 
         thread = threading.Thread(target=run, name=f"scengen-warm-{self.name}", daemon=True)
+        with self._lock:
+            self._warm_thread = thread
         thread.start()
         return thread
 
@@ -234,6 +261,7 @@ class FuturesExecutor:
     def close(self) -> None:
         with self._lock:
             executor, self._executor = self._executor, None
+            self._warm_thread = None
         if executor is not None:
             self._shutdown(executor)
 
