@@ -20,7 +20,7 @@ from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExe
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from app.jobs.fair import Share
-from app.jobs.lifeline import die_with_parent, pool_keeper_thread
+from app.jobs.lifeline import pool_keeper_thread, quick_exit_worker
 
 if TYPE_CHECKING:
     from app.jobs.chunk import CatalogueSpec, ChunkResult
@@ -288,7 +288,7 @@ class LocalPoolExecutor(FuturesExecutor):
         log.info("starting a local process pool with %d workers", self.workers)
         pool = ProcessPoolExecutor(max_workers=self.workers,
                                    mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=die_with_parent, initargs=(os.getpid(),))
+                                   initializer=quick_exit_worker, initargs=(os.getpid(),))
 
         def spawn_all() -> None:
             # one task per worker makes the pool start every worker now, from the keeper
