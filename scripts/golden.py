@@ -18,6 +18,7 @@ import hashlib
 import json
 import sys
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -25,9 +26,13 @@ import numpy as np
 from datasets import PARAM_NAMES
 from datasets.embedded import default_parameter_table
 from sampler import CutInGMM, sample
+from sampler.methods.probability import PRegionEstimator
 from sampler.methods.subset import region_limit_state, subset_simulation
+from sampler.region.btn_bound import a_req_bound
 from sampler.region.constraints import Region
+from sampler.region.criticality import criticality_quantities
 from sampler.scenario import build_scenario
+from sampler.scenario.record import score_vector
 
 REGIONS = [["ttc<3"], ["ttc<2", "thw<1"], ["btn>0.5"], ["ttc<4", "btn>0.3"],
            ["ttc<5", "gap<40", "ttr_true<3", "btn>0.05"], ["ttc<3", "support<=near"],
@@ -72,7 +77,7 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
             for kw in ({}, {"duration": 20.0}, {"lead_in": 0.0, "dt": 0.05},
                        {"lane_width": 3.2, "ego_size": (4.0, 1.7), "seed": 3}):
                 try:
-                    s = build_scenario(row, **kw)  # type: ignore[arg-type]
+                    s = build_scenario(row, **kw)
                 except Exception as exc:  # a refusal is an output too
                     out.append(f"{type(exc).__name__}: {exc}")
                     continue
@@ -92,6 +97,54 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
             s = sample(model, ["ttc<3"], n=200, seed=7, method=method)
             return _digest(np.asarray(s.params if hasattr(s, "params") else s))
         cases[f"sample {method}"] = sample_case
+
+    def sample_support_case() -> str:
+        s = sample(model, ["ttc<4", "support<=near"], n=100, seed=9, method="rejection",
+                   use_envelope=False)
+        return _digest(np.asarray(s.params), np.asarray(s.derived), s.log_density,
+                       s.exposure_weights, s.diagnostics.get("pilot"), s.support)
+    cases["sample rejection support, no envelope"] = sample_support_case
+
+    def fit_case() -> str:
+        return _digest(model.weights_, model.means_, model.covariances_, model.bic_curve_,
+                       model.fit_report_, model.training_, model.support_)
+    cases["CutInGMM.fit"] = fit_case
+
+    xc = model.params_matrix(model.sample(300, np.random.default_rng(13)))
+    xc[:3, 0] = (0.0, np.nan, -xc[2, 0])  # not a cut-in, not finite, the other side
+
+    def crit_case(baseline: bool, with_ttr: bool) -> str:
+        q = criticality_quantities(xc, baseline=baseline, with_ttr=with_ttr)
+        return _digest(*(q[k] for k in sorted(q)))
+    for baseline in (False, True):
+        for with_ttr in (True, False):
+            cases[f"criticality_quantities baseline={baseline} ttr={with_ttr}"] = (
+                partial(crit_case, baseline, with_ttr))
+
+    def bound_case() -> str:
+        return _digest(*(a_req_bound(xc, lw, stop_at=s) for lw in (3.5, 3.0)
+                         for s in (0.0, 2.0, 6.0)))
+    cases["a_req_bound"] = bound_case
+
+    def score_case() -> str:
+        out = []
+        for i, row in enumerate(rows[:12]):
+            for kw in ({}, {"wagner_scan": True, "include_scenario": True},
+                       {"score": False}, {"lane_width": 3.2, "seed": 4,
+                                          "builder_kwargs": {"duration": 15.0}}):
+                rec, scen = score_vector(row, index=i, **kw)
+                out.append(rec.to_dict() if hasattr(rec, "to_dict") else vars(rec))
+                out.append(None if scen is None else scen.to_dict())
+        rec, _ = score_vector({**rows[0], "p_y1": 0.0})
+        out.append(vars(rec))
+        return _digest(out)
+    cases["score_vector"] = score_case
+
+    def estimator_case() -> str:
+        return _digest(PRegionEstimator().settings(),
+                       PRegionEstimator(3, 5, 7, 9, 11, 0.2, 1.1, 13, (2.0,), 17, 1e-9, 0.9,
+                                        19, 0.3, 23, 29).settings())
+    cases["PRegionEstimator settings"] = estimator_case
     return cases
 
 
