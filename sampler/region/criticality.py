@@ -32,6 +32,7 @@ crossing, non-positive ego speed, a negative cutter speed) gives NaN.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -89,47 +90,139 @@ def _state(p_y1: float, p_t: float, p_a1: float, p_a2: float, p_a3: float, p_v0:
     return psi, p_v0 + p_a1 * (c - c0), 0.0
 
 
-@numba.njit(cache=True)
-def _cutter_samples(row: FloatArray, lane_width: float, wz: float, tail: float,
-                    follow: float) -> tuple[float, float, float, FloatArray, FloatArray,
-                                            FloatArray, FloatArray]:  # pragma: no cover
-    """The built scenario's cutter for one row, without building it.
+class _Cutter(NamedTuple):
+    """The built scenario's cutter for one row (:func:`_cutter_samples`)."""
 
-    Returns (t_p, v_ego, t_stop, cs, cd, cp, cv): the perception moment (scenario time),
-    the ego's constant speed, the end of the simulated time, and the cutter's centre
-    (along and across the ego's path, which is the road's x axis at y = 0), heading and
-    speed at the builder's sample times k * 0.1 s, k = 0 .. n - 1 (straight at constant
-    speed after the last one). t_p is NaN when the row is not a buildable cut-in.
-    """
+    t_p: float  # perception moment, scenario time; NaN: not a buildable cut-in
+    v_e: float  # the ego's constant speed
+    t_stop: float  # end of the simulated time
+    s: FloatArray  # centre along the ego's path (the road's x axis at y = 0) ...
+    d: FloatArray  # ... and across it, at the sample times k * _DT
+    p: FloatArray  # heading there
+    v: FloatArray  # speed there (straight at constant speed after the last sample)
+
+
+class _Box(NamedTuple):
+    """Half lengths and half widths of the ego and the cutter (m)."""
+
+    ehl: float
+    ehw: float
+    chl: float
+    chw: float
+
+
+class _Settings(NamedTuple):
+    """The drivers' and the TTR scan's settings (``criticality_quantities`` packs them)."""
+
+    wz: float  # wandering zone: the cutter's lateral move that marks t_p
+    reaction: float
+    jerk: float
+    a_max: float
+    ttc_crit: float
+    h: float  # simulation step
+    tail: float
+    follow: float
+    ttr_dt: float
+    ttr_tail: float  # negative: no TTR scan
+    grid: bool  # the baseline path (grid kernels over every step)
+
+
+@numba.njit(cache=True)
+def _not_a_cut_in() -> _Cutter:  # pragma: no cover - jit
+    """The answer for a row that is not a buildable cut-in (t_p NaN)."""
     empty = np.empty(0)
-    bad = (np.nan, np.nan, np.nan, empty, empty, empty, empty)
-    p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap = (row[0], row[1], row[2], row[3], row[4],
-                                                  row[5], row[6], row[7])
+    return _Cutter(np.nan, np.nan, np.nan, empty, empty, empty, empty)
+
+
+@numba.njit(cache=True)
+def _row_state(row: FloatArray, tau: float) -> tuple[float, float]:  # pragma: no cover
+    """The cutter's heading and speed at the model's time tau."""
+    psi, v, _ = _state(row[0], row[1], row[2], row[3], row[4], row[5], tau)
+    return psi, v
+
+
+@numba.njit(cache=True)
+def _n_samples(row: FloatArray) -> int:  # pragma: no cover - jit
+    """The number of sample times (every _DT up to the settled motion + _DT) of a row the
+    builder accepts; 0 for a row it refuses (not finite, no lateral motion, too long)."""
     for j in range(8):
         if not math.isfinite(row[j]):
-            return bad
+            return 0
+    p_y1, p_t, p_a2, p_a3 = row[0], row[1], row[3], row[4]
     if p_t <= 0.0 or p_a3 < 0.0 or p_y1 == 0.0:
-        return bad
-    ehl = 0.5 * _SIZE[0]
+        return 0
     pulse_end = p_a2 + p_a3 if p_a3 > 0.0 else 0.0
     t_settle = _LEAD_IN + max(2.0 * p_t, pulse_end, 0.0)
     if t_settle > _MAX_DURATION:  # the builder refuses it
-        return bad
-    # integrate on 0.01 s substeps from tau = -lead_in over the lateral motion and beyond:
-    # samples every _DT up to t_settle + 0.1, then constant velocity (as the frames do)
+        return 0
     k_set = math.ceil(t_settle / _DT - 1e-9) + 1
-    n_s = k_set + 1
+    return k_set + 1
+
+
+@numba.njit(cache=True)
+def _velocity(psi: float, v: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """The velocity's components; straight (psi 0): no trigonometry."""
+    if psi == 0.0:
+        return v, 0.0
+    return v * math.cos(psi), v * math.sin(psi)
+
+
+@numba.njit(cache=True)
+def _half_step(row: FloatArray, start: tuple[float, float, float], f0: tuple[float, float],
+               hs: float) -> tuple[float, float, float, float, float, float, float, float,
+                                   float]:  # pragma: no cover - jit
+    """Simpson's rule over one half sample step of length hs from ``start`` (x, y, tau),
+    the velocity there ``f0``. Returns the position at the step's middle (quadratic
+    through the three points) and end, the heading and speed at the end, the velocity
+    there, and the speed at the middle: (x_m, y_m, x1, y1, psi1, v1, fx1, fy1, v_m)."""
+    x, y, tau = start
+    fx0, fy0 = f0
+    pm, vm = _row_state(row, tau + 0.5 * hs)
+    p1, v1 = _row_state(row, tau + hs)
+    fxm, fym = _velocity(pm, vm)
+    fx1, fy1 = _velocity(p1, v1)
+    y_m = y + hs / 24.0 * (5.0 * fy0 + 8.0 * fym - fy1)  # quadratic through 3 pts
+    x_m = x + hs / 24.0 * (5.0 * fx0 + 8.0 * fxm - fx1)
+    y1 = y + hs / 6.0 * (fy0 + 4.0 * fym + fy1)
+    x1 = x + hs / 6.0 * (fx0 + 4.0 * fxm + fx1)
+    return x_m, y_m, x1, y1, p1, v1, fx1, fy1, vm
+
+
+@numba.njit(cache=True)
+def _crossing(offset: float, tau: float, hs: float, p0: tuple[float, float],
+              pm: tuple[float, float],
+              p1: tuple[float, float]) -> tuple[float, float]:  # pragma: no cover - jit
+    """The crossing moment and x there within a half step from tau whose end p1 (x, y)
+    is past ``offset``: linear in |y| on the step's two quarters (p0 start, pm middle;
+    |y| rises monotonically here)."""
+    x, y = p0
+    x_m, y_m = pm
+    x1, y1 = p1
+    if abs(y_m) >= offset:
+        f = (offset - abs(y)) / (abs(y_m) - abs(y)) if abs(y_m) > abs(y) else 0.0
+        return tau + f * 0.5 * hs, x + f * (x_m - x)
+    f = (offset - abs(y_m)) / (abs(y1) - abs(y_m))
+    return tau + 0.5 * hs + f * 0.5 * hs, x_m + f * (x1 - x_m)
+
+
+@numba.njit(cache=True)
+def _integrate(row: FloatArray, lane_width: float, n_s: int
+               ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float,
+                          float]:  # pragma: no cover - jit
+    """The cutter's motion from tau = -lead_in at n_s sample times every _DT (0.05 s
+    halves, Simpson's rule), relative to its start: (x, y, heading, speed, tau_c, x_c),
+    with the crossing moment tau_c (NaN: none within [0, 2 p_t], or a negative speed)
+    and x there, found on the quarter-step grid by linear interpolation of |y| (the
+    builder: 1 ms, linear)."""
     sx = np.empty(n_s)
     sy = np.empty(n_s)
     sp = np.empty(n_s)
     sv = np.empty(n_s)
-    # Simpson's rule on each sample step (two halves); the crossing is found on the
-    # quarter-step grid by linear interpolation of |y| (the builder: 1 ms, linear)
     hs = _DT / 2.0
     x = 0.0
     y = 0.0
     tau = -_LEAD_IN
-    psi, v, _ = _state(p_y1, p_t, p_a1, p_a2, p_a3, p_v0, tau)
+    psi, v = _row_state(row, tau)
     sx[0], sy[0], sp[0], sv[0] = 0.0, 0.0, psi, v
     offset = lane_width / 2.0
     tau_c = np.nan
@@ -138,88 +231,99 @@ def _cutter_samples(row: FloatArray, lane_width: float, wz: float, tail: float,
     fy0 = v * math.sin(psi)
     for k in range(1, n_s):
         for _ in range(2):
-            pm, vm, _ = _state(p_y1, p_t, p_a1, p_a2, p_a3, p_v0, tau + 0.5 * hs)
-            p1, v1, _ = _state(p_y1, p_t, p_a1, p_a2, p_a3, p_v0, tau + hs)
-            if pm == 0.0:  # straight: no trigonometry
-                fxm, fym = vm, 0.0
-            else:
-                fxm = vm * math.cos(pm)
-                fym = vm * math.sin(pm)
-            if p1 == 0.0:
-                fx1, fy1 = v1, 0.0
-            else:
-                fx1 = v1 * math.cos(p1)
-                fy1 = v1 * math.sin(p1)
-            y_m = y + hs / 24.0 * (5.0 * fy0 + 8.0 * fym - fy1)  # quadratic through 3 pts
-            x_m = x + hs / 24.0 * (5.0 * fx0 + 8.0 * fxm - fx1)
-            y1 = y + hs / 6.0 * (fy0 + 4.0 * fym + fy1)
-            x1 = x + hs / 6.0 * (fx0 + 4.0 * fxm + fx1)
+            x_m, y_m, x1, y1, p1, v1, fx1, fy1, vm = _half_step(row, (x, y, tau),
+                                                                (fx0, fy0), hs)
             if math.isnan(tau_c) and tau + hs >= 0.0 and abs(y1) >= offset:
-                # refine on the two halves (|y| rises monotonically here)
-                if abs(y_m) >= offset:
-                    f = (offset - abs(y)) / (abs(y_m) - abs(y)) if abs(y_m) > abs(y) else 0.0
-                    tau_c = tau + f * 0.5 * hs
-                    x_c = x + f * (x_m - x)
-                else:
-                    f = (offset - abs(y_m)) / (abs(y1) - abs(y_m))
-                    tau_c = tau + 0.5 * hs + f * 0.5 * hs
-                    x_c = x_m + f * (x1 - x_m)
-                if tau_c > 2.0 * p_t:
+                tau_c, x_c = _crossing(offset, tau, hs, (x, y), (x_m, y_m), (x1, y1))
+                if tau_c > 2.0 * row[1]:
                     tau_c = np.nan
             x, y, tau, psi, v = x1, y1, tau + hs, p1, v1
             fx0, fy0 = fx1, fy1
             if v < 0.0 or vm < 0.0:
-                return bad
+                return sx, sy, sp, sv, np.nan, x_c
         sx[k], sy[k], sp[k], sv[k] = x, y, psi, v
-    if math.isnan(tau_c):
-        return bad
-    _, v_cut_c, _ = _state(p_y1, p_t, p_a1, p_a2, p_a3, p_v0, tau_c)
-    v_e = v_cut_c + dv
-    if not v_e > 0.0:
-        return bad
-    t_c = _LEAD_IN + tau_c
-    # the x integral starts at tau = -lead_in, the builder's at tau = 0: only differences
-    # matter (x_cut0 is chosen from the same integral at the crossing)
-    x_cut0 = gap + 2.0 * ehl + v_e * t_c - x_c
-    y_start = -lane_width if p_y1 > 0.0 else lane_width
+    return sx, sy, sp, sv, tau_c, x_c
+
+
+@numba.njit(cache=True)
+def _stop_time(sx: FloatArray, sp: FloatArray, sv: FloatArray, x_cut0: float, v_e: float,
+               tail: float, follow: float) -> float:  # pragma: no cover - jit
+    """The end of the simulated time: the scenario-level frames simulate tail + (time
+    to close the gap after the last sample, at most follow)."""
+    n_s = sx.shape[0]
+    ehl = 0.5 * _SIZE[0]
     t_end = (n_s - 1) * _DT
-    # the scenario-level frames simulate tail + (time to close the gap, at most follow)
     vx_end = sv[n_s - 1] * math.cos(sp[n_s - 1])
     gap_end = x_cut0 + sx[n_s - 1] - v_e * t_end - 2.0 * ehl
     closing = v_e - vx_end
     extra = gap_end / closing if closing > 0.0 and gap_end > 0.0 else 0.0
-    t_stop = t_end + tail + min(extra, follow)
-    # perception moment: the centre has moved wz towards the ego lane (samples, linear)
-    t_p = np.nan
-    for k in range(1, n_s):
-        if abs(sy[k]) >= wz:
-            t_p = (k - 1) * _DT + (wz - abs(sy[k - 1])) / (abs(sy[k]) - abs(sy[k - 1])) * _DT
-            break
-    if math.isnan(t_p):
-        return bad
-    for k in range(n_s):
-        sx[k] += x_cut0
-        sy[k] += y_start
-    return t_p, v_e, t_stop, sx, sy, sp, sv
+    return t_end + tail + min(extra, follow)
 
 
 @numba.njit(cache=True)
-def _ttr_at_tp(t_p: float, c_none: float, v_e: float, cs: FloatArray, cd: FloatArray,
-               cp: FloatArray, cv: FloatArray, man_a1: FloatArray, man_w1: FloatArray, chl: float,
-               chw: float, ehl: float, ehw: float, ttr_dt: float,
-               ttr_tail: float) -> float:  # pragma: no cover - jit
-    """riskcore's TTR scan at t_p against the actual path (ego frame = road frame here);
-    the cutter given by its samples every _DT, straight at constant speed after them."""
+def _perception(sy: FloatArray, wz: float) -> float:  # pragma: no cover - jit
+    """The perception moment: the centre has moved wz towards the ego lane (samples,
+    linear); NaN: never."""
+    for k in range(1, sy.shape[0]):
+        if abs(sy[k]) >= wz:
+            return (k - 1) * _DT + (wz - abs(sy[k - 1])) / (abs(sy[k]) - abs(sy[k - 1])) * _DT
+    return np.nan
+
+
+@numba.njit(cache=True)
+def _cutter_samples(row: FloatArray, lane_width: float, wz: float, tail: float,
+                    follow: float) -> _Cutter:  # pragma: no cover - jit
+    """The built scenario's cutter for one row, without building it.
+
+    Returns the perception moment (scenario time), the ego's constant speed, the end of
+    the simulated time, and the cutter's centre (along and across the ego's path, which
+    is the road's x axis at y = 0), heading and speed at the builder's sample times
+    k * 0.1 s, k = 0 .. n - 1 (straight at constant speed after the last one): a
+    :class:`_Cutter`, whose t_p is NaN when the row is not a buildable cut-in.
+    """
+    n_s = _n_samples(row)
+    if n_s == 0:
+        return _not_a_cut_in()
+    # integrate on 0.01 s substeps from tau = -lead_in over the lateral motion and beyond:
+    # samples every _DT up to t_settle + 0.1, then constant velocity (as the frames do)
+    sx, sy, sp, sv, tau_c, x_c = _integrate(row, lane_width, n_s)
+    if math.isnan(tau_c):
+        return _not_a_cut_in()
+    _, v_cut_c = _row_state(row, tau_c)
+    v_e = v_cut_c + row[6]
+    if not v_e > 0.0:
+        return _not_a_cut_in()
+    ehl = 0.5 * _SIZE[0]
+    t_c = _LEAD_IN + tau_c
+    # the x integral starts at tau = -lead_in, the builder's at tau = 0: only differences
+    # matter (x_cut0 is chosen from the same integral at the crossing)
+    x_cut0 = row[7] + 2.0 * ehl + v_e * t_c - x_c
+    y_start = -lane_width if row[0] > 0.0 else lane_width
+    t_stop = _stop_time(sx, sp, sv, x_cut0, v_e, tail, follow)
+    t_p = _perception(sy, wz)
+    if math.isnan(t_p):
+        return _not_a_cut_in()
+    for k in range(n_s):
+        sx[k] += x_cut0
+        sy[k] += y_start
+    return _Cutter(t_p, v_e, t_stop, sx, sy, sp, sv)
+
+
+@numba.njit(cache=True)
+def _ttr_scene(cut: _Cutter, n_t: int, ttr_dt: float
+               ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - jit
+    """The ego's poses and speeds and the cutter's trajectory at t_p + i ttr_dt, i = 0 ..
+    n_t, as riskcore's TTR scan takes them (ego frame = road frame here); the cutter
+    straight at constant speed after its last sample."""
+    cs, cd, cp, cv, v_e = cut.s, cut.d, cut.p, cut.v, cut.v_e
     n_s = cs.shape[0]
     t_end = (n_s - 1) * _DT
     vx_end = cv[n_s - 1] * math.cos(cp[n_s - 1])
-    n_t = math.ceil((c_none - t_p) / ttr_dt - 1e-9) + math.ceil(ttr_tail / ttr_dt)
-    n_t = max(1, min(n_t, 1000))
     poses = np.zeros((n_t + 1, 4))
     vv = np.full(n_t + 1, v_e)
     traj = np.empty((1, n_t + 1, 4))
     for i in range(n_t + 1):
-        tq = t_p + i * ttr_dt
+        tq = cut.t_p + i * ttr_dt
         poses[i, 0] = v_e * tq
         poses[i, 2] = 1.0
         if tq > t_end:  # straight at constant speed after the last sample
@@ -232,6 +336,17 @@ def _ttr_at_tp(t_p: float, c_none: float, v_e: float, cs: FloatArray, cd: FloatA
             pq = _ck.interp(cp, 0.0, _DT, tq)
         traj[0, i, 2] = math.cos(pq)
         traj[0, i, 3] = math.sin(pq)
+    return poses, vv, traj
+
+
+@numba.njit(cache=True)
+def _ttr_at_tp(cut: _Cutter, c_none: float, man_a1: FloatArray, man_w1: FloatArray,
+               box: _Box, ttr_dt: float, ttr_tail: float) -> float:  # pragma: no cover
+    """riskcore's TTR scan at t_p against the actual path (ego frame = road frame here);
+    the cutter given by its samples every _DT, straight at constant speed after them."""
+    n_t = math.ceil((c_none - cut.t_p) / ttr_dt - 1e-9) + math.ceil(ttr_tail / ttr_dt)
+    n_t = max(1, min(n_t, 1000))
+    poses, vv, traj = _ttr_scene(cut, n_t, ttr_dt)
     n_man = man_a1.shape[0]
     man_a = np.empty((n_t, n_man))
     man_w = np.empty((n_t, n_man))
@@ -241,8 +356,8 @@ def _ttr_at_tp(t_p: float, c_none: float, v_e: float, cs: FloatArray, cd: FloatA
             man_w[i, m] = man_w1[m]
     eva = np.empty((n_t, n_man, n_t + 1, 4))
     done = np.zeros((n_t, n_man), dtype=np.bool_)
-    first, react, _ = _kernels.ttr_scan(traj, chl, chw, poses, vv, ehl, ehw, man_a, man_w,
-                                        ttr_dt, eva, done)
+    first, react, _ = _kernels.ttr_scan(traj, box.chl, box.chw, poses, vv, box.ehl, box.ehw,
+                                        man_a, man_w, ttr_dt, eva, done)
     if first[0] < 0:
         return np.inf
     if react[0] < 0:
@@ -251,60 +366,66 @@ def _ttr_at_tp(t_p: float, c_none: float, v_e: float, cs: FloatArray, cd: FloatA
 
 
 @numba.njit(cache=True)
+def _drivers_pruned(cut: _Cutter, box: _Box, cfg: _Settings
+                    ) -> tuple[float, float, float, float, float]:  # pragma: no cover - jit
+    """The fast path: the pruned kernels on the samples (stepping at h only through the
+    sample intervals that a bound cannot rule out). Returns (none contact, its impact
+    speed, R157 contact, its impact speed, a_req)."""
+    cs_s, cd_s, cp_s, cv_s = cut.s, cut.d, cut.p, cut.v
+    ehl, ehw, chl, chw = box
+    n_s = cs_s.shape[0]
+    ratio = round(_DT / cfg.h)
+    es_s = np.empty(n_s)
+    for k in range(n_s):
+        es_s[k] = cut.v_e * (k * _DT)
+    ev_s = np.full(n_s, cut.v_e)
+    c_none, imp_none = _ck.drive_pruned(0.0, _DT, ratio, cs_s, cd_s, cp_s, cv_s, es_s, ev_s,
+                                        ehl, ehw, chl, chw, np.nan, cfg.jerk, cfg.a_max, 0,
+                                        True, cut.t_stop)
+    t_r = _ck.r157_reaction_start_pruned(0.0, _DT, ratio, cs_s, cp_s, cv_s, es_s, ev_s,
+                                         ehl + chl, cut.t_p, cfg.ttc_crit, True, cut.t_stop)
+    t_b = t_r + cfg.reaction
+    if math.isnan(t_b) or (not math.isnan(c_none) and c_none <= t_b):
+        # never brakes, or the contact comes before the brakes: the scripted ego's
+        c_r, imp_r = c_none, imp_none
+    else:
+        # until t_b the R157 ego is the scripted one, which has no contact before
+        # c_none: start its run at the grid step before t_b
+        kb = max(math.floor(t_b / cfg.h) - 1, 0)
+        c_r, imp_r = _ck.drive_pruned(0.0, _DT, ratio, cs_s, cd_s, cp_s, cv_s, es_s, ev_s,
+                                      ehl, ehw, chl, chw, t_b, cfg.jerk, cfg.a_max, kb,
+                                      True, cut.t_stop)
+    a_req = 0.0
+    if not math.isnan(c_none):
+        t_b0 = cut.t_p + cfg.reaction
+        a_req = np.inf if c_none <= t_b0 else _ck.required_decel_pruned(
+            0.0, _DT, ratio, cs_s, cd_s, cp_s, cv_s, es_s, ev_s, ehl, ehw, chl, chw,
+            t_b0, True)
+    return c_none, imp_none, c_r, imp_r, a_req
+
+
+@numba.njit(cache=True)
 def _one(row: FloatArray, lane_width: float, man_a1: FloatArray, man_w1: FloatArray,
-         out: FloatArray, wz: float, reaction: float, jerk: float, a_max: float,
-         ttc_crit: float, h: float, tail: float, follow: float, ttr_dt: float,
-         ttr_tail: float, grid: bool) -> None:  # pragma: no cover - jit
+         out: FloatArray, cfg: _Settings) -> None:  # pragma: no cover - jit
     """The quantities of one row into ``out`` (NaN: not a cut-in).
 
-    ``grid`` False (the fast path): the pruned kernels on the samples (stepping at h only
-    through the sample intervals that a bound cannot rule out). True (the baseline): the
-    samples put on the h grid, then the grid kernels over it, as the scenario level does.
+    ``cfg.grid`` False (the fast path): the pruned kernels on the samples. True (the
+    baseline): the samples put on the h grid, then the grid kernels over it, as the
+    scenario level does.
     """
     for j in range(out.shape[0]):
         out[j] = np.nan
-    t_p, v_e, t_stop, cs_s, cd_s, cp_s, cv_s = _cutter_samples(row, lane_width, wz, tail,
-                                                               follow)
-    if math.isnan(t_p):
+    cut = _cutter_samples(row, lane_width, cfg.wz, cfg.tail, cfg.follow)
+    if math.isnan(cut.t_p):
         return
     ehl = 0.5 * _SIZE[0]
     ehw = 0.5 * _SIZE[1]
-    chl = ehl
-    chw = ehw
-    out[0] = t_p
-    n_s = cs_s.shape[0]
-    ratio = round(_DT / h)
-    if grid:
-        c_none, imp_none, c_r, imp_r, a_req = _drivers_grid(
-            t_p, v_e, t_stop, cs_s, cd_s, cp_s, cv_s, ehl, ehw, chl, chw, reaction, jerk,
-            a_max, ttc_crit, h)
+    box = _Box(ehl, ehw, ehl, ehw)
+    out[0] = cut.t_p
+    if cfg.grid:
+        c_none, _, c_r, imp_r, a_req = _drivers_grid(cut, box, cfg)
     else:
-        es_s = np.empty(n_s)
-        for k in range(n_s):
-            es_s[k] = v_e * (k * _DT)
-        ev_s = np.full(n_s, v_e)
-        c_none, imp_none = _ck.drive_pruned(0.0, _DT, ratio, cs_s, cd_s, cp_s, cv_s, es_s,
-                                            ev_s, ehl, ehw, chl, chw, np.nan, jerk, a_max,
-                                            0, True, t_stop)
-        t_r = _ck.r157_reaction_start_pruned(0.0, _DT, ratio, cs_s, cp_s, cv_s, es_s, ev_s,
-                                             ehl + chl, t_p, ttc_crit, True, t_stop)
-        t_b = t_r + reaction
-        if math.isnan(t_b) or (not math.isnan(c_none) and c_none <= t_b):
-            # never brakes, or the contact comes before the brakes: the scripted ego's
-            c_r, imp_r = c_none, imp_none
-        else:
-            # until t_b the R157 ego is the scripted one, which has no contact before
-            # c_none: start its run at the grid step before t_b
-            kb = max(math.floor(t_b / h) - 1, 0)
-            c_r, imp_r = _ck.drive_pruned(0.0, _DT, ratio, cs_s, cd_s, cp_s, cv_s, es_s,
-                                          ev_s, ehl, ehw, chl, chw, t_b, jerk, a_max, kb,
-                                          True, t_stop)
-        a_req = 0.0
-        if not math.isnan(c_none):
-            t_b0 = t_p + reaction
-            a_req = np.inf if c_none <= t_b0 else _ck.required_decel_pruned(
-                0.0, _DT, ratio, cs_s, cd_s, cp_s, cv_s, es_s, ev_s, ehl, ehw, chl, chw,
-                t_b0, True)
+        c_none, _, c_r, imp_r, a_req = _drivers_pruned(cut, box, cfg)
     out[4] = 0.0 if math.isnan(c_r) else 1.0
     out[5] = imp_r
     out[6] = 0.0 if math.isnan(c_none) else 1.0
@@ -314,22 +435,19 @@ def _one(row: FloatArray, lane_width: float, man_a1: FloatArray, man_w1: FloatAr
         out[3] = np.inf
         return
     out[1] = a_req
-    out[2] = a_req / a_max
-    if ttr_tail < 0.0:  # the TTR scan is not wanted
+    out[2] = a_req / cfg.a_max
+    if cfg.ttr_tail < 0.0:  # the TTR scan is not wanted
         return
-    out[3] = _ttr_at_tp(t_p, c_none, v_e, cs_s, cd_s, cp_s, cv_s, man_a1, man_w1, chl, chw, ehl,
-                        ehw, ttr_dt, ttr_tail)
+    out[3] = _ttr_at_tp(cut, c_none, man_a1, man_w1, box, cfg.ttr_dt, cfg.ttr_tail)
 
 
 @numba.njit(cache=True)
-def _drivers_grid(t_p: float, v_e: float, t_stop: float, cs_s: FloatArray,
-                  cd_s: FloatArray, cp_s: FloatArray, cv_s: FloatArray, ehl: float,
-                  ehw: float, chl: float, chw: float, reaction: float, jerk: float,
-                  a_max: float, ttc_crit: float, h: float
-                  ) -> tuple[float, float, float, float, float]:  # pragma: no cover - jit
-    """The baseline (the path before the pruned kernels): the samples on the h grid, the
-    grid kernels over it. Returns (none contact, its impact speed, R157 contact, its
-    impact speed, a_req)."""
+def _on_grid(cut: _Cutter, h: float
+             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                        FloatArray]:  # pragma: no cover - jit
+    """The cutter's samples put on the h grid (linear between them) and the scripted
+    ego's position and speed there: (cs, cd, cp, cv, es, ev)."""
+    cs_s, cd_s, cp_s, cv_s = cut.s, cut.d, cut.p, cut.v
     n_s = cs_s.shape[0]
     t_end = (n_s - 1) * _DT
     n = round(t_end / h) + 1
@@ -342,8 +460,8 @@ def _drivers_grid(t_p: float, v_e: float, t_stop: float, cs_s: FloatArray,
     ratio = round(_DT / h)
     for i in range(n):
         t = i * h
-        es[i] = v_e * t
-        ev[i] = v_e
+        es[i] = cut.v_e * t
+        ev[i] = cut.v_e
         k = i // ratio
         f = (i - k * ratio) / ratio
         if k >= n_s - 1:
@@ -353,25 +471,44 @@ def _drivers_grid(t_p: float, v_e: float, t_stop: float, cs_s: FloatArray,
         cd[i] = cd_s[k] * (1.0 - f) + cd_s[k + 1] * f
         cp[i] = cp_s[k] * (1.0 - f) + cp_s[k + 1] * f
         cv[i] = cv_s[k] * (1.0 - f) + cv_s[k + 1] * f
-    k_const = n - 1
-    # the drivers' runs start where something can happen: at t_p or when the cutter
-    # first meets the ego's band, whichever is earlier (before, all follow the script)
+    return cs, cd, cp, cv, es, ev
+
+
+@numba.njit(cache=True)
+def _first_step(t_p: float, h: float, cd: FloatArray, cp: FloatArray,
+                box: _Box) -> int:  # pragma: no cover - jit
+    """Where the drivers' runs start on the grid: at t_p or when the cutter first meets
+    the ego's band, whichever is earlier (before, all follow the script)."""
     k0 = math.floor(t_p / h)
-    radius = math.hypot(chl, chw)
+    radius = math.hypot(box.chl, box.chw)
     for i in range(k0):
-        if abs(cd[i]) - radius > ehw:  # clear whatever its heading: no trigonometry
+        if abs(cd[i]) - radius > box.ehw:  # clear whatever its heading: no trigonometry
             continue
-        if not _ck.lateral_clear(cd[i], math.cos(cp[i]), math.sin(cp[i]), chl, chw, ehw):
-            k0 = i
-            break
+        if not _ck.lateral_clear(cd[i], math.cos(cp[i]), math.sin(cp[i]), box.chl, box.chw,
+                                 box.ehw):
+            return i
+    return k0
+
+
+@numba.njit(cache=True)
+def _drivers_grid(cut: _Cutter, box: _Box, cfg: _Settings
+                  ) -> tuple[float, float, float, float, float]:  # pragma: no cover - jit
+    """The baseline (the path before the pruned kernels): the samples on the h grid, the
+    grid kernels over it. Returns (none contact, its impact speed, R157 contact, its
+    impact speed, a_req)."""
+    ehl, ehw, chl, chw = box
+    h, t_p, t_stop = cfg.h, cut.t_p, cut.t_stop
+    cs, cd, cp, cv, es, ev = _on_grid(cut, h)
+    k_const = cs.shape[0] - 1
+    k0 = _first_step(t_p, h, cd, cp, box)
     t0 = k0 * h
     cs_, cd_, cp_, cv_, es_, ev_ = cs[k0:], cd[k0:], cp[k0:], cv[k0:], es[k0:], ev[k0:]
     kc = k_const - k0
     c_none, imp_none, _ = _ck.drive(t0, h, cs_, cd_, cp_, cv_, es_, ev_, ehl, ehw, chl,
-                                    chw, np.nan, jerk, a_max, t_p, kc, t_stop)
-    t_r = _ck.r157_reaction_start(t0, h, cs_, cp_, cv_, es_, ev_, ehl + chl, t_p, ttc_crit,
-                                  kc, t_stop)
-    t_b = t_r + reaction
+                                    chw, np.nan, cfg.jerk, cfg.a_max, t_p, kc, t_stop)
+    t_r = _ck.r157_reaction_start(t0, h, cs_, cp_, cv_, es_, ev_, ehl + chl, t_p,
+                                  cfg.ttc_crit, kc, t_stop)
+    t_b = t_r + cfg.reaction
     if not math.isnan(c_none) and c_none <= t_b:  # contact before the brakes come on
         c_r, imp_r = c_none, imp_none
     else:
@@ -379,11 +516,11 @@ def _drivers_grid(t_p: float, v_e: float, t_stop: float, cs_s: FloatArray,
         if not math.isnan(t_b):
             kb = min(max(math.floor(t_b / h) - 1, k0), k_const)
         c_r, imp_r, _ = _ck.drive(kb * h, h, cs[kb:], cd[kb:], cp[kb:], cv[kb:], es[kb:],
-                                  ev[kb:], ehl, ehw, chl, chw, t_b, jerk, a_max, t_p,
-                                  k_const - kb, t_stop)
+                                  ev[kb:], ehl, ehw, chl, chw, t_b, cfg.jerk, cfg.a_max,
+                                  t_p, k_const - kb, t_stop)
     a_req = 0.0
     if not math.isnan(c_none):
-        t_b0 = t_p + reaction
+        t_b0 = t_p + cfg.reaction
         if c_none <= t_b0:
             a_req = np.inf
         else:
@@ -397,13 +534,11 @@ def _drivers_grid(t_p: float, v_e: float, t_stop: float, cs_s: FloatArray,
 @numba.njit(cache=True, nogil=True)
 def _all(params: FloatArray, lane_width: float, man_a: FloatArray, man_w: FloatArray,
          out: FloatArray, settings: FloatArray) -> None:  # pragma: no cover
-    wz, reaction, jerk, a_max, ttc_crit, h, tail, follow, ttr_dt, ttr_tail = (
-        settings[0], settings[1], settings[2], settings[3], settings[4], settings[5],
-        settings[6], settings[7], settings[8], settings[9])
-    grid = settings[10] != 0.0
+    cfg = _Settings(settings[0], settings[1], settings[2], settings[3], settings[4],
+                    settings[5], settings[6], settings[7], settings[8], settings[9],
+                    settings[10] != 0.0)
     for r in range(params.shape[0]):
-        _one(params[r], lane_width, man_a[r], man_w[r], out[r], wz, reaction, jerk, a_max,
-             ttc_crit, h, tail, follow, ttr_dt, ttr_tail, grid)
+        _one(params[r], lane_width, man_a[r], man_w[r], out[r], cfg)
 
 
 def _ego_speed(params: FloatArray, lane_width: float) -> FloatArray:
