@@ -49,6 +49,7 @@ gets +inf, so the full evaluation decides. The property is tested against
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -185,131 +186,179 @@ def _dist(tau: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float,
     return (p_v0 - p_a1 * c0) * tau + p_a1 * (_h(tau - p_a2, p_a3) - _h(-p_a2, p_a3))
 
 
+class _Relaxed(NamedTuple):
+    """The relaxed cutter (relaxation 2): its crossing moment, the distance it has covered
+    by then and by the end of the lane change, the shrink 1 - cos psi_max of its
+    x-progress in between, the gap less its rear's extent, and its speed profile (the
+    arguments of :func:`_speed` after tau)."""
+
+    tau_c: float
+    s_c: float
+    s_lc: float
+    shrink: float
+    d_c: float
+    p_a1: float
+    p_a2: float
+    p_a3: float
+    p_v0: float
+    c0: float
+
+
+class _Setup(NamedTuple):
+    """What every row's bound shares: the road, the criticality's settings, the boxes."""
+
+    lane_width: float
+    wandering: float  # wandering zone (m)
+    reaction: float  # reaction time (s)
+    ehw: float  # the ego's half width
+    chl: float  # the cutter's half length ...
+    chw: float  # ... and half width
+    stop_at: float  # > 0: a looser bound below it settles the row
+
+
 @numba.njit(cache=True, nogil=True)
-def _rear(tau: float, tau_c: float, s_c: float, s_lc: float, shrink: float, d_c: float,
-          p_a1: float, p_a2: float, p_a3: float, p_v0: float,
-          c0: float) -> float:  # pragma: no cover - compiled
+def _rear(tau: float, rel: _Relaxed) -> float:  # pragma: no cover - compiled
     """Lower bound of the cutter's rear minus the ego's front at the crossing moment
-    ``tau_c``, at ``tau`` (relaxation 2; ``d_c``: the gap less the rear's extent)."""
-    s = _dist(tau, p_a1, p_a2, p_a3, p_v0, c0)
-    if tau <= tau_c:
-        return d_c + (s - s_c)
-    return d_c + (s - s_c) - shrink * max(min(s, s_lc) - s_c, 0.0)
+    ``rel.tau_c``, at ``tau`` (relaxation 2; ``rel.d_c``: the gap less the rear's
+    extent)."""
+    s = _dist(tau, rel.p_a1, rel.p_a2, rel.p_a3, rel.p_v0, rel.c0)
+    if tau <= rel.tau_c:
+        return rel.d_c + (s - rel.s_c)
+    return rel.d_c + (s - rel.s_c) - rel.shrink * max(min(s, rel.s_lc) - rel.s_c, 0.0)
 
 
 @numba.njit(cache=True, nogil=True)
-def _scan(h: float, t0: float, t_b: float, t_end: float, v_e: float, tau_c: float,
-          s_c: float, s_lc: float, shrink: float, d_c: float, p_a1: float, p_a2: float,
-          p_a3: float, p_v0: float, c0: float) -> float:  # pragma: no cover - compiled
+def _scan(h: float, t0: float, t_b: float, t_end: float, v_e: float,
+          rel: _Relaxed) -> float:  # pragma: no cover - compiled
     """Relaxation 4 on a grid of step ``h`` from ``t0`` (the band may be met) to ``t_end``
     (the cutter's motion is settled): +inf when the unbraked ego could touch the relaxed
     cutter before ``t_b``, else the largest needed deceleration."""
     need = 0.0
     n = max(math.ceil((t_end - t0) / h - 1e-9), 1)
-    front_b = v_e * (t_b - tau_c)
+    front_b = v_e * (t_b - rel.tau_c)
     for j in range(n):
         lo = t0 + j * h
         hi = min(t0 + (j + 1) * h, t_end) if j < n - 1 else t_end
-        r_lo = _rear(lo, tau_c, s_c, s_lc, shrink, d_c, p_a1, p_a2, p_a3, p_v0, c0)
+        r_lo = _rear(lo, rel)
         if lo < t_b:
             # the scripted ego at constant speed until t_b: touching then gives +inf
-            if r_lo - v_e * (min(hi, t_b) - tau_c) <= 0.0:
+            if r_lo - v_e * (min(hi, t_b) - rel.tau_c) <= 0.0:
                 return np.inf
             if hi <= t_b:
                 continue
-            r_lo = _rear(t_b, tau_c, s_c, s_lc, shrink, d_c, p_a1, p_a2, p_a3, p_v0, c0)
+            r_lo = _rear(t_b, rel)
         need = max(need, _decel_for(r_lo - front_b, v_e, hi - t_b))
     return need
+
+
+@numba.njit(cache=True, nogil=True)
+def _lateral_moments(row: FloatArray, c0: float, amp: float, one_minus_cos: FloatArray,
+                     levels: tuple[float, float, float]
+                     ) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """The model times at which the cutter's centre has moved each of ``levels``
+    (wandering zone, band, crossing) laterally, on the crossing kernel's grid
+    (trapezoid rule, linear between grid points): (tau_p, tau_e, tau_c), NaN when not
+    reached before the crossing; tau_e 0 for a band at or below 0."""
+    wandering, y_band, y_cross = levels
+    p_t, p_a1, p_a2, p_a3, p_v0 = row[1], row[2], row[3], row[4], row[5]
+    n_grid = one_minus_cos.shape[0] - 1
+    du = 2.0 / n_grid
+    h_lat = p_t * du
+    y = 0.0
+    f_prev = 0.0
+    tau_p = np.nan
+    tau_c = np.nan
+    tau_e = 0.0 if y_band <= 0.0 else np.nan
+    for i in range(1, n_grid + 1):
+        v = _speed(p_t * i * du, p_a1, p_a2, p_a3, p_v0, c0)
+        f = v * math.sin(amp * one_minus_cos[i])
+        y_new = y + 0.5 * (f + f_prev) * h_lat
+        a0, a1 = abs(y), abs(y_new)
+        if np.isnan(tau_p) and a1 >= wandering:
+            tau_p = (i - 1 + (wandering - a0) / (a1 - a0)) * du * p_t
+        if np.isnan(tau_e) and a1 >= y_band:
+            tau_e = (i - 1 + (y_band - a0) / (a1 - a0)) * du * p_t
+        if np.isnan(tau_c) and a1 >= y_cross:
+            tau_c = (i - 1 + (y_cross - a0) / (a1 - a0)) * du * p_t
+            if not np.isnan(tau_e):
+                break  # t_p <= the crossing moment: all three are known
+        y = y_new
+        f_prev = f
+    return tau_p, tau_e, tau_c
+
+
+@numba.njit(cache=True, nogil=True)
+def _tight_bound(rel: _Relaxed, v_e: float, t_b: float, tau_e: float, p_t: float,
+                 after: float) -> float:  # pragma: no cover - compiled
+    """Relaxations 3 and 4: the grid scan from the first moment in the band ``tau_e`` to
+    the end of the cutter's motion, then the tail (speed ``after``, clearance D0 + after
+    tau from t_b) in closed form."""
+    t_end = max(2.0 * p_t, rel.p_a2 + rel.p_a3, t_b, tau_e) + H_FINE
+    need = _scan(H_FINE, tau_e, t_b, t_end, v_e, rel)
+    if np.isfinite(need):
+        d_end = _rear(t_end, rel) - v_e * (t_b - rel.tau_c)
+        d0 = d_end - after * (t_end - t_b)
+        if v_e > after and d0 > 0.0 and 2.0 * d0 / (v_e - after) >= t_end - t_b:
+            need = max(need, (v_e - after) ** 2 / (2.0 * d0))
+    return need
+
+
+@numba.njit(cache=True, nogil=True)
+def _bound_row(row: FloatArray, cfg: _Setup,
+               one_minus_cos: FloatArray) -> float:  # pragma: no cover - compiled
+    """The bound of one row: +inf when it is not a buildable cut-in (the evaluation
+    decides); with ``cfg.stop_at``, a looser bound below it when one settles the row."""
+    p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap = (row[0], row[1], row[2], row[3], row[4],
+                                                  row[5], row[6], row[7])
+    ok = p_t > 0.0 and p_a3 >= 0.0
+    for j in range(8):
+        if not np.isfinite(row[j]):
+            ok = False
+    c0 = min(max(-p_a2, 0.0), p_a3)
+    before = p_v0 - p_a1 * c0
+    after = before + p_a1 * p_a3
+    amp = p_y1 * p_t / np.pi
+    psi_max = 2.0 * abs(amp)
+    if not ok or before < 0.0 or after < 0.0 or psi_max >= 0.5 * np.pi:
+        return np.inf
+    extent = cfg.chw * math.sin(psi_max) + X_MARGIN
+    y_band = cfg.lane_width - cfg.ehw - cfg.chw - cfg.chl * math.sin(psi_max) - Y_MARGIN
+    if cfg.stop_at > 0.0:
+        # cheaper, looser bounds first: below what is asked, they settle the row.
+        # Speeds alone (t_p and the crossing lie in [0, 2 p_t], t_p before the
+        # crossing: braking at most the reaction time after it) ...
+        quick = _quick_bound(dv, gap, before, after, psi_max, extent, 2.0 * p_t,
+                             cfg.reaction + T_MARGIN)
+        if quick < cfg.stop_at:
+            return quick
+        # ... then with the lateral moments bracketed in closed form
+        quick = _bracket_bound(p_t, dv, gap, before, after, abs(amp), psi_max, extent,
+                               cfg.lane_width, y_band, cfg.wandering, cfg.reaction)
+        if quick < cfg.stop_at:
+            return quick
+    tau_p, tau_e, tau_c = _lateral_moments(row, c0, amp, one_minus_cos,
+                                           (cfg.wandering, y_band, 0.5 * cfg.lane_width))
+    if np.isnan(tau_c) or np.isnan(tau_p):
+        return np.inf  # no crossing: not buildable, the evaluation decides
+    if np.isnan(tau_e):
+        return 0.0  # the box never reaches the ego's band
+    v_e = _speed(tau_c, p_a1, p_a2, p_a3, p_v0, c0) + dv
+    if not v_e > 0.0:
+        return np.inf
+    t_b = tau_p + T_MARGIN + cfg.reaction
+    rel = _Relaxed(tau_c, _dist(tau_c, p_a1, p_a2, p_a3, p_v0, c0),
+                   _dist(2.0 * p_t, p_a1, p_a2, p_a3, p_v0, c0), 1.0 - math.cos(psi_max),
+                   gap - extent, p_a1, p_a2, p_a3, p_v0, c0)
+    return _tight_bound(rel, v_e, t_b, tau_e, p_t, after)
 
 
 @numba.njit(cache=True, nogil=True)
 def _bound_kernel(arr: FloatArray, lane_width: float, wandering: float, reaction: float,
                   ehw: float, chl: float, chw: float, stop_at: float,
                   one_minus_cos: FloatArray, out: FloatArray) -> None:  # pragma: no cover
-    n_grid = one_minus_cos.shape[0] - 1
-    du = 2.0 / n_grid
+    cfg = _Setup(lane_width, wandering, reaction, ehw, chl, chw, stop_at)
     for r in range(arr.shape[0]):
-        p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap = (
-            arr[r, 0], arr[r, 1], arr[r, 2], arr[r, 3], arr[r, 4], arr[r, 5], arr[r, 6],
-            arr[r, 7])
-        ok = p_t > 0.0 and p_a3 >= 0.0
-        for j in range(8):
-            if not np.isfinite(arr[r, j]):
-                ok = False
-        c0 = min(max(-p_a2, 0.0), p_a3)
-        before = p_v0 - p_a1 * c0
-        after = before + p_a1 * p_a3
-        amp = p_y1 * p_t / np.pi
-        psi_max = 2.0 * abs(amp)
-        if not ok or before < 0.0 or after < 0.0 or psi_max >= 0.5 * np.pi:
-            out[r] = np.inf  # not a buildable cut-in: the evaluation decides
-            continue
-        extent = chw * math.sin(psi_max) + X_MARGIN
-        y_band = lane_width - ehw - chw - chl * math.sin(psi_max) - Y_MARGIN
-        if stop_at > 0.0:
-            # cheaper, looser bounds first: below what is asked, they settle the row.
-            # Speeds alone (t_p and the crossing lie in [0, 2 p_t], t_p before the
-            # crossing: braking at most the reaction time after it) ...
-            quick = _quick_bound(dv, gap, before, after, psi_max, extent, 2.0 * p_t,
-                                 reaction + T_MARGIN)
-            if quick < stop_at:
-                out[r] = quick
-                continue
-            # ... then with the lateral moments bracketed in closed form
-            quick = _bracket_bound(p_t, dv, gap, before, after, abs(amp), psi_max, extent,
-                                   lane_width, y_band, wandering, reaction)
-            if quick < stop_at:
-                out[r] = quick
-                continue
-        y_cross = 0.5 * lane_width
-        # lateral motion (the crossing kernel's rule): t_p, crossing, first band contact
-        h_lat = p_t * du
-        y = 0.0
-        f_prev = 0.0
-        tau_p = np.nan
-        tau_c = np.nan
-        tau_e = 0.0 if y_band <= 0.0 else np.nan
-        for i in range(1, n_grid + 1):
-            v = _speed(p_t * i * du, p_a1, p_a2, p_a3, p_v0, c0)
-            f = v * math.sin(amp * one_minus_cos[i])
-            y_new = y + 0.5 * (f + f_prev) * h_lat
-            a0, a1 = abs(y), abs(y_new)
-            if np.isnan(tau_p) and a1 >= wandering:
-                tau_p = (i - 1 + (wandering - a0) / (a1 - a0)) * du * p_t
-            if np.isnan(tau_e) and a1 >= y_band:
-                tau_e = (i - 1 + (y_band - a0) / (a1 - a0)) * du * p_t
-            if np.isnan(tau_c) and a1 >= y_cross:
-                tau_c = (i - 1 + (y_cross - a0) / (a1 - a0)) * du * p_t
-                if not np.isnan(tau_e):
-                    break  # t_p <= the crossing moment: all three are known
-            y = y_new
-            f_prev = f
-        if np.isnan(tau_c) or np.isnan(tau_p):
-            out[r] = np.inf  # no crossing: not buildable, the evaluation decides
-            continue
-        if np.isnan(tau_e):
-            out[r] = 0.0  # the box never reaches the ego's band
-            continue
-        v_e = _speed(tau_c, p_a1, p_a2, p_a3, p_v0, c0) + dv
-        if not v_e > 0.0:
-            out[r] = np.inf
-            continue
-        t_b = tau_p + T_MARGIN + reaction
-        s_c = _dist(tau_c, p_a1, p_a2, p_a3, p_v0, c0)
-        s_lc = _dist(2.0 * p_t, p_a1, p_a2, p_a3, p_v0, c0)
-        shrink = 1.0 - math.cos(psi_max)
-        d_c = gap - extent
-        t_end = max(2.0 * p_t, p_a2 + p_a3, t_b, tau_e) + H_FINE
-        need = _scan(H_FINE, tau_e, t_b, t_end, v_e, tau_c, s_c, s_lc, shrink, d_c, p_a1,
-                     p_a2, p_a3, p_v0, c0)
-        if np.isfinite(need):
-            # the tail: speed ``after``, clearance D0 + after tau from t_b, closed form
-            d_end = _rear(t_end, tau_c, s_c, s_lc, shrink, d_c, p_a1, p_a2, p_a3, p_v0,
-                          c0) - v_e * (t_b - tau_c)
-            d0 = d_end - after * (t_end - t_b)
-            if v_e > after and d0 > 0.0 and 2.0 * d0 / (v_e - after) >= t_end - t_b:
-                need = max(need, (v_e - after) ** 2 / (2.0 * d0))
-        out[r] = need
+        out[r] = _bound_row(arr[r], cfg, one_minus_cos)
 
 
 @numba.njit(cache=True, nogil=True)
