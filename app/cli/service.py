@@ -248,7 +248,7 @@ def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
             bar.close()
     print(json.dumps({"id": catalogue_id, "status": status}))
     if status != "done":
-        error = catalogues.describe(ctx, catalogue_id).get("error")
+        error = catalogues.describe(ctx, catalogue_id).error
         raise CliError(f"catalogue {catalogue_id} {status}: {error}")
     return 0
 
@@ -284,9 +284,9 @@ STATUS_FIRST = ("id", "status", "progress", "scenarios_done", "n", "constraints"
 
 
 def status_for_reading(info: dict[str, Any]) -> dict[str, Any]:
-    """The catalogue status in reading order (``STATUS_FIRST``, then the rest, P(A) last)
-    with P(A)'s bootstrap replicates counted, not listed (``GET /catalogues/{id}`` has
-    them)."""
+    """The catalogue status (``app.statuses.catalogue_status_plain``) in reading order
+    (``STATUS_FIRST``, then the rest, P(A) last) with P(A)'s bootstrap replicates counted,
+    not listed (``GET /catalogues/{id}`` has them)."""
     out = {k: info[k] for k in STATUS_FIRST if k in info}
     out.update({k: v for k, v in info.items() if k not in out and k != "p_region"})
     p_region = info.get("p_region")
@@ -301,10 +301,11 @@ def status_for_reading(info: dict[str, Any]) -> dict[str, Any]:
 
 def _status(args: argparse.Namespace) -> int:
     from app.services import catalogues
+    from app.statuses import catalogue_status_plain
 
     ctx = _context(load_defaults=False)
     try:
-        info = catalogues.describe(ctx, args.id)
+        info = catalogue_status_plain(catalogues.describe(ctx, args.id))
         print(json.dumps(status_for_reading(info), indent=2))
         p_region = info.get("p_region") or {}
         if p_region.get("mc_ci") and p_region.get("model_ci"):

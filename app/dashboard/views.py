@@ -61,6 +61,7 @@ from app.services.sampling import (
     reference_draws,
     split_constraints,
 )
+from app.statuses import catalogue_status_plain
 
 __all__ = [
     "CLASS_LABELS",
@@ -456,7 +457,7 @@ def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, A
             scatter = _scatter(s, catalogue_id)
             top = queries.top_rows(s, catalogue_id, TOP_N)
         return {
-            "catalogue": jsonconv.encode(info),
+            "catalogue": catalogue_status_plain(info),
             "n_rows": n_rows,
             "n_scored": n_scored,
             "diagnostics": diag,

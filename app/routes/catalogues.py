@@ -7,17 +7,16 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, BackgroundTasks, Query, Request
 from fastapi.responses import FileResponse, Response
-from pydantic import ConfigDict, Field, WithJsonSchema
+from pydantic import Field, WithJsonSchema
 
-from app import jsonconv
 from app.db.repository import ORDER_FIELDS
 from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.quotas import client_of
-from app.rates import RegionRates
 from app.routes._download import file_response
-from app.schemas import ApiModel, PRegion, SamplingRequest, schema_enum
+from app.schemas import ApiModel, SamplingRequest, schema_enum
 from app.services import catalogues as service
+from app.statuses import CatalogueStatus
 from riskcore.criticality import CLASSES
 from sampler.model import SUPPORT_CLASSES
 from sampler.scenario import ScenarioRecord
@@ -70,60 +69,6 @@ class CatalogueList(ApiModel):
     catalogues: list[CatalogueItem]
 
 
-class ChunkProgress(ApiModel):
-    total: int
-    done: int
-
-
-class CatalogueStage(ApiModel):
-    name: str = Field(description="what the running job is doing: 'estimating P(A): <the "
-                      "estimator's stage>', 'sampling and scoring', 'refining the model "
-                      "interval …'")
-    done: int | None = Field(default=None, description="the stage's count so far (draws, "
-                             "hits, …; null when it has none)")
-    total: int | None = Field(default=None, description="what ``done`` runs to (the "
-                              "pilot's budget, which it may not use up)")
-
-
-class CatalogueStatus(ApiModel):
-    """A catalogue's status; ``summary`` has count (and count_inf), min, max, mean and the
-    percentiles p05 … p95 of each scored column's finite values (computed in SQL);
-    ``classes`` the number of scenarios of each criticality class."""
-
-    model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
-
-    id: str
-    status: str = Field(description="queued | running | done | failed | cancelled")
-    model: str
-    n: int
-    seed: int
-    constraints: list[str]
-    sampler: str
-    score: bool
-    wagner_scan: bool = Field(default=False, description="whether the scores include "
-                              "Wagner's scan (alarm_time, risk_peak, risks at the crossing)")
-    chunk_size: int
-    chunks: ChunkProgress
-    scenarios_stored: int
-    scenarios_done: int = Field(description="scenarios stored plus, while the job runs, "
-                                "those its workers report computed in unfinished chunks")
-    progress: float = Field(description="scenarios_done / n, 0 … 1 (moves per scenario)")
-    stage: CatalogueStage | None = Field(default=None, description="while running: the "
-                                         "current stage (null otherwise)")
-    p_region: PRegion | None = Field(description="the catalogue's P(A) estimate; "
-                                            "mc_ci and model_ci: its two intervals")
-    rates: RegionRates | None = Field(default=None, description="cut-ins of the region per "
-                                      "hour / per 10^6 km with both intervals (when the "
-                                      "model has an exposure)")
-    summary: dict[str, dict[str, float]]
-    classes: dict[str, int] = Field(default_factory=dict, description="scenarios per "
-                                    "criticality class (docs/criticality.md)")
-    error: str | None
-    created_at: str
-    updated_at: str
-    finished_at: str | None
-
-
 @router.post("", status_code=202, response_model=CatalogueCreated,
              summary="Start a catalogue job; answers with its id")
 def create_catalogue(body: CatalogueRequest, request: Request, ctx: ContextDep,
@@ -148,7 +93,7 @@ def list_catalogues(ctx: ContextDep) -> CatalogueList:
 @router.get("/{catalogue_id}", response_model=CatalogueStatus,
             summary="Status, progress, counts, P(A), summary statistics")
 def show_catalogue(catalogue_id: str, ctx: ContextDep) -> CatalogueStatus:
-    return CatalogueStatus.model_validate(jsonconv.encode(service.describe(ctx, catalogue_id)))
+    return service.describe(ctx, catalogue_id)
 
 
 class ScenarioPage(ApiModel):

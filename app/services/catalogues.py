@@ -22,8 +22,10 @@ from app.errors import Conflict, InvalidInput, NotFound, ServiceError
 from app.jobs.chunk import CatalogueSpec, rebuild_scenario
 from app.jobs.runner import scenarios_done
 from app.limits import check_constraints
-from app.rates import catalogue_rates
+from app.rates import RegionRates, catalogue_rates
+from app.schemas import PRegion
 from app.services.filters import parse_filters
+from app.statuses import CatalogueStage, CatalogueStatus, ChunkProgress
 from riskcore import ConcreteScenario
 from sampler import SAMPLER_NAMES
 from sampler.scenario import SCORE_FIELDS, ScenarioRecord
@@ -161,7 +163,7 @@ def page_scenarios(ctx: ServiceContext, catalogue_id: str, flt: repo.ScenarioFil
         return ScenarioPage(total=total, records=[record_of(r) for r in rows])
 
 
-def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
+def describe(ctx: ServiceContext, catalogue_id: str) -> CatalogueStatus:
     """Status, progress, counts, P(A) and summary statistics of a catalogue."""
     with ctx.db.read_session() as s:
         row = repo.get_catalogue(s, catalogue_id)
@@ -175,43 +177,53 @@ def describe(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
     # the statistics change only when a chunk is stored: computed once per stored state
     key = (catalogue_id, n_done, stored, row.updated_at.isoformat())
 
-    def compute() -> dict[str, Any]:
+    def compute() -> _Statistics:
         with ctx.db.read_session() as s:
-            return {"summary": repo.statistics_of(_stat_values(ctx, s, catalogue_id)),
-                    "classes": repo.class_counts(s, catalogue_id),
-                    "support": repo.support_counts(s, catalogue_id)}
+            return _Statistics(summary=repo.statistics_of(_stat_values(ctx, s, catalogue_id)),
+                               classes=repo.class_counts(s, catalogue_id),
+                               support=repo.support_counts(s, catalogue_id))
 
-    cached: dict[str, Any] = ctx.cache("catalogue.statistics", 256).get(key, compute)
-    stats, classes, support = cached["summary"], cached["classes"], cached["support"]
-    return {
-        "id": row.id,
-        "status": row.status,
-        "model": row.model_id,
-        "n": row.n,
-        "seed": row.seed,
-        "constraints": row.spec.get("constraints", []),
-        "sampler": row.spec.get("method", "auto"),
-        "score": row.spec.get("score", True),
-        "wagner_scan": bool(row.spec.get("wagner_scan", False)),
-        "chunk_size": row.chunk_size,
-        "chunks": {"total": row.n_chunks, "done": n_done},
-        "scenarios_stored": stored,
-        "scenarios_done": done,
-        "progress": min(1.0, done / row.n) if row.n else 1.0,
+    stats: _Statistics = ctx.cache("catalogue.statistics", 256).get(key, compute)
+    stage = chunkfile.read_stage(folder) if running else None
+    rates = catalogue_rates(row.p_region, stats.summary.get("exposure_weight"))
+    return CatalogueStatus(
+        id=row.id,
+        status=row.status,
+        model=row.model_id,
+        n=row.n,
+        seed=row.seed,
+        constraints=row.spec.get("constraints", []),
+        sampler=row.spec.get("method", "auto"),
+        score=row.spec.get("score", True),
+        wagner_scan=bool(row.spec.get("wagner_scan", False)),
+        chunk_size=row.chunk_size,
+        chunks=ChunkProgress(total=row.n_chunks, done=n_done),
+        scenarios_stored=stored,
+        scenarios_done=done,
+        progress=min(1.0, done / row.n) if row.n else 1.0,
         # what the running job is doing now (the P(A) estimate can take a minute at 0 %)
-        "stage": chunkfile.read_stage(folder) if running else None,
-        "p_region": row.p_region,
+        stage=None if stage is None else CatalogueStage.model_validate(stage),
+        p_region=None if row.p_region is None else PRegion.model_validate(row.p_region),
         # issue 12: rates per hour / 10^6 km with both intervals, and the weights' sum
-        "rates": catalogue_rates(row.p_region, stats.get("exposure_weight")),
-        "summary": stats,
-        "classes": classes,
+        rates=None if rates is None else RegionRates.model_validate(rates),
+        summary=stats.summary,
+        classes=stats.classes,
         # issue 25: how many scenarios the data support (inside / near / extrapolated)
-        "support": support,
-        "error": row.error,
-        "created_at": row.created_at.isoformat(),
-        "updated_at": row.updated_at.isoformat(),
-        "finished_at": row.finished_at.isoformat() if row.finished_at else None,
-    }
+        support=stats.support,
+        error=row.error,
+        created_at=row.created_at.isoformat(),
+        updated_at=row.updated_at.isoformat(),
+        finished_at=row.finished_at.isoformat() if row.finished_at else None,
+    )
+
+
+@dataclass(frozen=True)
+class _Statistics:
+    """A catalogue's statistics at one stored state (cached by ``describe``)."""
+
+    summary: dict[str, dict[str, float]]
+    classes: dict[str, int]
+    support: dict[str, int]
 
 
 def page_filter(items: Sequence[tuple[str, str]], classes: Sequence[str] = (),
