@@ -32,9 +32,10 @@ from riskcore import ConcreteScenario
 from sampler._threads import single_threaded
 from sampler.errors import SamplerError
 from sampler.methods.probability import PRegion, PRegionEstimator
-from sampler.methods.problem import Problem, ProgressFn, Run, Sampler
+from sampler.methods.problem import Draw, Pilot, Problem, ProgressFn, Run, Sampler
 from sampler.methods.samplers import SAMPLERS, AutoSampler, make_sampler
 from sampler.model.gmm import CutInGMM
+from sampler.model.support import SupportMeasures
 from sampler.region.constraints import DERIVED, Region
 from sampler.scenario.builder import build_scenario
 
@@ -273,9 +274,7 @@ def sample(
         Bad arguments.
     """
     model.check_fitted()
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 1_000_000:
-        raise SamplerError(f"n: expected an integer in 1 ... 1000000, got {n!r}")
-    n = int(n)
+    n = _check_n(n)
     seed_i = _seed(seed)
     region = _region(model, constraints, lane_width, physical_bounds)
     strategy = make_sampler(method)
@@ -286,31 +285,10 @@ def sample(
               (known_region.p_bounds, known_region.p_bounds_ci[0],
                known_region.p_bounds_ci[1]))
     run = Run(problem, rng, est, bounds, seed_i, progress)
-    plan = strategy.pilot_plan(problem)
-    pilot = est.pilot(problem, rng, need=plan.need, progress=progress, extend=plan.extend)
-    strategy.prepare(run, n, pilot)
-    drawn = strategy.draw(problem, n, rng, pilot, progress)
-    p_region = (strategy.estimate_p(run, pilot, drawn) if known_region is None
-                else known_region)
-    x = model.from_z(drawn.z)
-    params = pd.DataFrame(model.params_matrix(x), columns=list(PARAM_NAMES))
-    for j, f in enumerate(model.features_):
-        if f not in PARAM_NAMES:
-            params[f] = x[:, j]
-    full = params[list(PARAM_NAMES)].to_numpy()
-    has_support = model.support_ is not None
-    derived = pd.DataFrame(region.quantities(
-        full, [k for k in DERIVED if has_support or k not in SUPPORT_QUANTITIES]))
-    measures = model.support_measures(full, with_density=True) if has_support else None
-    if not region.contains(params[list(PARAM_NAMES)].to_numpy()).all():  # pragma: no cover
-        raise SamplerError("internal error: a sample violates its region")
+    pilot, drawn, p_region = _draw(strategy, run, n, known_region)
+    x, params, derived, measures = _tables(model, region, drawn.z)
     diag = dict(drawn.diagnostics)
-    diag["pilot"] = {"n_draws": pilot.n_draws, "n_hits": pilot.n_hits,
-                     "search_draws": pilot.search_draws,
-                     "n_simulated": pilot.n_simulated,
-                     "probe_draws": pilot.probe_draws, "plain": pilot.plain,
-                     "search_hits": int(pilot.search_hits.shape[0])
-                     if pilot.search_hits.ndim == 2 else 0}
+    diag["pilot"] = _pilot_diagnostics(pilot)
     return SampleSet(
         params=params,
         derived=derived,
@@ -326,6 +304,57 @@ def sample(
         model_info=_model_info(model),
         support=None if measures is None else [measures.record(i) for i in range(n)],
     )
+
+
+def _check_n(n: Any) -> int:
+    """``sample``'s n, checked (an integer in 1 ... 1,000,000)."""
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 1_000_000:
+        raise SamplerError(f"n: expected an integer in 1 ... 1000000, got {n!r}")
+    return int(n)
+
+
+def _draw(strategy: Sampler, run: Run, n: int,
+          known_region: PRegion | None) -> tuple[Pilot, Draw, PRegion]:
+    """The strategy's pilot, its draw of ``n`` samples and P(A) (the known region's when
+    given: then nothing is estimated)."""
+    problem, rng, est, progress = run.problem, run.rng, run.estimator, run.progress
+    plan = strategy.pilot_plan(problem)
+    pilot = est.pilot(problem, rng, need=plan.need, progress=progress, extend=plan.extend)
+    strategy.prepare(run, n, pilot)
+    drawn = strategy.draw(problem, n, rng, pilot, progress)
+    p_region = (strategy.estimate_p(run, pilot, drawn) if known_region is None
+                else known_region)
+    return pilot, drawn, p_region
+
+
+def _tables(model: CutInGMM, region: Region, z: FloatArray
+            ) -> tuple[FloatArray, pd.DataFrame, pd.DataFrame, SupportMeasures | None]:
+    """The drawn points ``z`` in the model's features (x), as parameter vectors (with any
+    feature that is not a parameter as a column of its own), their derived quantities and
+    their data support (None without the model's support)."""
+    x = model.from_z(z)
+    params = pd.DataFrame(model.params_matrix(x), columns=list(PARAM_NAMES))
+    for j, f in enumerate(model.features_):
+        if f not in PARAM_NAMES:
+            params[f] = x[:, j]
+    full = params[list(PARAM_NAMES)].to_numpy()
+    has_support = model.support_ is not None
+    derived = pd.DataFrame(region.quantities(
+        full, [k for k in DERIVED if has_support or k not in SUPPORT_QUANTITIES]))
+    measures = model.support_measures(full, with_density=True) if has_support else None
+    if not region.contains(params[list(PARAM_NAMES)].to_numpy()).all():  # pragma: no cover
+        raise SamplerError("internal error: a sample violates its region")
+    return x, params, derived, measures
+
+
+def _pilot_diagnostics(pilot: Pilot) -> dict[str, Any]:
+    """The pilot's counts, for the sample set's diagnostics."""
+    return {"n_draws": pilot.n_draws, "n_hits": pilot.n_hits,
+            "search_draws": pilot.search_draws,
+            "n_simulated": pilot.n_simulated,
+            "probe_draws": pilot.probe_draws, "plain": pilot.plain,
+            "search_hits": int(pilot.search_hits.shape[0])
+            if pilot.search_hits.ndim == 2 else 0}
 
 
 @single_threaded
