@@ -1,6 +1,7 @@
 """The status objects of the service's jobs: what ``app.services.catalogues.describe``
 returns, ``GET /catalogues/{id}`` answers, the dashboard's view 3 shows and
-``scengen catalogue status`` prints.
+``scengen catalogue status`` prints; what ``app.services.evaluations.describe`` returns and
+``GET /evaluations/{id}`` answers.
 
 The typed object is the HTTP response as it is (its floats, its field order). The CLI and
 the dashboard print the status the way the store holds it (counts as whole numbers, P(A)'s
@@ -16,7 +17,8 @@ from pydantic import ConfigDict, Field
 from app.rates import RegionRates
 from app.schemas import ApiModel, PRegion
 
-__all__ = ["CatalogueStage", "CatalogueStatus", "ChunkProgress", "catalogue_status_plain"]
+__all__ = ["CatalogueStage", "CatalogueStatus", "ChunkProgress", "EvaluationStatus",
+           "catalogue_status_plain"]
 
 
 class ChunkProgress(ApiModel):
@@ -110,3 +112,35 @@ def catalogue_status_plain(status: CatalogueStatus) -> dict[str, Any]:
                          for col, stats in fields["summary"].items()}
     fields["p_region"] = None if status.p_region is None else _stored_p_region(status.p_region)
     return {k: fields[k] for k in _PLAIN_ORDER if k in fields}
+
+
+class EvaluationStatus(ApiModel):
+    """An evaluation's status; ``spec`` and ``summary`` in the service's JSON form
+    (non-finite floats as strings: ``app.jsonconv.decode`` gives the numbers back)."""
+
+    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="strings")
+
+    id: str
+    status: str = Field(description="queued | running | done | failed | cancelled")
+    sut: str
+    model: str
+    seed: int
+    constraints: list[str]
+    spec: dict[str, Any]
+    runs_planned: int = Field(description="n, or max_runs with the stop rule")
+    runs_done: int = Field(description="draws stored so far (simulated or not)")
+    progress: float = Field(description="runs_done / runs_planned (1 when done; the stop "
+                            "rule usually ends a campaign before max_runs)")
+    chunks_done: int
+    collisions_so_far: int
+    runs_simulated: int = Field(description="stored runs the SUT drove (draws inside the "
+                                "region and the physical bounds)")
+    summary: dict[str, Any] | None = Field(description="once done: p_collision and "
+                                           "rate_per_hour (estimate, ci, model_ci), runs, "
+                                           "collisions, ess, acceleration, ... "
+                                           "(docs/evaluation.md)")
+    error: str | None
+    href_runs: str
+    created_at: str
+    updated_at: str
+    finished_at: str | None

@@ -25,6 +25,7 @@ from app.dashboard.schemas import (
 from app.errors import NotFound
 from app.services import evaluations as service
 from app.services import suts
+from app.statuses import EvaluationStatus
 from datasets import PARAM_NAMES
 
 #: the careful driver the SUT is compared with (UN R157, JRC-FSM rule)
@@ -78,13 +79,13 @@ def careful_evaluation(ctx: ServiceContext, model_id: str, constraints: list[str
     return None
 
 
-def careful_request(st: dict[str, Any]) -> dict[str, Any]:
+def careful_request(st: EvaluationStatus) -> dict[str, Any]:
     """The body of ``POST /evaluations`` that evaluates the careful driver where the
     evaluation ``st`` (``service.describe``) was made: the same model, region, seed, number
     of draws or stop rule, and simulator settings."""
-    spec = st["spec"]
-    body: dict[str, Any] = {"sut": CAREFUL, "model": st["model"],
-                            "constraints": list(st["constraints"]), "seed": int(st["seed"])}
+    spec = jsonconv.decode(st.spec)
+    body: dict[str, Any] = {"sut": CAREFUL, "model": st.model,
+                            "constraints": list(st.constraints), "seed": int(st.seed)}
     if spec.get("n") is not None:
         body["n"] = int(spec["n"])
     else:
@@ -112,7 +113,7 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
                                 max(0, SCATTER_RUNS - len(hits)), order_by="run", desc=False)
     shown = hits + rest
     if shown:
-        model = ctx.model(st["model"])
+        model = ctx.model(st.model)
         params = np.array([[float(r[k]) for k in PARAM_NAMES] for r in shown])
         crit = importlib.import_module("sampler.region").criticality_quantities(
             params, domain.model_lane_width(model), with_ttr=False)
@@ -128,10 +129,10 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
             scatter["note"] = ("r_dep of the SUT's drive not computed by the runner: impact "
                                "speed shown instead")
     return EvaluationOverview(
-        evaluation=EvaluationBrief(**{k: st[k] for k in EvaluationBrief.model_fields}),
-        figures=_figures(st["summary"]),
-        careful=careful_evaluation(ctx, st["model"], list(st["constraints"]),
-                                   st["spec"].get("settings")),
+        evaluation=EvaluationBrief(**{k: getattr(st, k) for k in EvaluationBrief.model_fields}),
+        figures=_figures(None if st.summary is None else jsonconv.decode(st.summary)),
+        careful=careful_evaluation(ctx, st.model, list(st.constraints),
+                                   jsonconv.decode(st.spec).get("settings")),
         careful_request=careful_request(st),
         failures_total=failures_total,
         failures=jsonconv.encode(failures),
@@ -147,18 +148,18 @@ def run_profile(ctx: ServiceContext, evaluation_id: str, run: int) -> RunProfile
     if rec is None:
         raise NotFound(f"evaluation {evaluation_id} has no simulated run {run}",
                        field="path.run")
-    model = ctx.model(st["model"])
+    model = ctx.model(st.model)
     lane = domain.model_lane_width(model)
     params = {k: float(rec[k]) for k in PARAM_NAMES}
-    scenario = service.rebuild(params, lane, int(st["seed"]), run, evaluation_id)
+    scenario = service.rebuild(params, lane, st.seed, run, evaluation_id)
     if scenario is None:
         raise NotFound(f"run {run}: the builder refuses its vector", field="path.run")
     rs = importlib.import_module("riskcore.sut")
     batch = rs.CutInBatch.from_scenarios([scenario], lane_width=lane)
     seeds = np.array([int(rec["seed"])], dtype=np.uint64)
-    spec = st["spec"]
+    spec = jsonconv.decode(st.spec)
     sim = rs.SimSettings.from_dict(spec["settings"]) if spec.get("settings") else None
-    entry = suts.resolve(st["sut"], allow_import=False, field="sut")
+    entry = suts.resolve(st.sut, allow_import=False, field="sut")
     drivers: dict[str, DriverProfile] = {}
     for label, factory in (("sut", entry.factory(spec.get("sut_params") or {})),
                            ("careful", suts.registry().entries[CAREFUL].factory())):

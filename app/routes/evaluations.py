@@ -18,6 +18,7 @@ from app.routes._download import file_response
 from app.schemas import SEED_MAX, ApiModel, ConstraintText, schema_enum
 from app.services import evaluations as service
 from app.services import suts
+from app.statuses import EvaluationStatus
 
 router = APIRouter(tags=["evaluations"])
 
@@ -69,35 +70,6 @@ class EvaluationCreated(ApiModel):
     id: str
     status: str = Field(description="queued | running | done | failed | cancelled")
     href: str = Field(description="where to poll its status")
-
-
-class EvaluationStatus(ApiModel):
-    model_config = ConfigDict(extra="allow", ser_json_inf_nan="strings")
-
-    id: str
-    status: str = Field(description="queued | running | done | failed | cancelled")
-    sut: str
-    model: str
-    seed: int
-    constraints: list[str]
-    spec: dict[str, Any]
-    runs_planned: int = Field(description="n, or max_runs with the stop rule")
-    runs_done: int = Field(description="draws stored so far (simulated or not)")
-    progress: float = Field(description="runs_done / runs_planned (1 when done; the stop "
-                            "rule usually ends a campaign before max_runs)")
-    chunks_done: int
-    collisions_so_far: int
-    runs_simulated: int = Field(description="stored runs the SUT drove (draws inside the "
-                                "region and the physical bounds)")
-    summary: dict[str, Any] | None = Field(description="once done: p_collision and "
-                                           "rate_per_hour (estimate, ci, model_ci), runs, "
-                                           "collisions, ess, acceleration, ... "
-                                           "(docs/evaluation.md)")
-    error: str | None
-    href_runs: str
-    created_at: str
-    updated_at: str
-    finished_at: str | None
 
 
 class EvaluationItem(ApiModel):
@@ -181,8 +153,7 @@ def list_evaluations(ctx: ContextDep) -> EvaluationList:
 @router.get("/evaluations/{evaluation_id}", response_model=EvaluationStatus,
             summary="Status, progress and (once done) the collision rate with its intervals")
 def show_evaluation(evaluation_id: str, ctx: ContextDep) -> EvaluationStatus:
-    return EvaluationStatus.model_validate(
-        jsonconv.encode(service.describe(ctx, evaluation_id)))
+    return service.describe(ctx, evaluation_id)
 
 
 _RANGE_DOCS = {"impact_speed": "impact speed (m/s, 0 without a collision)",

@@ -43,6 +43,7 @@ from app.jobs.fair import FairExecutor, InlineFutures, JobCancelled, Share
 from app.limits import check_constraints
 from app.services import suts
 from app.services.filters import parse_filters
+from app.statuses import EvaluationStatus
 from datasets import PARAM_NAMES
 from riskcore import ConcreteScenario
 
@@ -479,8 +480,9 @@ def _p_bounds(row: EvaluationRow) -> float | None:
     return float(pb) if isinstance(pb, int | float) and pb > 0 else None
 
 
-def describe(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
-    """Status, progress, the spec and (once done) the campaign's summary."""
+def describe(ctx: ServiceContext, evaluation_id: str) -> EvaluationStatus:
+    """Status, progress, the spec and (once done) the campaign's summary (``spec`` and
+    ``summary`` in the service's JSON form: ``jsonconv.decode`` gives the numbers)."""
     row = get(ctx, evaluation_id)
     with ctx.db.read_session() as s:
         chunks, collisions, simulated = s.execute(
@@ -493,20 +495,20 @@ def describe(ctx: ServiceContext, evaluation_id: str) -> dict[str, Any]:
     spec = jsonconv.decode(row.spec)
     done = row.status == "done"
     summary = jsonconv.decode(row.summary) if row.summary else None
-    return {
-        "id": row.id, "status": row.status, "sut": row.sut, "model": row.model_id,
-        "seed": row.seed, "constraints": spec.get("constraints", []), "spec": spec,
-        "runs_planned": row.runs_planned, "runs_done": row.runs_done,
+    return EvaluationStatus(
+        id=row.id, status=row.status, sut=row.sut, model=row.model_id,
+        seed=row.seed, constraints=spec.get("constraints", []), spec=jsonconv.encode(spec),
+        runs_planned=row.runs_planned, runs_done=row.runs_done,
         # with the stop rule the campaign usually ends before max_runs: progress then
         # says how much of the budget was used
-        "progress": 1.0 if done else min(1.0, row.runs_done / max(1, row.runs_planned)),
-        "chunks_done": int(chunks), "collisions_so_far": int(collisions),
-        "runs_simulated": int(simulated),
-        "summary": summary, "error": row.error,
-        "href_runs": f"/evaluations/{row.id}/runs",
-        "created_at": row.created_at.isoformat(), "updated_at": row.updated_at.isoformat(),
-        "finished_at": row.finished_at.isoformat() if row.finished_at else None,
-    }
+        progress=1.0 if done else min(1.0, row.runs_done / max(1, row.runs_planned)),
+        chunks_done=int(chunks), collisions_so_far=int(collisions),
+        runs_simulated=int(simulated),
+        summary=None if summary is None else jsonconv.encode(summary), error=row.error,
+        href_runs=f"/evaluations/{row.id}/runs",
+        created_at=row.created_at.isoformat(), updated_at=row.updated_at.isoformat(),
+        finished_at=row.finished_at.isoformat() if row.finished_at else None,
+    )
 
 
 @dataclass(frozen=True)

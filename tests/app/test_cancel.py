@@ -136,7 +136,7 @@ def test_a_cancelled_evaluation_stops_between_the_parts_of_a_chunk(
         eid = service.create(ctx, sut="acc", n=5000, batch_size=5000, seed=3).id
         assert service.run_job(ctx, eid, cancel=cancel) == "cancelled"
         assert 0 < runner.rows <= 1024  # the first part only (before: the whole chunk)
-        assert service.describe(ctx, eid)["status"] == "cancelled"
+        assert service.describe(ctx, eid).status == "cancelled"
     finally:
         ctx.close()
 

@@ -69,7 +69,7 @@ def _evaluate(data_dir: Path, **settings: Any) -> tuple[dict[str, Any], str]:
     try:
         row = evaluations.create(ctx, sut="acc", n=240, seed=5, batch_size=120)
         assert evaluations.run_job(ctx, row.id) == "done"
-        return evaluations.describe(ctx, row.id)["summary"], ctx.executor.name
+        return evaluations.describe(ctx, row.id).summary or {}, ctx.executor.name
     finally:
         ctx.close()
 

@@ -282,14 +282,14 @@ def test_an_interrupted_job_resumes_from_its_stored_chunks(
 
         runner.rows = 0
         assert service.run_job(ctx, b, stop=stop, progress=progress) == "interrupted"
-        assert service.describe(ctx, b)["chunks_done"] == 2
+        assert service.describe(ctx, b).chunks_done == 2
         simulated_before = runner.rows
         runner.rows = 0
         assert service.run_job(ctx, b) == "done"
         # the resumed run simulated only chunks 2..4: together, what run a simulated
         assert runner.rows + simulated_before == rows_a
         assert simulated_before > 0 and 0 < runner.rows < rows_a
-        sa, sb = service.describe(ctx, a)["summary"], service.describe(ctx, b)["summary"]
+        sa, sb = service.describe(ctx, a).summary, service.describe(ctx, b).summary
         assert sa == sb
         ta, ra = service.page_runs(ctx, a, service.RunFilter(), 0, 10_000, order_by="run",
                                    desc=False)

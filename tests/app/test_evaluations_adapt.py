@@ -209,9 +209,9 @@ def test_old_and_ce_specs_resume_to_the_uninterrupted_result(
                     stop.set()
 
             assert service.run_job(ctx, b, stop=stop, progress=progress) == "interrupted"
-            assert service.describe(ctx, b)["chunks_done"] == 1
+            assert service.describe(ctx, b).chunks_done == 1
             assert service.run_job(ctx, b) == "done"
-            sa, sb = service.describe(ctx, a)["summary"], service.describe(ctx, b)["summary"]
+            sa, sb = service.describe(ctx, a).summary, service.describe(ctx, b).summary
             assert sb["adapt"] == adapt
             assert sa == sb
             if adapt == "ce":

@@ -92,3 +92,50 @@ def test_catalogue_status_refuses_a_field_it_does_not_declare() -> None:
 
     with pytest.raises(ValidationError, match="extra"):
         CatalogueStatus.model_validate({"id": "c", "surprise": 1})
+
+
+#: GET /evaluations/{id}'s fields in their order
+EVALUATION_STATUS_FIELDS = [
+    "id", "status", "sut", "model", "seed", "constraints", "spec", "runs_planned",
+    "runs_done", "progress", "chunks_done", "collisions_so_far", "runs_simulated", "summary",
+    "error", "href_runs", "created_at", "updated_at", "finished_at"]
+
+
+@pytest.fixture(scope="module")
+def evaluation(client: Any) -> str:
+    r = client.post("/evaluations", json={"sut": "acc", "n": 200, "batch_size": 100,
+                                          "seed": 3})
+    assert r.status_code == 202, r.text
+    eid: str = r.json()["id"]
+    wait_for(lambda: client.get(f"/evaluations/{eid}").json()["status"]
+             in ("done", "failed"), "the evaluation")
+    return eid
+
+
+def test_evaluation_status_is_typed_and_answers_as_before(client: Any,
+                                                         evaluation: str) -> None:
+    from app import jsonconv
+    from app.services import evaluations
+    from app.statuses import EvaluationStatus
+
+    r = client.get(f"/evaluations/{evaluation}")
+    body = r.json()
+    assert list(body) == EVALUATION_STATUS_FIELDS
+    assert EvaluationStatus.model_validate_json(r.text).model_dump_json() == r.text
+    status = evaluations.describe(_ctx(client), evaluation)
+    assert isinstance(status, EvaluationStatus)
+    assert status.model_dump_json() == r.text
+    # values from elsewhere: the request, the run pages, the stored row
+    assert (body["status"], body["sut"], body["seed"]) == ("done", "acc", 3)
+    assert body["spec"]["n"] == 200 and body["spec"]["batch_size"] == 100
+    assert (body["runs_planned"], body["runs_done"], body["chunks_done"]) == (200, 200, 2)
+    runs = client.get(f"/evaluations/{evaluation}/runs?limit=1").json()["total"]
+    assert body["runs_simulated"] == runs > 0
+    assert body["href_runs"] == f"/evaluations/{evaluation}/runs"
+    # the summary is the stored one, in the service's JSON form
+    with _ctx(client).db.read_session() as s:
+        from app.db.models import EvaluationRow
+
+        stored = s.get(EvaluationRow, evaluation).summary
+    assert body["summary"] == jsonconv.encode(jsonconv.decode(stored))
+    assert body["summary"]["runs"] == 200
