@@ -157,43 +157,89 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
     import openturns as ot
 
     model.check_fitted()
-    if not 0.0 < p0 < 0.5:
-        raise SamplerError(f"p0: must be in (0, 0.5), got {p0!r}")
-    chains = math.ceil(n_per_level * p0)
-    blocks = round(1.0 / p0)
-    if chains < 10:
-        raise SamplerError(f"n_per_level: need at least {math.ceil(10 / p0)}, got {n_per_level}")
-    if not (max_seconds > 0 and proposal_range > 0 and 0 < min_probability < 1):
-        raise SamplerError("max_seconds, proposal_range and min_probability must be positive "
-                           "(min_probability < 1)")
+    plan = _Plan.checked(n_per_level, p0, proposal_range, max_seconds, min_probability)
     d = model.n_features
     to_z: Callable[[FloatArray], FloatArray] = (
         from_normal if from_normal is not None
         else (lambda u: mixture_from_normal(model, u)))
-    # levels needed to go below min_probability, plus slack: a region that the levels
-    # cannot reach (empty, or g stuck above 0) ends here instead of running on
-    max_levels = math.ceil(math.log(min_probability) / math.log(p0)) + 5
     budget = _Budget(limit_state, to_z, deadline=time.monotonic() + float(max_seconds),
-                     max_evals=(max_levels + 1) * blocks * chains)
+                     max_evals=(plan.max_levels + 1) * plan.blocks * plan.chains)
 
     fun = ot.PythonFunction(d + 1, 1, func_sample=budget)
     event = ot.ThresholdEvent(ot.CompositeRandomVector(fun, ot.RandomVector(ot.Normal(d + 1))),
                               ot.LessOrEqual(), 0.0)
     t0 = time.monotonic()
+    steps, thresholds, cumulative, gamma, u_final = _run_levels(event, seed, plan, budget)
+    if thresholds[-1] > 0:
+        raise EmptyRegionError(
+            f"subset simulation reached P = {cumulative[-1]:.3g} after {steps} levels "
+            f"(min_probability={min_probability:g}) with the limit state still above 0 "
+            f"(threshold {thresholds[-1]:.3g}): the region holds less mass than that"
+            + _stall_note(_stalled(thresholds)),
+            n_draws=budget.evals, n_hits=0, p_upper=cumulative[-1],
+            stalled=_stalled(thresholds))
+    return _levels_result(cumulative, thresholds, gamma, steps, plan.blocks * plan.chains,
+                          n_evaluations=budget.evals,
+                          z=to_z(u_final) if u_final.size else np.zeros((0, d)),
+                          seconds=time.monotonic() - t0)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """The checked settings of one subset simulation and the level layout they give."""
+
+    p0: float
+    proposal_range: float
+    max_seconds: float
+    min_probability: float
+    chains: int  # per block: N p0
+    blocks: int  # per level: 1 / p0
+    #: levels needed to go below min_probability, plus slack: a region that the levels
+    #: cannot reach (empty, or g stuck above 0) ends there instead of running on
+    max_levels: int
+
+    @classmethod
+    def checked(cls, n_per_level: int, p0: float, proposal_range: float, max_seconds: float,
+                min_probability: float) -> _Plan:
+        """The plan of ``subset_simulation``'s settings; SamplerError when one is bad."""
+        if not 0.0 < p0 < 0.5:
+            raise SamplerError(f"p0: must be in (0, 0.5), got {p0!r}")
+        chains = math.ceil(n_per_level * p0)
+        blocks = round(1.0 / p0)
+        if chains < 10:
+            raise SamplerError(f"n_per_level: need at least {math.ceil(10 / p0)}, "
+                               f"got {n_per_level}")
+        if not (max_seconds > 0 and proposal_range > 0 and 0 < min_probability < 1):
+            raise SamplerError("max_seconds, proposal_range and min_probability must be "
+                               "positive (min_probability < 1)")
+        max_levels = math.ceil(math.log(min_probability) / math.log(p0)) + 5
+        return cls(p0, proposal_range, max_seconds, min_probability, chains, blocks,
+                   max_levels)
+
+
+def _run_levels(event: Any, seed: int, plan: _Plan, budget: _Budget
+                ) -> tuple[int, list[float], list[float], list[float], FloatArray]:
+    """OpenTURNS' subset sampling of ``event``, seeded from ``seed``, under the lock: the
+    number of levels, per level the threshold, the cumulative probability and the chains'
+    correlation factor, and the last level's standard normal points inside the event.
+    A run OpenTURNS stops becomes the error ``_failure`` makes of it."""
+    import openturns as ot
+
     with _OT_LOCK:
         ot.RandomGenerator.SetSeed(int(seed) % (2**31 - 1))
         algo = ot.SubsetSampling(event)
-        algo.setConditionalProbability(float(p0))
-        algo.setMaximumOuterSampling(blocks)
-        algo.setBlockSize(chains)
-        algo.setProposalRange(float(proposal_range))
-        algo.setMinimumProbability(float(min_probability))
+        algo.setConditionalProbability(float(plan.p0))
+        algo.setMaximumOuterSampling(plan.blocks)
+        algo.setBlockSize(plan.chains)
+        algo.setProposalRange(float(plan.proposal_range))
+        algo.setMinimumProbability(float(plan.min_probability))
         algo.setKeepSample(True)
         try:
             algo.run()
         except RuntimeError as exc:
-            raise _failure(exc, algo, budget, max_seconds=max_seconds, max_levels=max_levels,
-                           min_probability=min_probability) from None
+            raise _failure(exc, algo, budget, max_seconds=plan.max_seconds,
+                           max_levels=plan.max_levels,
+                           min_probability=plan.min_probability) from None
         except TypeError as exc:
             # OpenTURNS 1.27 refuses to finish when the last level holds every sample
             # (conditional probability 1: zero variance, gamma NaN); the levels are complete
@@ -206,18 +252,7 @@ def subset_simulation(model: CutInGMM, limit_state: LimitState, seed: int, *,
         gamma = [float(x) if math.isfinite(x) else 0.0 for x in algo.getGammaPerStep()]
         u_final = np.asarray(algo.getInputSample(steps - 1, ot.SubsetSampling.EVENT1),
                              dtype=np.float64)
-    if thresholds[-1] > 0:
-        raise EmptyRegionError(
-            f"subset simulation reached P = {cumulative[-1]:.3g} after {steps} levels "
-            f"(min_probability={min_probability:g}) with the limit state still above 0 "
-            f"(threshold {thresholds[-1]:.3g}): the region holds less mass than that"
-            + _stall_note(_stalled(thresholds)),
-            n_draws=budget.evals, n_hits=0, p_upper=cumulative[-1],
-            stalled=_stalled(thresholds))
-    return _levels_result(cumulative, thresholds, gamma, steps, blocks * chains,
-                          n_evaluations=budget.evals,
-                          z=to_z(u_final) if u_final.size else np.zeros((0, d)),
-                          seconds=time.monotonic() - t0)
+    return steps, thresholds, cumulative, gamma, u_final
 
 
 @dataclass
