@@ -1,5 +1,5 @@
 """A runner that drives a system under test: the batch of cut-ins
-(``sampler.scenario.cutin_batch``, the builder's tracks) through riskcore's closed-loop
+(``sampler.scenario.buildable_batch``, the builder's tracks) through riskcore's closed-loop
 simulator (``riskcore.sut.simulate``), and the same runs with UN R157's careful driver
 (``r157_cc``) for ``vs_careful``.
 
@@ -28,7 +28,7 @@ from riskcore.sut import (
     make_sut,
     simulate,
 )
-from sampler.scenario.batch import cutin_batch, cutin_tracks
+from sampler.scenario.batch import buildable_batch
 from sampler.scenario.builder import DEFAULT_VEHICLE_SIZE
 
 __all__ = ["SutRuns", "sut_runner"]
@@ -94,13 +94,15 @@ class SutRunner:
         n = x.shape[0]
         length, width = self.vehicle_size
         lane = 3.75 if self.lane_width is None else self.lane_width
-        ok = cutin_tracks(x, lane_width=lane, ego_length=length,
-                          cutter_length=length).ok
-        rows = np.flatnonzero(ok)
+        # the tracks once: ok of every row, the batch of the buildable ones (equal to
+        # cutin_batch(x[rows]))
+        tracks, rows, batch = buildable_batch(x, lane_width=lane, ego_length=length,
+                                              ego_width=width, cutter_length=length,
+                                              cutter_width=width)
+        ok = tracks.ok
+        del tracks
         seeds = np.asarray(seeds, dtype=np.uint64)
-        if rows.size:
-            batch = cutin_batch(x[rows], lane_width=lane, ego_length=length,
-                                ego_width=width, cutter_length=length, cutter_width=width)
+        if batch is not None:
             runs = simulate(self._sut(), batch, seeds=seeds[rows], settings=self.settings,
                             risk=self.risk)
             arrays = _full(runs, rows, n)

@@ -10,7 +10,7 @@
   gives (sampler starts no processes).
 """
 
-from sampler.scenario.batch import CutInTracks, cutin_batch, cutin_tracks
+from sampler.scenario.batch import CutInTracks, buildable_batch, cutin_batch, cutin_tracks
 from sampler.scenario.builder import (
     DEFAULT_DT,
     DEFAULT_HORIZON,
@@ -39,6 +39,7 @@ __all__ = [
     "OutsideParameter",
     "ScenarioRecord",
     "build_scenario",
+    "buildable_batch",
     "cutin_batch",
     "cutin_tracks",
     "score_part",

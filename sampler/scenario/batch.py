@@ -40,7 +40,7 @@ from sampler.scenario.builder import (
 
 jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
-__all__ = ["CutInTracks", "cutin_batch", "cutin_tracks", "reasons"]
+__all__ = ["CutInTracks", "buildable_batch", "cutin_batch", "cutin_tracks", "reasons"]
 
 FloatArray = NDArray[np.float64]
 
@@ -110,6 +110,18 @@ def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no co
     if x <= xp[0]:
         return fp[0]
     j = np.searchsorted(xp, x, side="right") - 1
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if r != r:
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+    return r
+
+
+@numba.njit(cache=True)
+def _interp_at(x: float, xp: FloatArray, fp: FloatArray, j: int
+               ) -> float:  # pragma: no cover - jit
+    """:func:`_interp` for ``xp[0] < x < xp[-1]`` given ``j``, the last index with
+    ``xp[j] <= x`` (what its binary search finds)."""
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
     r = slope * (x - xp[j]) + fp[j]
     if r != r:
@@ -225,6 +237,7 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
     x_cut0 = gap + 0.5 * (cut_len + ego_len) + v_ego * t_c - x_rel_c
     y_start = -lane_width if p_y1 > 0 else lane_width
     nt = t.shape[0]
+    jg = 0  # the grid's interval of tau (t increases: found by walking, not searching)
     for k in range(nt):
         tau = t[k] - lead_in
         if tau < 0.0:
@@ -233,9 +246,17 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
         elif tau > end:
             xr = xs[ng - 1] + (_pulse_integral(tau, p_a1, p_a2, p_a3, p_v0) - s_end)
             yr = ys[ng - 1]
+        elif tau >= grid[ng - 1]:
+            xr = xs[ng - 1]
+            yr = ys[ng - 1]
+        elif tau <= grid[0]:
+            xr = xs[0]
+            yr = ys[0]
         else:
-            xr = _interp(tau, grid, xs)
-            yr = _interp(tau, grid, ys)
+            while grid[jg + 1] <= tau:
+                jg += 1
+            xr = _interp_at(tau, grid, xs, jg)
+            yr = _interp_at(tau, grid, ys, jg)
         v = _speed(tau, p_a1, p_a2, p_a3, p_v0)
         if v < 0.0:
             return _NEG_SPEED, nan, nan, nan, nan
@@ -287,6 +308,23 @@ def _time_grid(n_steps: int, dt: float) -> FloatArray:
     return np.round(np.arange(n_steps + 1, dtype=np.float64) * dt, 12)
 
 
+def _grid_steps(x: FloatArray, dt: float, lead_in: float, duration: float | None) -> int:
+    """The number of steps of ``cutin_tracks``'s grid for the rows ``x`` (its docstring)."""
+    if duration is None:
+        with np.errstate(invalid="ignore"):
+            pulse_end = np.where(x[:, 4] > 0, x[:, 3] + x[:, 4], 0.0)
+            settle = lead_in + np.maximum(np.maximum(2.0 * x[:, 1], pulse_end), 0.0)
+        good = np.isfinite(settle) & (settle <= MAX_DURATION)
+        longest = float(settle[good].max()) if good.any() else lead_in
+        duration = longest + DEFAULT_HORIZON
+    duration = _positive(duration, "duration")
+    n_steps = max(math.ceil(duration / dt - 1e-9), 1)
+    if n_steps > 100_000:
+        raise BuilderError(f"duration: {duration} s is more than 100000 steps of {dt} s",
+                           field="duration")
+    return n_steps
+
+
 def _positive(value: Any, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | np.floating
                                                   | np.integer):
@@ -320,18 +358,7 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
         raise BuilderError(f"lead_in: must be a finite number >= 0 s, got {lead_in!r}",
                            field="lead_in")
     n = x.shape[0]
-    if duration is None:
-        with np.errstate(invalid="ignore"):
-            pulse_end = np.where(x[:, 4] > 0, x[:, 3] + x[:, 4], 0.0)
-            settle = lead_in + np.maximum(np.maximum(2.0 * x[:, 1], pulse_end), 0.0)
-        good = np.isfinite(settle) & (settle <= MAX_DURATION)
-        longest = float(settle[good].max()) if good.any() else lead_in
-        duration = longest + DEFAULT_HORIZON
-    duration = _positive(duration, "duration")
-    n_steps = max(math.ceil(duration / dt - 1e-9), 1)
-    if n_steps > 100_000:
-        raise BuilderError(f"duration: {duration} s is more than 100000 steps of {dt} s",
-                           field="duration")
+    n_steps = _grid_steps(x, dt, float(lead_in), duration)
     t = _time_grid(n_steps, dt)
     shape = (n, t.shape[0])
     cx, cy, cpsi, cv, ca, cw = (np.zeros(shape) for _ in range(6))
@@ -348,6 +375,8 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
 def reasons(status: NDArray[np.int64]) -> list[str | None]:
     """Why each row is not a buildable cut-in (None: it is)."""
     return [_REASONS.get(int(s)) for s in status]
+
+
 def cutin_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                 ego_length: float = DEFAULT_VEHICLE_SIZE[0],
                 ego_width: float = DEFAULT_VEHICLE_SIZE[1],
@@ -373,3 +402,51 @@ def cutin_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                       c_width=np.full(tr.ego_v0.shape[0], float(cutter_width)),
                       t_p=tr.t_p, t_cross=tr.t_cross, t_end=tr.t_end,
                       c_yaw_rate=tr.c_yaw_rate)
+
+
+def buildable_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
+                    ego_length: float = DEFAULT_VEHICLE_SIZE[0],
+                    ego_width: float = DEFAULT_VEHICLE_SIZE[1],
+                    cutter_length: float = DEFAULT_VEHICLE_SIZE[0],
+                    cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
+                    lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
+                    wandering_zone: float = WANDERING_ZONE
+                    ) -> tuple[CutInTracks, NDArray[np.intp], CutInBatch | None]:
+    """Every row's tracks (``cutin_tracks``), the buildable rows ``rows`` and their batch,
+    equal to ``cutin_batch(params[rows], same keywords)`` array for array (None when no
+    row is buildable), building the tracks once.
+
+    The batch's grid is that of ``cutin_batch(params[rows])`` (by default it ends at the
+    buildable rows' latest script end plus the risk horizon; ``cutin_tracks`` also counts
+    rows refused after that end is known, so its grid can be longer): the tracks are cut to
+    it. Every grid value of a row depends on its time only, and a row's ``t_p`` lies
+    before its script's end, so the cut tracks are those built on the shorter grid.
+    """
+    tr = cutin_tracks(params, lane_width=lane_width, ego_length=ego_length,
+                      cutter_length=cutter_length, dt=dt, lead_in=lead_in, duration=duration,
+                      wandering_zone=wandering_zone)
+    rows = np.flatnonzero(tr.ok)
+    if rows.size == 0:
+        return tr, rows, None
+    n = tr.ok.shape[0]
+    x = np.atleast_2d(np.asarray(params, dtype=np.float64))
+    n_steps = _grid_steps(x if rows.size == n else x[rows], float(dt), float(lead_in),
+                          duration)
+    m = n_steps + 1
+    assert m <= tr.t.shape[0]
+    pick: Any = slice(None) if rows.size == n else rows
+
+    def cut(a: FloatArray) -> FloatArray:
+        return a[pick, :m]
+
+    def sub(a: NDArray[Any]) -> NDArray[Any]:
+        return a if rows.size == n else a[rows]
+
+    batch = CutInBatch(t=tr.t[:m], lane_width=float(lane_width), ego_v0=sub(tr.ego_v0),
+                       ego_length=float(ego_length), ego_width=float(ego_width),
+                       cx=cut(tr.cx), cy=cut(tr.cy), cpsi=cut(tr.cpsi), cv=cut(tr.cv),
+                       ca=cut(tr.ca), c_length=np.full(rows.size, float(cutter_length)),
+                       c_width=np.full(rows.size, float(cutter_width)), t_p=sub(tr.t_p),
+                       t_cross=sub(tr.t_cross), t_end=sub(tr.t_end),
+                       c_yaw_rate=cut(tr.c_yaw_rate))
+    return tr, rows, batch

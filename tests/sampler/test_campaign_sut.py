@@ -88,3 +88,52 @@ def test_risk_of_the_suts_own_drive_is_opt_in() -> None:
     direct = simulate(make_sut("acc"), cutin_batch(x[rows], lane_width=3.75), seeds=seeds[rows],
                       risk=True)
     assert risky.r_dep_peak[rows].tolist() == direct.r_dep_peak.tolist()
+
+
+def _runner_reference(sut: str, x: np.ndarray, seeds: np.ndarray, settings: SimSettings,
+                      lane: float) -> dict[str, np.ndarray]:
+    """The runner as it was written first: ``ok`` from one build of every row, then a
+    second build of the buildable rows by ``cutin_batch`` (its own grid) and simulate."""
+    from riskcore.sut import RUN_FIELDS, simulate
+    from sampler.scenario import cutin_batch, cutin_tracks
+
+    ok = cutin_tracks(x, lane_width=lane).ok
+    rows = np.flatnonzero(ok)
+    batch = cutin_batch(x[rows], lane_width=lane)
+    runs = simulate(make_sut(sut), batch, seeds=seeds[rows], settings=settings)
+    out: dict[str, np.ndarray] = {"buildable": ok}
+    for name in RUN_FIELDS:
+        out[name] = np.asarray(getattr(runs, name))
+    out["rows"] = rows
+    out["grid_end"] = batch.t[-1:]
+    return out
+
+
+def test_the_runner_equals_two_builds_and_simulate_bit_for_bit() -> None:
+    """Model draws with refused rows among them (one with the longest script, so the
+    buildable rows' grid is shorter than that of all rows, and runs going past its end):
+    every field of every run equals the reference's, bit for bit."""
+    model = CutInGMM(k_range=(2, 2), n_init=1, n_report_samples=500).fit(
+        synthetic_parameter_table(300, seed=5))
+    rng = np.random.default_rng(4)
+    x = model.params_matrix(model.sample(300, rng))
+    x[::37, 0] = 0.0
+    x[11, 1], x[11, 0] = 30.0, 1e-4  # the longest script, never reaches the marking
+    x[12, 6] = -80.0  # ego speed <= 0
+    x[13, 4] = np.nan
+    seeds = np.asarray(rng.integers(0, 2**63, size=x.shape[0], dtype=np.uint64))
+    for sut, st in (("acc", SimSettings(t_max=60.0)), ("none", SimSettings(t_max=20.0))):
+        out = sut_runner(make_sut(sut), careful=False, settings=st, lane_width=3.6)(
+            x, seeds)
+        ref = _runner_reference(sut, x, seeds, st, 3.6)
+        rows = ref.pop("rows")
+        grid_end = float(ref.pop("grid_end")[0])
+        assert out.buildable.tolist() == ref.pop("buildable").tolist()
+        assert 120 <= rows.size <= 290
+        assert not out.buildable[[11, 12, 13]].any()
+        assert (out.end[~out.buildable] == "not_buildable").all()
+        for name, want in ref.items():
+            got = np.asarray(getattr(out, name))[rows]
+            assert got.tobytes() == want.astype(got.dtype).tobytes(), (sut, name)
+        if sut == "acc":  # some runs outlive the buildable rows' grid
+            assert grid_end < 2.5 + 60.0 and (ref["end_time"] > grid_end).sum() >= 1

@@ -113,3 +113,38 @@ def test_cutin_batch_equals_the_batch_of_built_scenarios() -> None:
         assert np.allclose(getattr(mine, name), getattr(ref, name), rtol=0, atol=1e-9), name
     with pytest.raises(BuilderError, match=r"params\[1\]"):
         cutin_batch(np.array([x[0], [0.0, 2.5, 0, 0, 0, 25.0, 2.0, 12.0]]))
+
+
+def test_buildable_batch_equals_cutin_batch_of_the_buildable_rows() -> None:
+    """One build for ``ok`` and the batch: array for array ``cutin_batch(x[rows])``, also
+    when a refused row has the longest script (its grid is then cut to the buildable
+    rows' one) and with an explicit duration."""
+    from sampler.scenario.batch import buildable_batch, cutin_batch
+
+    x = synthetic_parameter_table(60, seed=8)[list(PARAM_NAMES)].to_numpy(
+        dtype=np.float64).copy()
+    x[3, 0] = 0.0  # no lane change
+    x[4, 1], x[4, 0] = 30.0, 1e-4  # the longest script, never reaches the marking
+    x[5, 2] = np.nan
+    for duration in (None, 20.0):
+        tr, rows, batch = buildable_batch(x, lane_width=3.5, ego_length=4.2, ego_width=1.7,
+                                          cutter_length=5.0, cutter_width=2.0,
+                                          duration=duration)
+        ref_tr = cutin_tracks(x, lane_width=3.5, ego_length=4.2, cutter_length=5.0,
+                              duration=duration)
+        assert np.array_equal(tr.status, ref_tr.status)
+        assert rows.tolist() == np.flatnonzero(ref_tr.ok).tolist()
+        assert {3, 4, 5}.isdisjoint(rows.tolist()) and rows.size >= 40
+        ref = cutin_batch(x[rows], lane_width=3.5, ego_length=4.2, ego_width=1.7,
+                          cutter_length=5.0, cutter_width=2.0, duration=duration)
+        assert batch is not None
+        if duration is None:  # the refused row 4 made the tracks' grid longer
+            assert tr.t.shape[0] > ref.t.shape[0] + 100
+        for name in ("t", "ego_v0", "cx", "cy", "cpsi", "cv", "ca", "c_length", "c_width",
+                     "t_p", "t_cross", "t_end", "c_yaw_rate"):
+            a, b = getattr(batch, name), getattr(ref, name)
+            assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
+        for name in ("lane_width", "ego_length", "ego_width"):
+            assert getattr(batch, name) == getattr(ref, name)
+    none = buildable_batch(x[3:6])
+    assert none[1].size == 0 and none[2] is None
