@@ -18,6 +18,8 @@ from sampler.campaign.runners import (
     halfspace_probability,
     halfspace_runner,
     late_brake_runner,
+    union_probability,
+    union_runner,
 )
 from sampler.campaign.sut import SutRunner, SutRuns, sut_runner
 
@@ -37,4 +39,6 @@ __all__ = [
     "halfspace_runner",
     "late_brake_runner",
     "sut_runner",
+    "union_probability",
+    "union_runner",
 ]

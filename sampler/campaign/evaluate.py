@@ -561,19 +561,65 @@ def _ce_elite(previous: Sequence[ChunkResult], rho: float, min_hits: int
     return (z[sel], w[sel]), gamma, False
 
 
+#: share of the earlier pilot levels' mixtures in a cross-entropy chunk's proposal
+CE_HISTORY_SHARE = 0.1
+#: scale factor of the cross-entropy mixture's components
+CE_INFLATE = 1.2
+
+
+def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
+                 previous: Sequence[ChunkResult], envelopes: Sequence[str], alpha: float,
+                 rho: float, ce_min_hits: int, fits: dict[int, tuple[Any, float]]
+                 ) -> tuple[Proposal, bool, np.random.Generator]:
+    """Chunk k's cross-entropy proposal from the chunks before it, and whether it counts.
+
+    Besides the mixture fitted at this chunk's level it keeps, with share
+    ``CE_HISTORY_SHARE``, the equal mixture of the mixtures fitted at the earlier pilot
+    levels (``fits``: chunk index -> (its fitted mixture or None, its level), filled here;
+    a chunk replayed from storage is refitted from the chunks before it with its own
+    generator, which gives the same mixture bit for bit). The generator is returned as
+    the fit left it: the chunk's draws continue it."""
+    def build(j: int, history: list[Any]
+              ) -> tuple[Proposal, bool, float, np.random.Generator]:
+        rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(j)]))
+        elite, level, counted = _ce_elite(previous[:j], rho, ce_min_hits)
+        prop = build_ce_proposal(model, region=region, lane_width=region.lane_width,
+                                 elite=elite, level=level, rng=rng, envelopes=envelopes,
+                                 alpha=alpha, history=history,
+                                 history_share=CE_HISTORY_SHARE, inflate=CE_INFLATE)
+        return prop, counted, level, rng
+
+    def history(j: int) -> list[Any]:
+        out = []
+        for i in range(j):
+            if i not in fits and previous[i].counted and i > 0:
+                continue  # a final-stage chunk (level 0): not a pilot level
+            if i not in fits:
+                prop, _, level, _ = build(i, history(i))
+                fits[i] = (prop.fitted, level)
+            gm, level = fits[i]
+            if gm is not None and level > 0:
+                out.append(gm)
+        return out
+
+    prop, counted, level, rng = build(k, history(k))
+    fits[k] = (prop.fitted, level)
+    return prop, counted, rng
+
+
 def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runner,
                seed: int, previous: Sequence[ChunkResult], envelopes: Sequence[str],
                alpha: float, executor: Executor | None, part_size: int,
                min_fit_hits: int, adapt: str = "kernels", rho: float = 0.1,
-               ce_min_hits: int = 10) -> ChunkResult:
+               ce_min_hits: int = 10, ce_fits: dict[int, tuple[Any, float]] | None = None
+               ) -> ChunkResult:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
     counted = True
     proposal: Proposal
     if adapt == "ce":
-        elite, level, counted = _ce_elite(previous, rho, ce_min_hits)
-        proposal = build_ce_proposal(model, region=region, lane_width=region.lane_width,
-                                     elite=elite, level=level, rng=rng,
-                                     envelopes=envelopes, alpha=alpha)
+        proposal, counted, rng = _ce_proposal(k, model, region, seed, previous, envelopes,
+                                              alpha, rho, ce_min_hits,
+                                              {} if ce_fits is None else ce_fits)
     else:
         hits = _hits(previous)
         if hits is not None and hits[0].shape[0] < min_fit_hits:
@@ -691,6 +737,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
     zq = float(norm.ppf(0.5 + confidence / 2))
     pb, cv_b = _p_bounds(model, region)
     chunks: list[ChunkResult] = []
+    ce_fits: dict[int, tuple[Any, float]] = {}
     done = 0
     stop = "max_runs"
     while done < planned:
@@ -705,7 +752,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         else:
             chunk = _new_chunk(k, size, model, region, runner, seed, chunks, envelopes,
                                alpha, executor, part_size, min_fit_hits, adapt, float(rho),
-                               int(ce_min_hits))
+                               int(ce_min_hits), ce_fits)
             if on_chunk is not None:
                 on_chunk(chunk)
         chunks.append(chunk)

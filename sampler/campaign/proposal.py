@@ -106,6 +106,8 @@ class Proposal:
             raise ValueError("proposal: one positive share per part")
         self.parts = list(parts)
         self.shares = s / s.sum()
+        #: the cross-entropy mixture fitted for this proposal (``build_ce_proposal``)
+        self.fitted: GaussianMixture | None = None
         self._log_s = np.log(self.shares)
 
     def log_q(self, z: FloatArray) -> FloatArray:
@@ -440,8 +442,9 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
                       rng: np.random.Generator,
                       envelopes: Sequence[str] = DEFAULT_ENVELOPES, alpha: float = 0.1,
                       wide_share: float = 0.05, envelope_share: float = 0.1,
-                      kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3
-                      ) -> Proposal:
+                      kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3,
+                      history: Sequence[GaussianMixture] = (), history_share: float = 0.1,
+                      inflate: float = 1.2) -> Proposal:
     """The proposal of one chunk of an adaptive cross-entropy campaign: the model
     (``alpha``: weights stay below ``1 / alpha``), the wide part, the envelopes
     (``envelope_share`` together) and, with ``elite`` (z rows and their weights ``p/q``
@@ -458,16 +461,33 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     parts: list[MixturePart] = [_ModelPart("model", model), _wide_part(model, widen)]
     shares = [alpha, wide_share]
     env = _envelope_parts(model, envelopes, lane_width, region)
-    gm = fit_ce_mixture(elite[0], elite[1], rng, max_k=max_k, model=model)
+    gm = fit_ce_mixture(elite[0], elite[1], rng, max_k=max_k, model=model, inflate=inflate)
     rest = 1.0 - alpha - wide_share - (envelope_share if env else 0.0)
     if level <= 0:
         parts.append(_fitted_part(elite[0], elite[1], rng, model, 300, 1.3, 5.0))
         shares.append(kernel_share)
         rest -= kernel_share
+    if history:
+        parts.append(_MixturePart(f"ce:levels{len(history)}", _pooled_mixtures(history)))
+        shares.append(history_share)
+        rest -= history_share
     parts.append(_MixturePart(f"ce:gmm{gm.weights.size}@{level:.4g}x{elite[0].shape[0]}",
                               gm))
     shares.append(rest)
     if env:
         parts.extend(env)
         shares.extend([envelope_share / len(env)] * len(env))
-    return Proposal(parts, shares)
+    out = Proposal(parts, shares)
+    out.fitted = gm
+    return out
+
+
+def _pooled_mixtures(mixtures: Sequence[GaussianMixture]) -> GaussianMixture:
+    """The equal-share mixture of several mixtures of the same ``nu`` (one mixture)."""
+    nus = {m.nu for m in mixtures}
+    if len(nus) != 1:
+        raise ValueError("pooled mixtures: one nu for all")
+    n = len(mixtures)
+    return GaussianMixture(np.concatenate([m.weights / n for m in mixtures]),
+                           np.concatenate([m.means for m in mixtures]),
+                           np.concatenate([m.covs for m in mixtures]), nu=nus.pop())
