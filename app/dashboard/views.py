@@ -40,15 +40,25 @@ from app.dashboard.aggregate import (
     thin_scatter,
 )
 from app.dashboard.schemas import (
+    CatalogueCriticalityView,
+    ClassCount,
     CornerPoints,
     CornerView,
+    CriticalityScatter,
     DensityCurve,
+    Diagnostics,
+    DriverImpact,
     FitParameter,
     HistogramView,
     ModelFitView,
     PlotValues,
+    ProfilesView,
+    RiskAtPerception,
+    ScenarioView,
     ShiftParameter,
     ShiftView,
+    TopScenario,
+    TrackView,
 )
 from app.db import repository as repo
 from app.db.models import CatalogueRow
@@ -345,7 +355,7 @@ def catalogue_shift(ctx: ServiceContext, catalogue_id: str) -> ShiftView:
 
 
 # --------------------------------------------------------------------------- view 3
-def _diagnostics(chunks: Sequence[Any]) -> dict[str, Any]:
+def _diagnostics(chunks: Sequence[Any]) -> Diagnostics:
     """Sampler diagnostics over a catalogue's chunks (each chunk is sampled on its own)."""
     per = [jsonconv.decode(c.diagnostics or {}).get("sampler") or {} for c in chunks]
     methods = sorted({str(d.get("method")) for d in per if d.get("method")})
@@ -366,16 +376,16 @@ def _diagnostics(chunks: Sequence[Any]) -> dict[str, Any]:
     warnings: list[str] = []
     for d in per:
         warnings.extend(str(w) for w in d.get("warnings", []) or [])
-    return {
-        "chunks": len(per),
-        "methods": methods,
-        "acceptance_mean": float(np.mean(acc)) if acc else None,
-        "acceptance_min": float(np.min(acc_min)) if acc_min else None,
-        "tau_max": float(np.max(tau)) if tau else None,
-        "ess_total": float(np.sum(ess)) if ess else None,
-        "n_draws": float(np.sum(draws)) if draws else None,
-        "warnings": warnings[:20],
-    }
+    return Diagnostics(
+        chunks=len(per),
+        methods=methods,
+        acceptance_mean=float(np.mean(acc)) if acc else None,
+        acceptance_min=float(np.min(acc_min)) if acc_min else None,
+        tau_max=float(np.max(tau)) if tau else None,
+        ess_total=float(np.sum(ess)) if ess else None,
+        n_draws=float(np.sum(draws)) if draws else None,
+        warnings=warnings[:20],
+    )
 
 
 def _edges_from(session: Any, catalogue_id: str, cols: Sequence[Any],
@@ -390,28 +400,28 @@ def _edges_from(session: Any, catalogue_id: str, cols: Sequence[Any],
     return nice_edges(0.0, hi, CRITICALITY_BINS)
 
 
-def _scatter(session: Any, catalogue_id: str) -> dict[str, Any]:
+def _scatter(session: Any, catalogue_id: str) -> CriticalityScatter:
     """TTC against btn, thinned (the envelope keeps the highest btn of each cell)."""
     cols = queries.scatter_columns(session, catalogue_id)
     idx, ttc, btn, cls = cols["idx"], cols["ttc"], cols["btn"], cols["class"]
     keep = thin_scatter(ttc, btn, MAX_SCATTER)
     plottable = int((np.isfinite(ttc) & np.isfinite(btn)).sum())
-    return {
-        "index": [int(i) for i in idx[keep]],
-        "ttc": [float(v) for v in ttc[keep]],
-        "btn": [float(v) for v in btn[keep]],
-        "cls": [str(cls[i]) for i in keep],
-        "n_total": int(idx.size),
-        "n_plottable": plottable,
-        "n_shown": int(keep.size),
-        "n_ttc_inf": int(np.isinf(ttc).sum()),
-        "n_btn_inf": int(np.isinf(btn).sum()),
-        "selection": "all points" if keep.size == plottable
+    return CriticalityScatter(
+        index=[int(i) for i in idx[keep]],
+        ttc=[float(v) for v in ttc[keep]],
+        btn=[float(v) for v in btn[keep]],
+        cls=[str(cls[i]) for i in keep],
+        n_total=int(idx.size),
+        n_plottable=plottable,
+        n_shown=int(keep.size),
+        n_ttc_inf=int(np.isinf(ttc).sum()),
+        n_btn_inf=int(np.isinf(btn).sum()),
+        selection="all points" if keep.size == plottable
         else f"envelope grid + evenly spaced, at most {MAX_SCATTER} points",
-    }
+    )
 
 
-def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, Any]:
+def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> CatalogueCriticalityView:
     """A catalogue's criticality (class counts, the record's distributions, TTC against
     btn, the riskiest scenarios), P(A), n, seed and sampler diagnostics. Every histogram is
     counted in SQL."""
@@ -420,7 +430,7 @@ def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, A
     crow = _catalogue(ctx, catalogue_id)
     decel_max = CriticalitySettings().decel_max
 
-    def compute() -> dict[str, Any]:
+    def compute() -> CatalogueCriticalityView:
         info = catalogue_service.describe(ctx, catalogue_id)
         col = queries.column
         scored = col("class").is_not(None)
@@ -429,12 +439,12 @@ def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, A
             counts = repo.class_counts(s, catalogue_id)
             n_rows = sum(counts.values())
             n_scored = n_rows - counts.get("unscored", 0)
-            btn = queries.column_histogram(
+            btn = HistogramView(**queries.column_histogram(
                 s, catalogue_id, col("btn"), _edges_from(s, catalogue_id, [col("btn")]),
-                [scored])
-            ttr = queries.column_histogram(
+                [scored]))
+            ttr = HistogramView(**queries.column_histogram(
                 s, catalogue_id, col("ttr_true"),
-                _edges_from(s, catalogue_id, [col("ttr_true")]), [scored])
+                _edges_from(s, catalogue_id, [col("ttr_true")]), [scored]))
             speeds = [(d, col(f"{d}_impact_speed"), col(f"{d}_collision").is_(True))
                       for d in DRIVER_LABELS]
             hi = 1.0
@@ -442,49 +452,51 @@ def catalogue_criticality(ctx: ServiceContext, catalogue_id: str) -> dict[str, A
                 rng = queries.finite_range(s, catalogue_id, c, [hit])
                 hi = max(hi, rng[1]) if rng else hi
             speed_edges = nice_edges(0.0, hi, IMPACT_BINS)
-            impact = [{"driver": d, "label": DRIVER_LABELS[d],
-                       "histogram": queries.column_histogram(s, catalogue_id, c, speed_edges,
-                                                             [hit])}
+            impact = [DriverImpact(driver=d, label=DRIVER_LABELS[d],
+                                   histogram=HistogramView(**queries.column_histogram(
+                                       s, catalogue_id, c, speed_edges, [hit])))
                       for d, c, hit in speeds]
             risk_edges = np.asarray(RISK_LOG_EDGES)
-            r_dep_tp = {name: queries.column_histogram(s, catalogue_id, col(field),
-                                                       risk_edges, [scored])
-                        for name, field in (("scripted", "r_dep_tp"),
-                                            ("r157", "r_dep_tp_r157"))}
-            alarm = queries.column_histogram(
+            r_dep_tp = RiskAtPerception(**{
+                name: HistogramView(**queries.column_histogram(s, catalogue_id, col(field),
+                                                               risk_edges, [scored]))
+                for name, field in (("scripted", "r_dep_tp"), ("r157", "r_dep_tp_r157"))})
+            alarm = HistogramView(**queries.column_histogram(
                 s, catalogue_id, col("alarm_time"),
-                _edges_from(s, catalogue_id, [col("alarm_time")]), [scored])
+                _edges_from(s, catalogue_id, [col("alarm_time")]), [scored]))
             scatter = _scatter(s, catalogue_id)
             top = queries.top_rows(s, catalogue_id, TOP_N)
-        return {
-            "catalogue": catalogue_status_plain(info),
-            "n_rows": n_rows,
-            "n_scored": n_scored,
-            "diagnostics": diag,
-            "classes": [{"name": c, "label": CLASS_LABELS[c], "count": counts.get(c, 0)}
-                        for c in CLASSES],
-            "n_unscored": counts.get("unscored", 0),
-            "decel_max": decel_max,
-            "btn": btn,
-            "ttr_true": ttr,
-            "impact_speed": impact,
-            "r_dep_tp": r_dep_tp,
-            "alarm_time": alarm,
-            "scatter": scatter,
-            "top": top,
-        }
+        return CatalogueCriticalityView(
+            catalogue=catalogue_status_plain(info),
+            n_rows=n_rows,
+            n_scored=n_scored,
+            diagnostics=diag,
+            classes=[ClassCount(name=c, label=CLASS_LABELS[c], count=counts.get(c, 0))
+                     for c in CLASSES],
+            n_unscored=counts.get("unscored", 0),
+            decel_max=decel_max,
+            btn=btn,
+            ttr_true=ttr,
+            impact_speed=impact,
+            r_dep_tp=r_dep_tp,
+            alarm_time=alarm,
+            scatter=scatter,
+            top=[TopScenario.model_validate(row) for row in top],
+        )
 
-    result: dict[str, Any] = _views(ctx).get(_key(ctx, "criticality", *_version(crow)),
-                                             compute)
+    result: CatalogueCriticalityView = _views(ctx).get(
+        _key(ctx, "criticality", *_version(crow)), compute)
     return result
 
 
 # --------------------------------------------------------------------------- view 4
-def _track(data: dict[str, Any]) -> dict[str, Any]:
-    return {k: data.get(k) for k in ("id", "length", "width", "x", "y", "psi", "v")}
+def _track(data: dict[str, Any]) -> TrackView:
+    """A track of a scenario's JSON form (``ConcreteScenario.to_dict``) for the page."""
+    return TrackView(id=data.get("id"), length=data.get("length"), width=data.get("width"),
+                     x=data.get("x"), y=data.get("y"), psi=data.get("psi"), v=data.get("v"))
 
 
-def _profiles(sc: Any) -> tuple[dict[str, Any] | None, str | None]:
+def _profiles(sc: Any) -> tuple[ProfilesView | None, str | None]:
     """Wagner's r(t) for the scripted and the R157 driver's ego and the R157 ego's track
     (``riskcore.criticality.criticality_profiles``, computed for this one scenario), as
     plot data; or None and why not."""
@@ -495,11 +507,10 @@ def _profiles(sc: Any) -> tuple[dict[str, Any] | None, str | None]:
         prof = criticality_profiles(sc)
     except RiskcoreError as exc:
         return None, str(exc)
-    out: dict[str, Any] = jsonconv.plot_values(prof)
-    return out, None
+    return ProfilesView.model_validate(jsonconv.plot_values(prof)), None
 
 
-def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, Any]:
+def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> ScenarioView:
     """One scenario of a catalogue: trajectories (top-down view, with the R157 driver's
     reacted ego), its stored criticality record, and the risk, TTC, WTTC and THW series
     over time for the scripted ego and r(t) for the R157 ego (computed with riskcore on
@@ -515,7 +526,7 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
                        field="path.index")
     row = found[0]
 
-    def compute() -> dict[str, Any]:
+    def compute() -> ScenarioView:
         sc, source = catalogue_service.stored_scenario(ctx, crow, row)
         if sc is None:
             raise Conflict(f"scenario {index} of catalogue {crow.id} has no trajectories: "
@@ -528,23 +539,22 @@ def scenario(ctx: ServiceContext, catalogue_id: str, index: int) -> dict[str, An
         if profiles is not None:
             # the R157 driver's ego is the same car as the scripted one: its size, so the
             # page can draw its box (issue 25: null sizes made view 4 skip it)
-            profiles["r157_ego"].update(length=ego["length"], width=ego["width"])
-        return {
-            "catalogue": crow.id,
-            "index": row.idx,
-            "params": row.params,
-            "trajectory_source": source,
-            "lane_width": prov.get("lane_width"),
-            "t": data["t"],
-            "ego": ego,
-            "objects": [_track(o) for o in data.get("objects", [])],
-            "record": catalogue_service.record_of(row),
-            "summary": jsonconv.encode(risk["summary"]),
-            "series": risk["series"],
-            "profiles": profiles,
-            "profiles_error": profiles_error,
-        }
+            profiles.r157_ego.length, profiles.r157_ego.width = ego.length, ego.width
+        return ScenarioView(
+            catalogue=crow.id,
+            index=row.idx,
+            params=row.params,
+            trajectory_source=source,
+            lane_width=prov.get("lane_width"),
+            t=data["t"],
+            ego=ego,
+            objects=[_track(o) for o in data.get("objects", [])],
+            record=catalogue_service.record_of(row),
+            summary=jsonconv.encode(risk["summary"]),
+            series=risk["series"],
+            profiles=profiles,
+            profiles_error=profiles_error,
+        )
 
-    result: dict[str, Any] = _views(ctx).get(_key(ctx, "scenario", crow.id, index),
-                                        compute)
+    result: ScenarioView = _views(ctx).get(_key(ctx, "scenario", crow.id, index), compute)
     return result

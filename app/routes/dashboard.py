@@ -161,8 +161,7 @@ def catalogue_shift(catalogue_id: str, ctx: ContextDep) -> ShiftView:
             "ttr_true, impact speeds, r_dep at t_p and alarm time (counted in SQL), TTC "
             "against btn (thinned), the riskiest scenarios, P(A), sampler diagnostics")
 def catalogue_criticality(catalogue_id: str, ctx: ContextDep) -> CatalogueCriticalityView:
-    return CatalogueCriticalityView.model_validate(
-        views.catalogue_criticality(ctx, catalogue_id))
+    return views.catalogue_criticality(ctx, catalogue_id)
 
 
 @router.get("/api/catalogues/{catalogue_id}/scenarios/{index}", response_model=ScenarioView,
@@ -172,7 +171,7 @@ def scenario(catalogue_id: str, index: Annotated[int, PathParam(ge=0, le=INDEX_M
              ctx: ContextDep) -> ScenarioView:
     if index < 0:
         raise NotFound(f"scenario index must be >= 0, got {index}", field="path.index")
-    return ScenarioView.model_validate(views.scenario(ctx, catalogue_id, index))
+    return views.scenario(ctx, catalogue_id, index)
 
 
 @router.get("/api/evaluations/{evaluation_id}", response_model=EvaluationOverview,

@@ -139,3 +139,78 @@ def test_evaluation_status_is_typed_and_answers_as_before(client: Any,
         stored = s.get(EvaluationRow, evaluation).summary
     assert body["summary"] == jsonconv.encode(jsonconv.decode(stored))
     assert body["summary"]["runs"] == 200
+
+
+#: the dashboard's view 3 (a catalogue's criticality), its fields in their order
+CRITICALITY_VIEW_FIELDS = [
+    "catalogue", "n_rows", "n_scored", "diagnostics", "classes", "n_unscored", "decel_max",
+    "btn", "ttr_true", "impact_speed", "r_dep_tp", "alarm_time", "scatter", "top"]
+HISTOGRAM_FIELDS = ["edges", "counts", "density", "n", "n_finite", "below", "above",
+                    "n_nonfinite", "n_inf", "n_null"]
+
+
+def test_dashboard_view_3_is_typed_and_answers_as_before(client: Any, catalogue: str) -> None:
+    from app.dashboard import views
+    from app.dashboard.schemas import CatalogueCriticalityView
+    from app.services import catalogues
+    from app.statuses import catalogue_status_plain
+
+    r = client.get(f"/dashboard/api/catalogues/{catalogue}/criticality")
+    body = r.json()
+    assert list(body) == CRITICALITY_VIEW_FIELDS
+    assert CatalogueCriticalityView.model_validate_json(r.text).model_dump_json() == r.text
+    view = views.catalogue_criticality(_ctx(client), catalogue)
+    assert isinstance(view, CatalogueCriticalityView)
+    assert view.model_dump_json() == r.text
+    for name in ("btn", "ttr_true", "alarm_time"):
+        assert list(body[name]) == HISTOGRAM_FIELDS, name
+        assert body[name]["n"] == body["n_scored"], name
+    assert [d["driver"] for d in body["impact_speed"]] == ["none", "r157_cc", "rss"]
+    assert list(body["r_dep_tp"]) == ["scripted", "r157"]
+    assert list(body["diagnostics"]) == ["chunks", "methods", "acceptance_mean",
+                                         "acceptance_min", "tau_max", "ess_total", "n_draws",
+                                         "warnings"]
+    assert body["diagnostics"]["chunks"] == 2
+    # values from elsewhere: the row count, the status (its plain form), the pages
+    assert body["n_rows"] == 10 == body["n_scored"] + body["n_unscored"]
+    status = catalogue_status_plain(catalogues.describe(_ctx(client), catalogue))
+    assert body["catalogue"] == json.loads(json.dumps(status))
+    assert list(body["catalogue"]) == CATALOGUE_PLAIN_FIELDS
+    assert {c["name"]: c["count"] for c in body["classes"]} == status["classes"]
+    page = client.get(f"/catalogues/{catalogue}/scenarios?limit=10&order_by=btn").json()
+    assert [t["index"] for t in body["top"]] == [s["index"] for s in page["scenarios"]]
+    assert [t["class"] for t in body["top"]] == [s["class"] for s in page["scenarios"]]
+    assert sorted(body["scatter"]["index"]) == sorted(s["index"] for s in page["scenarios"])
+
+
+#: the dashboard's view 4 (one scenario), its fields in their order
+SCENARIO_VIEW_FIELDS = [
+    "catalogue", "index", "params", "trajectory_source", "lane_width", "t", "ego", "objects",
+    "record", "summary", "series", "profiles", "profiles_error"]
+TRACK_FIELDS = ["id", "length", "width", "x", "y", "psi", "v"]
+
+
+def test_dashboard_view_4_is_typed_and_answers_as_before(client: Any, catalogue: str) -> None:
+    from app.dashboard import views
+    from app.dashboard.schemas import ScenarioView
+
+    r = client.get(f"/dashboard/api/catalogues/{catalogue}/scenarios/3")
+    body = r.json()
+    assert list(body) == SCENARIO_VIEW_FIELDS
+    assert ScenarioView.model_validate_json(r.text).model_dump_json() == r.text
+    view = views.scenario(_ctx(client), catalogue, 3)
+    assert isinstance(view, ScenarioView)
+    assert view.model_dump_json() == r.text
+    assert list(body["ego"]) == TRACK_FIELDS
+    assert all(list(o) == TRACK_FIELDS for o in body["objects"]) and body["objects"]
+    assert len(body["ego"]["x"]) == len(body["t"]) == len(body["objects"][0]["v"])
+    # the stored record and parameters, as the scenario page gives them
+    page = client.get(f"/catalogues/{catalogue}/scenarios?order_by=index&offset=3&limit=1")
+    record = page.json()["scenarios"][0]
+    assert body["index"] == record["index"] == 3
+    assert body["record"] == record and body["params"] == record["params"]
+    # the R157 driver's ego is the scripted ego's car: its size
+    assert body["profiles"] is not None and body["profiles_error"] is None
+    r157 = body["profiles"]["r157_ego"]
+    assert (r157["length"], r157["width"]) == (body["ego"]["length"], body["ego"]["width"])
+    assert isinstance(r157["length"], float) and r157["length"] > 0
