@@ -20,10 +20,11 @@ What :func:`simulate_esmini` does, per cut-in:
    the SUT's :class:`riskcore.sut.Observations` from them as scengen's simulator does
    (box centres, the ego lane's frame, perception delay, sensor range, update period),
    asks the SUT (every ``settings.update_period``) and moves the ego.
-3. The ego's longitudinal dynamics are scengen's vehicle model, written here again
-   (:func:`ego_advance`: the command clipped to ``[-a_brake_max, a_accel_max]``, reached
-   at the jerk limit, no reversing; a SUT's ``command_onset`` honoured). esmini has no
-   longitudinal dynamics for an externally driven object: it moves the ego along its lane
+3. The ego's longitudinal dynamics are scengen's vehicle model, the simulator's own
+   kernel (:func:`riskcore.sut.ego_advance_with_onset`: the command clipped to
+   ``[-a_brake_max, a_accel_max]``, reached at the jerk limit, no reversing; a SUT's
+   ``command_onset`` honoured). esmini has no longitudinal dynamics for an externally
+   driven object: it moves the ego along its lane
    by the speed reported for the step (``SE_ReportObjectSpeed``, applied over the next
    ``SE_StepDT``), so the adapter reports the step's mean speed (distance covered / dt)
    and esmini's ego lands where the vehicle model's does. The ego's own speed and
@@ -31,11 +32,11 @@ What :func:`simulate_esmini` does, per cut-in:
 4. Contact is esmini's collision detection (``SE_CollisionDetection``,
    ``SE_GetObjectNumberOfCollisions``) at the step's end; its moment and the impact speed
    are refined inside the step by bisection on the states interpolated between the two
-   steps (the rotated-box test below). The margins (smallest gap, TTC, time headway from
+   steps (the rotated-box test, :func:`boxes_touch`). The margins (smallest gap, TTC, time headway from
    the perception moment on), the regulation's intrusion moment (``must_avoid``), the
    largest deceleration and jerk and the braking moment are those of
-   :data:`riskcore.sut.RUN_FIELDS`, computed from esmini's states with the geometry
-   below (written here again, independent of riskcore's kernels).
+   :data:`riskcore.sut.RUN_FIELDS`, computed from esmini's states with the simulator's
+   box geometry (:func:`riskcore.sut.box_clearance`, :func:`riskcore.sut.band_range`).
 5. A run ends at contact; once the cutter's script is over and the conflict resolved,
    with scengen's rule on esmini's states (``settled``, ``left_behind``, ``no_conflict``:
    :mod:`riskcore.sut.simulate`), so that both simulators measure the same window; when
@@ -76,6 +77,9 @@ from riskcore.sut import (
     RunBatch,
     SimSettings,
     SystemUnderTest,
+    band_range,
+    box_clearance,
+    ego_advance_with_onset,
     must_avoid,
 )
 
@@ -88,9 +92,7 @@ __all__ = [
     "EsminiLibrary",
     "EsminiResult",
     "adapter_document",
-    "band_range",
     "boxes_touch",
-    "ego_advance",
     "esmini_world",
     "find_library",
     "simulate_esmini",
@@ -109,7 +111,7 @@ SETTLE_ACCEL = 0.1
 #: the cutter drives straight when |sin(heading)| is below this (esmini's headings come
 #: from polyline segments: exact 0 on the straight tail up to rounding)
 STRAIGHT_SIN = 1e-6
-_BISECT = 52
+_BISECT = 52  # bisection steps for the contact moment inside a step
 #: the profiles' arrays: the ego's x (from its start), v, a; the cutter's centre (in the
 #: ego's start frame), heading, speed, acceleration as esmini has them
 PROFILE_KEYS = ("x", "v", "a", "cx", "cy", "cpsi", "cv", "ca")
@@ -273,119 +275,24 @@ class EsminiLibrary:
         self.lib.SE_Close()
 
 
-# ------------------------------------------------------------------ the ego's vehicle model
-
-def _constant_jerk(x: float, v: float, a: float, jj: float,
-                   tau: float) -> tuple[float, float, float, bool]:
-    """(x, v, a) after tau s of constant jerk jj; stops (v = 0, a = 0) where the speed
-    falls to 0 first. Returns (x, v, a, stopped)."""
-    if tau <= 0.0:
-        return x, v, a, False
-    # the speed v + a t + jj t^2 / 2: its first downward zero crossing in (0, tau]
-    stop = math.inf
-    if v <= 0.0 and (a < 0.0 or (a == 0.0 and jj < 0.0)):
-        stop = 0.0
-    elif jj == 0.0:
-        if a < 0.0:
-            stop = -v / a
-    else:
-        disc = a * a - 2.0 * jj * v
-        if disc >= 0.0:
-            # the roots of jj/2 t^2 + a t + v in the cancellation-free form
-            q = -0.5 * (a + math.copysign(math.sqrt(disc), a))
-            roots = [q / (0.5 * jj)] + ([v / q] if q != 0.0 else [])
-            for root in sorted(roots):
-                slope = a + jj * root
-                if root >= 0.0 and (slope < 0.0 or (slope == 0.0 and jj < 0.0)):
-                    stop = root
-                    break
-    if stop > tau and v + a * tau + jj * tau * tau / 2.0 < 0.0:
-        # rounding (e.g. subnormal inputs) hid the root: the speed starts >= 0 and ends
-        # below 0, so it crosses 0 once in between; bisect for it
-        lo, hi = 0.0, tau
-        for _ in range(_BISECT):
-            mid = 0.5 * (lo + hi)
-            if v + a * mid + jj * mid * mid / 2.0 < 0.0:
-                hi = mid
-            else:
-                lo = mid
-        stop = lo
-    if stop <= tau:
-        t = stop
-        return x + v * t + a * t * t / 2.0 + jj * t ** 3 / 6.0, 0.0, 0.0, True
-    return (x + v * tau + a * tau * tau / 2.0 + jj * tau ** 3 / 6.0,
-            max(v + a * tau + jj * tau * tau / 2.0, 0.0), a + jj * tau, False)
-
-
-def ego_advance(x: float, v: float, a: float, u: float, jerk: float,
-                tau: float) -> tuple[float, float, float, bool]:
-    """The ego tau s after (x, v, a) under the command u (already clipped): its
-    acceleration moves towards u at ``jerk`` m/s³, then stays; it never reverses (at
-    v = 0 it stays with a = 0 until a positive command). Returns (x, v, a, stopped)."""
-    if v <= 0.0 and u <= 0.0 and a <= 0.0:
-        return x, 0.0, 0.0, a != 0.0
-    if u == a:
-        return _constant_jerk(x, v, a, 0.0, tau)
-    ramp = abs(u - a) / jerk
-    jj = math.copysign(jerk, u - a)
-    if ramp >= tau:
-        return _constant_jerk(x, v, a, jj, tau)
-    x1, v1, a1, stopped = _constant_jerk(x, v, a, jj, ramp)
-    if stopped:
-        return x1, v1, a1, True
-    return _constant_jerk(x1, v1, u, 0.0, tau - ramp)
-
-
-def _ego_two(x: float, v: float, a: float, u_old: float, u: float, onset: float,
-             jerk: float, tau: float) -> tuple[float, float, float, bool]:
-    """:func:`ego_advance` with the command ``u_old`` until ``onset`` s, then ``u``."""
-    if onset <= 0.0:
-        return ego_advance(x, v, a, u, jerk, tau)
-    if tau <= onset:
-        return ego_advance(x, v, a, u_old, jerk, tau)
-    x1, v1, a1, s1 = ego_advance(x, v, a, u_old, jerk, onset)
-    x2, v2, a2, s2 = ego_advance(x1, v1, a1, u, jerk, tau - onset)
-    return x2, v2, a2, s1 or s2
-
-
 # ---------------------------------------------------------------------------- geometry
-
-def band_range(x: float, y: float, h: float, half_length: float, half_width: float,
-               band: float) -> tuple[float, float] | None:
-    """The x-range of a box (centre x, y, heading h) inside the band ``|y| <= band``:
-    the polygon clipped to the band, projected on x. None when the box misses the band."""
-    c, s = math.cos(h), math.sin(h)
-    corners = [(x + i * half_length * c - j * half_width * s,
-                y + i * half_length * s + j * half_width * c)
-               for i, j in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
-    xs = [px for px, py in corners if abs(py) <= band]
-    for k in range(4):
-        (x0, y0), (x1, y1) = corners[k], corners[(k + 1) % 4]
-        for edge in (band, -band):
-            if (y0 - edge) * (y1 - edge) < 0.0:  # the side crosses the band's edge
-                xs.append(x0 + (edge - y0) / (y1 - y0) * (x1 - x0))
-    if not xs:
-        return None
-    return min(xs), max(xs)
-
 
 def _clearance(cut: VehicleState, ego_x: float, ego_y: float, ehl: float, ehw: float,
                chl: float, chw: float) -> float | None:
     """The free distance ahead of the ego's front to the cutter's box inside the ego's
     band (< 0: the boxes overlap), or None when the box is not in the band beside or
-    ahead of the ego (scengen's ``min_gap`` counts only those)."""
-    rng = band_range(cut.x - ego_x, cut.y - ego_y, cut.h, chl, chw, ehw)
-    if rng is None or not rng[1] > -ehl:
-        return None
-    return rng[0] - ehl
+    ahead of the ego (scengen's ``min_gap`` counts only those): the simulator's
+    :func:`riskcore.sut.box_clearance` on the states relative to the ego."""
+    near, gap = box_clearance(cut.x - ego_x, cut.y - ego_y, cut.h, 0.0, ehl, ehw, chl, chw)
+    return float(gap) if near else None
 
 
 def boxes_touch(cut: VehicleState, ego_x: float, ego_y: float, ehl: float, ehw: float,
                 chl: float, chw: float) -> bool:
     """The cutter's box overlaps the ego's (heading 0, centre ego_x, ego_y): its part
     inside the ego's band reaches between the ego's rear and front."""
-    rng = band_range(cut.x - ego_x, cut.y - ego_y, cut.h, chl, chw, ehw)
-    return rng is not None and rng[0] < ehl and rng[1] > -ehl
+    gap = _clearance(cut, ego_x, ego_y, ehl, ehw, chl, chw)
+    return gap is not None and gap < 0.0
 
 
 def _rel(cut: VehicleState, x0: float, y0: float) -> tuple[float, ...]:
@@ -671,6 +578,7 @@ def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnde
     """Run i in esmini (module docstring); returns its record, the ego's largest drift
     from the vehicle model, the flag/box disagreements, the steps and the profile."""
     dt = s.dt
+    jerk = s.jerk_max
     upd = s.update_steps
     delay = s.delay_steps
     n_steps = math.ceil(s.t_max / dt - 1e-9)
@@ -738,7 +646,7 @@ def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnde
                     run.t_brake = t0
                 elif u <= -s.brake_threshold:
                     run.t_brake = t0 + onset
-            x1, v1, a1, stopped = _ego_two(x, v, a, u_old, u, onset, s.jerk_max, dt)
+            x1, v1, a1, stopped = ego_advance_with_onset(x, v, a, u_old, u, onset, jerk, dt)
             lib.report_speed(ego_id, (x1 - x) / dt)
             if not lib.step(dt):
                 run.end = "esmini_stop"
@@ -759,7 +667,7 @@ def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnde
                 xs = ego_x - x1  # esmini's ego against the model's (drift)
                 for _ in range(_BISECT):
                     mid = 0.5 * (lo + hi)
-                    xm = _ego_two(x, v, a, u_old, u, onset, s.jerk_max, mid)[0] + xs
+                    xm = ego_advance_with_onset(x, v, a, u_old, u, onset, jerk, mid)[0] + xs
                     if boxes_touch(_lerp_state(prev_cut, cut, mid / dt), xm, ey, ehl, ehw,
                                    chl, chw):
                         hi = mid
@@ -767,7 +675,7 @@ def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnde
                         lo = mid
                 if not touch:
                     hi = dt
-                _, vc, ac, _ = _ego_two(x, v, a, u_old, u, onset, s.jerk_max, hi)
+                _, vc, ac, _ = ego_advance_with_onset(x, v, a, u_old, u, onset, jerk, hi)
                 q = _lerp_state(prev_cut, cut, hi / dt)
                 run.collided = True
                 run.t_contact = t0 + hi
@@ -802,11 +710,11 @@ def _one(lib: EsminiLibrary, xosc: Path, names: tuple[str, str], sut: SystemUnde
             end = ""
             if t1 >= t_end - 1e-9:
                 straight = abs(sn) < STRAIGHT_SIN
-                rng = band_range(cut.x - ego_x, cut.y - ey, cut.h, chl, chw, ehw)
+                meets, _, _ = band_range(cut.x - ego_x, cut.y - ey, cut.h, chl, chw, ehw)
                 behind = cut.x + chl < ego_x - ehl
                 if behind and cut.v * c <= v:
                     end = "left_behind"
-                elif not near and straight and not behind and rng is None:
+                elif not near and straight and not behind and not meets:
                     end = "no_conflict"
                 elif near and straight and clos <= 0.0 and a <= SETTLE_ACCEL:
                     end = "settled"

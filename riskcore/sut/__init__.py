@@ -10,11 +10,16 @@ vectorised over N cut-ins, built-in SUTs and the regulation's verdict (docs/syst
 - :mod:`~riskcore.sut.runs` — :class:`RunBatch`, :data:`RUN_FIELDS`,
   :func:`compare_careful`;
 - :mod:`~riskcore.sut.suts` — :data:`BUILTIN_SUTS`, :func:`make_sut`;
-- :mod:`~riskcore.sut.regulation` — :func:`must_avoid` (UN R157 5.2.5.2 / EU 2022/1426).
+- :mod:`~riskcore.sut.regulation` — :func:`must_avoid` (UN R157 5.2.5.2 / EU 2022/1426);
+- :mod:`~riskcore.sut.kernels` — the compiled kernels; public of them, for a simulator
+  that steps the ego itself (app.esmini): the ego's vehicle model :func:`ego_advance`,
+  :func:`ego_advance_with_onset` and the box geometry :func:`band_range`,
+  :func:`box_clearance`.
 """
 
 from riskcore.sut.batch import CutInBatch, Observation, Observations
 from riskcore.sut.errors import SutError
+from riskcore.sut.kernels import band_range, box_clearance, ego_advance, ego_advance_with_onset
 from riskcore.sut.protocol import PerRunSUT, SystemUnderTest, per_run
 from riskcore.sut.regulation import MUST_AVOID_VARIANTS, must_avoid, must_avoid_ttc
 from riskcore.sut.runs import RUN_FIELDS, RunBatch, RunField, compare_careful
@@ -36,7 +41,11 @@ __all__ = [
     "SutError",
     "SutSpec",
     "SystemUnderTest",
+    "band_range",
+    "box_clearance",
     "compare_careful",
+    "ego_advance",
+    "ego_advance_with_onset",
     "make_sut",
     "must_avoid",
     "must_avoid_ttc",

@@ -1,4 +1,7 @@
-"""Compiled (numba) kernels of the closed-loop simulator. Private: use :func:`simulate`.
+"""Compiled (numba) kernels of the closed-loop simulator: use :func:`simulate`. The vehicle
+model and the box geometry are also public on ``riskcore.sut`` (:func:`ego_advance`,
+:func:`ego_advance_with_onset`, :func:`band_range`, :func:`box_clearance`): the esmini
+adapter (app.esmini) moves its ego and tests contact with them.
 
 Road frame = the ego's frame: the ego drives along +x at y = 0, heading 0; its box is
 ``[x - L_e/2, x + L_e/2] x [-W_e/2, W_e/2]``. The cutter's box (centre, heading) is
@@ -57,26 +60,38 @@ def _piece(x: float, v: float, a: float, jj: float,
     if T <= 0.0:
         return x, v, a, False
     v_end = v + a * T + 0.5 * jj * T * T
-    # the first root of v + a tau + jj tau^2 / 2 in (0, T], if v goes negative there
-    t_stop = -1.0
-    if jj == 0.0:
-        if a < 0.0 and v + a * T < 0.0:
+    # the speed v + a tau + jj tau^2 / 2: its first downward zero crossing in [0, T]
+    t_stop = np.inf
+    if v <= 0.0 and (a < 0.0 or (a == 0.0 and jj < 0.0)):
+        t_stop = 0.0
+    elif jj == 0.0:
+        if a < 0.0:
             t_stop = -v / a
     else:
         disc = a * a - 2.0 * jj * v
         if disc >= 0.0:
-            sq = math.sqrt(disc)
-            r1 = (-a - sq) / jj
-            r2 = (-a + sq) / jj
-            lo = min(r1, r2)
-            hi = max(r1, r2)
-            if 0.0 <= lo <= T:
-                t_stop = lo
-            elif 0.0 <= hi <= T and v_end < 0.0:
-                t_stop = hi
-        if t_stop < 0.0 and v_end < 0.0:
-            t_stop = T
-    if t_stop >= 0.0 and (v > 0.0 or a < 0.0):
+            # the roots in the cancellation-free form: q / (jj / 2) and v / q
+            q = -0.5 * (a + math.copysign(math.sqrt(disc), a))
+            r1 = q / (0.5 * jj)
+            r2 = v / q if q != 0.0 else np.inf
+            for root in (min(r1, r2), max(r1, r2)):
+                slope = a + jj * root
+                if root >= 0.0 and (slope < 0.0 or (slope == 0.0 and jj < 0.0)):
+                    t_stop = root
+                    break
+    if t_stop > T and v_end < 0.0:
+        # rounding (e.g. a subnormal speed or acceleration) hid the root: the speed starts
+        # >= 0 and ends below 0, so it crosses 0 in between; bisect for it
+        lo = 0.0
+        hi = T
+        for _ in range(_BISECT):
+            mid = 0.5 * (lo + hi)
+            if v + a * mid + 0.5 * jj * mid * mid < 0.0:
+                hi = mid
+            else:
+                lo = mid
+        t_stop = lo
+    if t_stop <= T:
         tt = t_stop
         xs = x + v * tt + 0.5 * a * tt * tt + jj * tt * tt * tt / 6.0
         return xs, 0.0, 0.0, True
@@ -105,8 +120,9 @@ def ego_advance(x: float, v: float, a: float, u: float, j: float,
 
 
 @njit(cache=True)
-def ego_two(x: float, v: float, a: float, u_old: float, u: float, d: float, j: float,
-            tau: float) -> tuple[float, float, float, bool]:  # pragma: no cover - jit
+def ego_advance_with_onset(x: float, v: float, a: float, u_old: float, u: float, d: float,
+                           j: float, tau: float
+                           ) -> tuple[float, float, float, bool]:  # pragma: no cover - jit
     """:func:`ego_advance` when the command changes from ``u_old`` to ``u`` ``d`` s into
     the step (``d = 0``: ``u`` throughout)."""
     if d <= 0.0:
@@ -144,10 +160,21 @@ def cutter_at(cx: FloatArray, cy: FloatArray, cpsi: FloatArray, cv: FloatArray,
 
 
 @njit(cache=True)
-def clearance(x: float, y: float, p: float, xe: float, ehl: float, ehw: float, chl: float,
-              chw: float) -> tuple[bool, float]:  # pragma: no cover - jit
-    """(the cutter's box meets the ego's band beside or ahead of the ego, the free distance
-    ahead of the ego's front inside its band; < 0: the boxes overlap)."""
+def band_range(x: float, y: float, p: float, hl: float, hw: float,
+               band: float) -> tuple[bool, float, float]:  # pragma: no cover - jit
+    """The x-range of a box (centre x, y, heading p, half length hl, half width hw) inside
+    the band ``|y| <= band``: (it meets the band, x_lo, x_hi); the criticality record's
+    geometry (module docstring)."""
+    return _ck.band_range(x, y, math.cos(p), math.sin(p), hl, hw, band)
+
+
+@njit(cache=True)
+def box_clearance(x: float, y: float, p: float, xe: float, ehl: float, ehw: float,
+                  chl: float, chw: float) -> tuple[bool, float]:  # pragma: no cover - jit
+    """The cutter's box (centre x, y, heading p, half sizes chl, chw) against the ego's
+    (centre xe, 0, heading 0, half sizes ehl, ehw): (it meets the ego's band beside or
+    ahead of the ego, the free distance ahead of the ego's front inside its band; < 0: the
+    boxes overlap)."""
     c = math.cos(p)
     sn = math.sin(p)
     if _ck.lateral_clear(y, c, sn, chl, chw, ehw):
@@ -164,9 +191,9 @@ def _overlap_at(tau: float, t0: float, x: float, v: float, a: float, u_old: floa
                 cx: FloatArray, cy: FloatArray, cpsi: FloatArray, cv: FloatArray,
                 ca: FloatArray, i: int, h: float, ehl: float, ehw: float, chl: float,
                 chw: float) -> bool:  # pragma: no cover - jit
-    xe, _, _, _ = ego_two(x, v, a, u_old, u, d, j, tau)
+    xe, _, _, _ = ego_advance_with_onset(x, v, a, u_old, u, d, j, tau)
     px, py, pp, _, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t0 + tau)
-    near, gap = clearance(px, py, pp, xe, ehl, ehw, chl, chw)
+    near, gap = box_clearance(px, py, pp, xe, ehl, ehw, chl, chw)
     return near and gap < 0.0
 
 
@@ -195,7 +222,7 @@ def new_outcomes(n: int) -> FloatArray:
 @njit(cache=True)
 def _clearance_cs(x: float, y: float, c: float, sn: float, xe: float, ehl: float,
                   ehw: float, chl: float, chw: float) -> tuple[bool, float]:  # pragma: no cover
-    """:func:`clearance` with the heading's cos and sin given."""
+    """:func:`box_clearance` with the heading's cos and sin given."""
     if _ck.lateral_clear(y, c, sn, chl, chw, ehw):
         return False, np.nan
     meets, lo, hi = _ck.band_range(x, y, c, sn, chl, chw, ehw)
@@ -265,7 +292,7 @@ def step_one(i: int, k: int, uo: float, ui: float, d: float, x: FloatArray, v: F
     xi = x[i]
     vi = v[i]
     ai = a[i]
-    x1, v1, a1, stopped = ego_two(xi, vi, ai, uo, ui, d, j, dt)
+    x1, v1, a1, stopped = ego_advance_with_onset(xi, vi, ai, uo, ui, d, j, dt)
     px, py, pp, pv, pa = cutter_at(cx, cy, cpsi, cv, ca, i, h, t1)
     c = math.cos(pp)
     sn = math.sin(pp)
@@ -280,7 +307,7 @@ def step_one(i: int, k: int, uo: float, ui: float, d: float, x: FloatArray, v: F
                 hi = mid
             else:
                 lo = mid
-        xc, vc_e, ac, _ = ego_two(xi, vi, ai, uo, ui, d, j, hi)
+        xc, vc_e, ac, _ = ego_advance_with_onset(xi, vi, ai, uo, ui, d, j, hi)
         _, _, qp, qv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t0 + hi)
         collided[i] = True
         out[i, T_CONTACT] = t0 + hi
@@ -602,7 +629,7 @@ def run_builtin(kind: int, q: FloatArray, v_des: FloatArray, upd: int, n_steps: 
                         hi = mid
                     else:
                         lo = mid
-                xc, vc_e, ac, _ = ego_two(xi, vi, ai, u, u, 0.0, j, hi)
+                xc, vc_e, ac, _ = ego_advance_with_onset(xi, vi, ai, u, u, 0.0, j, hi)
                 _, _, qp, qv, _ = cutter_at(cx, cy, cpsi, cv, ca, i, h, t0 + hi)
                 collided[i] = True
                 out[i, T_CONTACT] = t0 + hi
