@@ -32,8 +32,9 @@ What :func:`simulate_esmini` does, per cut-in:
 4. Contact is esmini's collision detection (``SE_CollisionDetection``,
    ``SE_GetObjectNumberOfCollisions``) at the step's end; its moment and the impact speed
    are refined inside the step by bisection on the states interpolated between the two
-   steps (the rotated-box test, :func:`boxes_touch`). The margins (smallest gap, TTC, time headway from
-   the perception moment on), the regulation's intrusion moment (``must_avoid``), the
+   steps (the rotated-box test, :func:`boxes_touch`). The margins (smallest gap, TTC,
+   time headway from the perception moment on), the regulation's intrusion moment
+   (``must_avoid``), the
    largest deceleration and jerk and the braking moment are those of
    :data:`riskcore.sut.RUN_FIELDS`, computed from esmini's states with the simulator's
    box geometry (:func:`riskcore.sut.box_clearance`, :func:`riskcore.sut.band_range`).
