@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import emcee
@@ -146,6 +147,28 @@ class _EnvelopeProposal:
                 "mass": self.envelope.mass}
 
 
+@dataclass(frozen=True)
+class _ChainRun:
+    """One production run of the ensemble: what the thinning and the diagnostics read."""
+
+    sampler: Any  # emcee.EnsembleSampler
+    n_walkers: int
+    adapt_steps: int  # steps before the proposal's refit (discarded)
+    steps: int  # production steps
+    tau: FloatArray  # integrated autocorrelation time per dimension
+    converged: bool
+
+
+@dataclass(frozen=True)
+class _Thinning:
+    """How the production chain became the samples."""
+
+    burn: int
+    thin: int
+    tau_max: float
+    warnings: list[str]
+
+
 class MCMCSampler(Sampler):
     """emcee ensemble sampler with differential-evolution moves (see the module docstring).
 
@@ -264,25 +287,48 @@ class MCMCSampler(Sampler):
         nw += nw % 2
         p0, pool = self._start(problem, rng, pilot, nw)
         state: Any = np.random.RandomState(int(rng.integers(0, 2**32 - 1))).get_state()
-        use_ind = self.independence_weight > 0
-        proposal: MixtureProposal | _EnvelopeProposal | None = None
-        if use_ind and problem.envelope is not None:
-            proposal = _EnvelopeProposal(problem)
-        elif use_ind:
-            proposal = MixtureProposal(problem.model, pool, int(rng.integers(0, 2**31 - 1)))
+        proposal = self._proposal(problem, rng, pool)
         current = emcee.State(p0, random_state=state)
         adapt = 0
         if isinstance(proposal, MixtureProposal) and self.adapt_steps > 0:
-            sampler = self._sampler(problem, nw, d, proposal, current)
-            current = sampler.run_mcmc(current, self.adapt_steps)
+            proposal, current = self._adapt(problem, rng, nw, proposal, current)
             adapt = self.adapt_steps
-            chain = sampler.get_chain(discard=self.adapt_steps // 2, flat=True)
-            proposal = MixtureProposal(problem.model, np.unique(chain, axis=0),
-                                        int(rng.integers(0, 2**31 - 1)))
         sampler = self._sampler(problem, nw, d, proposal, current)
+        steps, tau, converged = self._run(sampler, current, n, progress)
+        chain = _ChainRun(sampler, nw, adapt, steps, tau, converged)
+        z, thinning = self._thinned(chain, n)
+        return Draw(z=np.ascontiguousarray(z), method=self.name,
+                    diagnostics=self._diagnostics(problem, chain, thinning, n, proposal),
+                    mc_draws=pilot.n_draws, mc_hits=pilot.n_hits)
+
+    def _proposal(self, problem: Problem, rng: np.random.Generator, pool: FloatArray
+                  ) -> MixtureProposal | _EnvelopeProposal | None:
+        """The independence move's proposal: the region's envelope when it has one, else
+        a mixture fitted to the starting pool; None without the move."""
+        if self.independence_weight > 0 and problem.envelope is not None:
+            return _EnvelopeProposal(problem)
+        if self.independence_weight > 0:
+            return MixtureProposal(problem.model, pool, int(rng.integers(0, 2**31 - 1)))
+        return None
+
+    def _adapt(self, problem: Problem, rng: np.random.Generator, nw: int,
+               proposal: MixtureProposal, current: Any) -> tuple[MixtureProposal, Any]:
+        """``adapt_steps`` steps with the starting proposal, then the proposal refitted to
+        the second half of them: (the refitted proposal, the walkers' state)."""
+        sampler = self._sampler(problem, nw, problem.ndim, proposal, current)
+        current = sampler.run_mcmc(current, self.adapt_steps)
+        chain = sampler.get_chain(discard=self.adapt_steps // 2, flat=True)
+        proposal = MixtureProposal(problem.model, np.unique(chain, axis=0),
+                                   int(rng.integers(0, 2**31 - 1)))
+        return proposal, current
+
+    def _run(self, sampler: emcee.EnsembleSampler, current: Any, n: int,
+             progress: ProgressFn | None) -> tuple[int, FloatArray, bool]:
+        """The production chain, in chunks until it is ``min_tau_multiple`` tau long with
+        ``n`` thinned samples, or ``max_steps``: (steps, tau per dimension, converged)."""
+        nw = sampler.nwalkers
         steps = 0
-        tau = np.full(d, np.nan)
-        converged = False
+        tau = np.full(sampler.ndim, np.nan)
         while steps < self.max_steps:
             todo = min(self.chunk, self.max_steps - steps)
             current = sampler.run_mcmc(current, todo, skip_initial_state_check=True)
@@ -295,8 +341,13 @@ class MCMCSampler(Sampler):
             if progress is not None:
                 progress("mcmc", min(n_thinned, n), n)
             if steps >= self.min_tau_multiple * tau_max and n_thinned >= n:
-                converged = True
-                break
+                return steps, tau, True
+        return steps, tau, False
+
+    def _thinned(self, chain: _ChainRun, n: int) -> tuple[FloatArray, _Thinning]:
+        """``n`` samples spread evenly over the post-burn-in, thinned chain (thinning
+        dropped, with a warning, when it leaves fewer than ``n``)."""
+        steps, tau, sampler = chain.steps, chain.tau, chain.sampler
         tau_max = float(np.max(tau)) if np.isfinite(tau).all() else float(steps)
         burn = min(math.ceil(2 * tau_max), steps - 1)
         thin = max(1, math.ceil(tau_max))
@@ -309,38 +360,44 @@ class MCMCSampler(Sampler):
             thin = 1
             flat = sampler.get_chain(discard=burn, flat=True)
             flat = flat[np.linspace(0, flat.shape[0] - 1, n).round().astype(int)]
-        elif not converged:
+        elif not chain.converged:
             warnings_.append(f"chain shorter than {self.min_tau_multiple:g} tau "
                              f"({steps} steps, tau={tau_max:.1f}): tau is uncertain")
         # n samples spread evenly over the whole post-burn-in (thinned) chain
         z = flat[np.linspace(0, flat.shape[0] - 1, n).round().astype(int)]
-        acc = np.asarray(sampler.acceptance_fraction, dtype=np.float64)
-        ess_per_dim = nw * (steps - burn) / np.where(tau > 0, tau, np.inf)
-        ess_out = float(min(n, n * thin / tau_max)) if tau_max > 0 else float(n)
-        diag = {
+        return z, _Thinning(burn, thin, tau_max, warnings_)
+
+    def _diagnostics(self, problem: Problem, chain: _ChainRun, th: _Thinning, n: int,
+                     proposal: MixtureProposal | _EnvelopeProposal | None) -> dict[str, Any]:
+        """The draw's diagnostics: the chain's length, autocorrelation, acceptance and
+        effective sample sizes, the moves."""
+        nw, steps, tau = chain.n_walkers, chain.steps, chain.tau
+        acc = np.asarray(chain.sampler.acceptance_fraction, dtype=np.float64)
+        ess_per_dim = nw * (steps - th.burn) / np.where(tau > 0, tau, np.inf)
+        ess_out = float(min(n, n * th.thin / th.tau_max)) if th.tau_max > 0 else float(n)
+        use_ind = self.independence_weight > 0
+        return {
             "n_walkers": nw,
-            "adapt_steps": adapt,
+            "adapt_steps": chain.adapt_steps,
             "n_steps": steps,
-            "burn_in": burn,
-            "thin": thin,
+            "burn_in": th.burn,
+            "thin": th.thin,
             "tau": [float(t) for t in tau],
-            "tau_max": tau_max,
+            "tau_max": th.tau_max,
             "acceptance_fraction": [float(a) for a in acc],
             "acceptance_mean": float(acc.mean()),
             "acceptance_min": float(acc.min()),
             "ess_chain": [float(e) for e in ess_per_dim],
             "ess_chain_min": float(np.min(ess_per_dim)),
             "ess": ess_out,
-            "converged": converged,
-            "warnings": warnings_,
+            "converged": chain.converged,
+            "warnings": th.warnings,
             "n_evaluations": problem.n_evals,
             "moves": {"DEMove": self.de_weight, "DESnookerMove": self.snooker_weight,
                       "independence": self.independence_weight if use_ind else 0.0},
             "independence_proposal": (None if proposal is None else
                                       proposal.describe()),
         }
-        return Draw(z=np.ascontiguousarray(z), method=self.name, diagnostics=diag,
-                    mc_draws=pilot.n_draws, mc_hits=pilot.n_hits)
 
     def _sampler(self, problem: Problem, nw: int, d: int,
                  proposal: MixtureProposal | _EnvelopeProposal | None,
