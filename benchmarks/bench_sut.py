@@ -15,9 +15,16 @@ whether both equal the Python step loop ``engine="loop"`` (on a slice). For idm 
 also the same SUT written as a plain per-run class behind :func:`riskcore.sut.per_run`.
 Issue 24 asks >= 20,000 built-in runs per second per core at dt = 0.01 s.
 
+(c) The campaign's runner (``sampler.campaign.sut_runner``, acc, careful=False) end to
+end from in-bounds model draws to outcomes, in blocks of ``--runner-blocks`` rows, against
+its previous path (the tracks built twice: once for ``ok``, once more by ``cutin_batch``)
+on the same blocks, with the share of the track builder and a bit-for-bit comparison of
+every field.
+
 Usage (from the repository root): ``PYTHONPATH=. .venv/bin/python benchmarks/bench_sut.py
 [--runs 20000] [--scenarios 400] [--model-draws 5000] [--baseline 200] [--seed 7]
-[--dt 0.01 0.05]``
+[--dt 0.01 0.05] [--runner-draws 16384] [--runner-blocks 256 1024 4096 16384]
+[--only-runner]``
 """
 
 from __future__ import annotations
@@ -155,6 +162,83 @@ def compare_engines(label: str, batch: CutInBatch, st: SimSettings, seed: int,
     return rates
 
 
+def runner_draws(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """n in-bounds draws of the embedded TNO model (what naive Monte Carlo feeds the
+    campaign's runner: ``region.in_bounds``, some still refused by the builder), their
+    seeds and the CPU seconds per draw of drawing them."""
+    from datasets.embedded import default_parameter_table
+    from sampler import CutInGMM
+    from sampler.region import Region
+
+    model = CutInGMM().fit(default_parameter_table())
+    rng = np.random.default_rng(seed)
+    region = Region.from_constraints((), lane_width=model.lane_width_).bind(model)
+    c = time.process_time()
+    x = model.params_matrix(model.from_z(model.sample_z(2 * n, rng)))
+    x = x[region.in_bounds(x)][:n]
+    draw = (time.process_time() - c) / x.shape[0]
+    seeds = np.asarray(rng.integers(0, 2**63, size=x.shape[0], dtype=np.uint64))
+    return x, seeds, draw
+
+
+def runner_previous(x: np.ndarray, seeds: np.ndarray, st: SimSettings,
+                    lane: float) -> tuple[np.ndarray, np.ndarray, RunBatch]:
+    """The campaign runner's previous path: one build for ``ok``, a second build of the
+    buildable rows (``cutin_batch``), simulate. Returns (collided of every row, the
+    buildable rows, their runs)."""
+    from sampler.scenario.batch import cutin_batch, cutin_tracks
+
+    ok = cutin_tracks(x, lane_width=lane).ok
+    rows = np.flatnonzero(ok)
+    runs = simulate(make_sut("acc", k2=0.5), cutin_batch(x[rows], lane_width=lane),
+                    seeds=seeds[rows], settings=st)
+    collided = np.zeros(x.shape[0], dtype=bool)
+    collided[rows] = runs.collided
+    return collided, rows, runs
+
+
+def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
+    """(c) ``sampler.campaign.sut_runner`` end to end (acc k2=0.5, careful=False, t_max
+    40 s, collisions only) on model draws, in blocks of each size, against the previous
+    path on the same blocks; all fields compared bit for bit."""
+    from riskcore.sut import RUN_FIELDS
+    from sampler.campaign import sut_runner
+    from sampler.scenario.batch import buildable_batch
+
+    lane = 3.75
+    st = SimSettings(t_max=40.0)
+    x, seeds, draw = runner_draws(n, seed)
+    runner = sut_runner(lambda: make_sut("acc", k2=0.5), careful=False, settings=st,
+                        lane_width=lane, name="acc")
+    runner(x[:64], seeds[:64])  # compile
+    runner_previous(x[:64], seeds[:64], st, lane)
+    print(f"(c) campaign runner end to end, acc k2=0.5, t_max {st.t_max} s, careful=False: "
+          f"{x.shape[0]} in-bounds model draws (drawing them: {draw * 1e6:.1f} us CPU per "
+          "draw, not in the figures below)")
+    for b in blocks:
+        c = time.process_time()
+        new = [runner(x[i:i + b], seeds[i:i + b]) for i in range(0, x.shape[0], b)]
+        t_new = time.process_time() - c
+        c = time.process_time()
+        old = [runner_previous(x[i:i + b], seeds[i:i + b], st, lane)
+               for i in range(0, x.shape[0], b)]
+        t_old = time.process_time() - c
+        c = time.process_time()
+        for i in range(0, x.shape[0], b):
+            buildable_batch(x[i:i + b], lane_width=lane)
+        t_build = time.process_time() - c
+        same = all(np.array_equal(r.collided, o[0]) and all(
+            np.ascontiguousarray(getattr(r, f)[o[1]]).tobytes()
+            == np.ascontiguousarray(getattr(o[2], f)).astype(getattr(r, f).dtype).tobytes()
+            for f in RUN_FIELDS) for r, o in zip(new, old, strict=True))
+        m = x.shape[0]
+        print(f"  blocks of {b:6d}: runner {m / t_new:8,.0f} runs/s per core (CPU); previous "
+              f"path {m / t_old:8,.0f} runs/s -> {t_old / t_new:.2f}x; of the runner's time "
+              f"{t_build / t_new:.0%} builds the tracks ({m / t_build:,.0f} rows/s); "
+              f"{sum(int(r.collided.sum()) for r in new)} collisions; every field "
+              f"bit-identical: {same}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=20_000)
@@ -166,7 +250,18 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--dt", type=float, nargs="+", default=[0.01, 0.05],
                     help="simulation steps to measure (s; 0.01 is the default setting)")
+    ap.add_argument("--runner-draws", type=int, default=16_384,
+                    help="model draws of the campaign runner's end-to-end figure (c)")
+    ap.add_argument("--runner-blocks", type=int, nargs="+", default=[256, 1024, 4096, 16384],
+                    help="rows per runner call in (c)")
+    ap.add_argument("--only-runner", action="store_true", help="only (c)")
     args = ap.parse_args()
+    if args.runner_draws > 0:
+        print(f"load average before: {os.getloadavg()[0]:.1f} (2-core machine shared)")
+        bench_runner(args.runner_draws, args.seed, args.runner_blocks)
+        if args.only_runner:
+            print(f"load average after: {os.getloadavg()[0]:.1f}")
+            return
     t0 = time.perf_counter()
     scs = scenarios(args.scenarios, args.seed)
     base = CutInBatch.from_scenarios(scs)

@@ -96,11 +96,11 @@ class SutRunner:
         lane = 3.75 if self.lane_width is None else self.lane_width
         # the tracks once: ok of every row, the batch of the buildable ones (equal to
         # cutin_batch(x[rows]))
-        tracks, rows, batch = buildable_batch(x, lane_width=lane, ego_length=length,
-                                              ego_width=width, cutter_length=length,
-                                              cutter_width=width)
-        ok = tracks.ok
-        del tracks
+        _status, rows, batch = buildable_batch(x, lane_width=lane, ego_length=length,
+                                               ego_width=width, cutter_length=length,
+                                               cutter_width=width)
+        ok = np.zeros(n, dtype=bool)
+        ok[rows] = True
         seeds = np.asarray(seeds, dtype=np.uint64)
         if batch is not None:
             runs = simulate(self._sut(), batch, seeds=seeds[rows], settings=self.settings,

@@ -292,16 +292,44 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
 def _all(params: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
          ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
          cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray,
-         status: NDArray[np.int64], out: FloatArray) -> None:  # pragma: no cover - jit
+         status: NDArray[np.int64], out: FloatArray,
+         compact: bool) -> None:  # pragma: no cover - jit
+    """Every row; the tracks of row i in row i of the track arrays or, ``compact``, those
+    of the buildable rows one after another (a refused row's slot is reused)."""
+    j = 0
     for i in range(params.shape[0]):
+        r = j if compact else i
         s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width, ego_len,
-                                         cut_len, wz, cx[i], cy[i], cpsi[i], cv[i], ca[i],
-                                         cw[i])
+                                         cut_len, wz, cx[r], cy[r], cpsi[r], cv[r], ca[r],
+                                         cw[r])
         status[i] = s
         out[i, 0] = v_ego
         out[i, 1] = t_c
         out[i, 2] = t_p
         out[i, 3] = t_end
+        if s == _OK:
+            j += 1
+
+
+@numba.njit(cache=True)
+def _repack(flat: FloatArray, k: int, width: int, m: int) -> None:  # pragma: no cover
+    """Rows 0..k-1 of a C-ordered (., width) buffer cut to their first m values, stored
+    as a C-ordered (k, m) array at the buffer's start (in place, forwards: m <= width)."""
+    for i in range(1, k):
+        src = i * width
+        dst = i * m
+        for q in range(m):
+            flat[dst + q] = flat[src + q]
+
+
+def _cut_rows(a: FloatArray, k: int, m: int) -> FloatArray:
+    """The first k rows of ``a`` (C-ordered), each cut to its first m values, as a
+    C-contiguous (k, m) view of ``a``'s buffer (``a`` is overwritten)."""
+    width = a.shape[1]
+    flat = a.reshape(-1)
+    if m < width:
+        _repack(flat, k, width, m)
+    return flat[:k * m].reshape(k, m)
 
 
 def _time_grid(n_steps: int, dt: float) -> FloatArray:
@@ -347,6 +375,21 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
     the risk horizon (3 s), in whole steps. Rows the builder would refuse get ``ok``
     False, their ``status`` code (``reasons``) and NaN or zero tracks; nothing raises.
     """
+    _, t, status, out, (cx, cy, cpsi, cv, ca, cw) = _build(
+        params, lane_width, ego_length, cutter_length, dt, lead_in, duration,
+        wandering_zone, compact=False)
+    ok = status == _OK
+    return CutInTracks(t=t, ego_v0=out[:, 0], cx=cx, cy=cy, cpsi=cpsi, cv=cv, ca=ca,
+                       c_yaw_rate=cw, t_p=out[:, 2], t_cross=out[:, 1], t_end=out[:, 3], ok=ok,
+                       status=status)
+
+
+def _build(params: Any, lane_width: float, ego_length: float, cutter_length: float,
+           dt: float, lead_in: float, duration: float | None, wandering_zone: float,
+           compact: bool) -> tuple[FloatArray, FloatArray, NDArray[np.int64], FloatArray,
+                                   tuple[FloatArray, ...]]:
+    """(params, t, status, the (N, 4) v_ego / t_cross / t_p / t_end, the six (N, T) track
+    arrays: row i's or, ``compact``, the buildable rows' one after another)."""
     x = jit.kernel_input(np.atleast_2d(np.asarray(params, dtype=np.float64)))
     if x.ndim != 2 or x.shape[1] != 8:
         raise BuilderError(f"params: expected shape (N, 8), got {x.shape}", field="params")
@@ -361,15 +404,13 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
     n_steps = _grid_steps(x, dt, float(lead_in), duration)
     t = _time_grid(n_steps, dt)
     shape = (n, t.shape[0])
-    cx, cy, cpsi, cv, ca, cw = (np.zeros(shape) for _ in range(6))
+    alloc = np.empty if compact else np.zeros
+    cx, cy, cpsi, cv, ca, cw = (alloc(shape) for _ in range(6))
     status = np.zeros(n, dtype=np.int64)
     out = np.full((n, 4), np.nan)
     _all(x, t, float(lead_in), lane_width, ego_length, cutter_length, float(wandering_zone),
-         cx, cy, cpsi, cv, ca, cw, status, out)
-    ok = status == _OK
-    return CutInTracks(t=t, ego_v0=out[:, 0], cx=cx, cy=cy, cpsi=cpsi, cv=cv, ca=ca,
-                       c_yaw_rate=cw, t_p=out[:, 2], t_cross=out[:, 1], t_end=out[:, 3], ok=ok,
-                       status=status)
+         cx, cy, cpsi, cv, ca, cw, status, out, compact)
+    return x, t, status, out, (cx, cy, cpsi, cv, ca, cw)
 
 
 def reasons(status: NDArray[np.int64]) -> list[str | None]:
@@ -411,42 +452,34 @@ def buildable_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                     cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
                     lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
                     wandering_zone: float = WANDERING_ZONE
-                    ) -> tuple[CutInTracks, NDArray[np.intp], CutInBatch | None]:
-    """Every row's tracks (``cutin_tracks``), the buildable rows ``rows`` and their batch,
-    equal to ``cutin_batch(params[rows], same keywords)`` array for array (None when no
-    row is buildable), building the tracks once.
+                    ) -> tuple[NDArray[np.int64], NDArray[np.intp], CutInBatch | None]:
+    """Every row's ``status`` (``cutin_tracks``'s; ``reasons``), the buildable rows
+    ``rows`` and their batch, equal to ``cutin_batch(params[rows], same keywords)`` array
+    for array (None when no row is buildable), building each row's tracks once.
 
     The batch's grid is that of ``cutin_batch(params[rows])`` (by default it ends at the
     buildable rows' latest script end plus the risk horizon; ``cutin_tracks`` also counts
     rows refused after that end is known, so its grid can be longer): the tracks are cut to
     it. Every grid value of a row depends on its time only, and a row's ``t_p`` lies
-    before its script's end, so the cut tracks are those built on the shorter grid.
+    before its script's end, so the cut tracks are those built on the shorter grid. The
+    buildable rows' tracks are written one after another and cut in place: no copy.
     """
-    tr = cutin_tracks(params, lane_width=lane_width, ego_length=ego_length,
-                      cutter_length=cutter_length, dt=dt, lead_in=lead_in, duration=duration,
-                      wandering_zone=wandering_zone)
-    rows = np.flatnonzero(tr.ok)
-    if rows.size == 0:
-        return tr, rows, None
-    n = tr.ok.shape[0]
-    x = np.atleast_2d(np.asarray(params, dtype=np.float64))
-    n_steps = _grid_steps(x if rows.size == n else x[rows], float(dt), float(lead_in),
-                          duration)
+    x, t, status, out, arrays = _build(params, lane_width, ego_length, cutter_length, dt,
+                                       lead_in, duration, wandering_zone, compact=True)
+    rows = np.flatnonzero(status == _OK)
+    k = rows.size
+    if k == 0:
+        return status, rows, None
+    n = status.shape[0]
+    n_steps = _grid_steps(x if k == n else x[rows], float(dt), float(lead_in), duration)
     m = n_steps + 1
-    assert m <= tr.t.shape[0]
-    pick: Any = slice(None) if rows.size == n else rows
-
-    def cut(a: FloatArray) -> FloatArray:
-        return a[pick, :m]
-
-    def sub(a: NDArray[Any]) -> NDArray[Any]:
-        return a if rows.size == n else a[rows]
-
-    batch = CutInBatch(t=tr.t[:m], lane_width=float(lane_width), ego_v0=sub(tr.ego_v0),
+    assert m <= t.shape[0]
+    cx, cy, cpsi, cv, ca, cw = (_cut_rows(a, k, m) for a in arrays)
+    per_row = out if k == n else out[rows]
+    batch = CutInBatch(t=t[:m], lane_width=float(lane_width), ego_v0=per_row[:, 0],
                        ego_length=float(ego_length), ego_width=float(ego_width),
-                       cx=cut(tr.cx), cy=cut(tr.cy), cpsi=cut(tr.cpsi), cv=cut(tr.cv),
-                       ca=cut(tr.ca), c_length=np.full(rows.size, float(cutter_length)),
-                       c_width=np.full(rows.size, float(cutter_width)), t_p=sub(tr.t_p),
-                       t_cross=sub(tr.t_cross), t_end=sub(tr.t_end),
-                       c_yaw_rate=cut(tr.c_yaw_rate))
-    return tr, rows, batch
+                       cx=cx, cy=cy, cpsi=cpsi, cv=cv, ca=ca,
+                       c_length=np.full(k, float(cutter_length)),
+                       c_width=np.full(k, float(cutter_width)), t_p=per_row[:, 2],
+                       t_cross=per_row[:, 1], t_end=per_row[:, 3], c_yaw_rate=cw)
+    return status, rows, batch

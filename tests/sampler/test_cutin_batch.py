@@ -127,23 +127,24 @@ def test_buildable_batch_equals_cutin_batch_of_the_buildable_rows() -> None:
     x[4, 1], x[4, 0] = 30.0, 1e-4  # the longest script, never reaches the marking
     x[5, 2] = np.nan
     for duration in (None, 20.0):
-        tr, rows, batch = buildable_batch(x, lane_width=3.5, ego_length=4.2, ego_width=1.7,
-                                          cutter_length=5.0, cutter_width=2.0,
-                                          duration=duration)
+        status, rows, batch = buildable_batch(x, lane_width=3.5, ego_length=4.2,
+                                              ego_width=1.7, cutter_length=5.0,
+                                              cutter_width=2.0, duration=duration)
         ref_tr = cutin_tracks(x, lane_width=3.5, ego_length=4.2, cutter_length=5.0,
                               duration=duration)
-        assert np.array_equal(tr.status, ref_tr.status)
+        assert np.array_equal(status, ref_tr.status)
         assert rows.tolist() == np.flatnonzero(ref_tr.ok).tolist()
         assert {3, 4, 5}.isdisjoint(rows.tolist()) and rows.size >= 40
         ref = cutin_batch(x[rows], lane_width=3.5, ego_length=4.2, ego_width=1.7,
                           cutter_length=5.0, cutter_width=2.0, duration=duration)
         assert batch is not None
         if duration is None:  # the refused row 4 made the tracks' grid longer
-            assert tr.t.shape[0] > ref.t.shape[0] + 100
+            assert ref_tr.t.shape[0] > ref.t.shape[0] + 100
         for name in ("t", "ego_v0", "cx", "cy", "cpsi", "cv", "ca", "c_length", "c_width",
                      "t_p", "t_cross", "t_end", "c_yaw_rate"):
             a, b = getattr(batch, name), getattr(ref, name)
             assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
+            assert a.flags.c_contiguous, name
         for name in ("lane_width", "ego_length", "ego_width"):
             assert getattr(batch, name) == getattr(ref, name)
     none = buildable_batch(x[3:6])
