@@ -40,7 +40,7 @@ rate per hour or km it is a real-world failure rate.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -137,6 +137,7 @@ def _add_batch(problem: Problem, kin: Region | None, n: int, rng: np.random.Gene
     return counts[0] + inside.shape[0], counts[1] + n, counts[2] + sims
 
 
+@dataclass(eq=False)
 class PRegionEstimator:
     """Pilot draws, the broadened search for rare regions, and the P(A) estimators.
 
@@ -185,31 +186,35 @@ class PRegionEstimator:
         the simulations, that bound such a run.
     """
 
-    def __init__(self, pilot_hits: int = 400, pilot_max: int = 1 << 20,
-                 pilot_max_costly: int = 1 << 13,
-                 mc_min_hits: int = 100, n_is: int = 1 << 15, defensive: float = 0.1,
-                 inflate: float = 1.5, n_bounds: int = 1 << 15,
-                 search_scales: tuple[float, ...] = (1.5, 2.0, 3.0),
-                 search_draws: int = 1 << 18, min_p: float = 1e-12,
-                 confidence: float = 0.95, exact_sims: int = 200_000,
-                 thin_share: float = 0.1, exact_sims_thin: int = 2_000_000,
-                 exact_draws: int = 1 << 25) -> None:
-        self.pilot_hits = int(pilot_hits)
-        self.pilot_max = int(pilot_max)
-        self.pilot_max_costly = int(pilot_max_costly)
-        self.mc_min_hits = int(mc_min_hits)
-        self.n_is = int(n_is)
-        self.defensive = float(defensive)
-        self.inflate = float(inflate)
-        self.n_bounds = int(n_bounds)
-        self.search_scales = tuple(float(s) for s in search_scales)
-        self.search_draws = int(search_draws)
-        self.min_p = float(min_p)
-        self.confidence = float(confidence)
-        self.exact_sims = int(exact_sims)
-        self.thin_share = float(thin_share)
-        self.exact_sims_thin = int(exact_sims_thin)
-        self.exact_draws = int(exact_draws)
+    pilot_hits: int = 400
+    pilot_max: int = 1 << 20
+    pilot_max_costly: int = 1 << 13
+    mc_min_hits: int = 100
+    n_is: int = 1 << 15
+    defensive: float = 0.1
+    inflate: float = 1.5
+    n_bounds: int = 1 << 15
+    search_scales: tuple[float, ...] = (1.5, 2.0, 3.0)
+    search_draws: int = 1 << 18
+    min_p: float = 1e-12
+    confidence: float = 0.95
+    exact_sims: int = 200_000
+    thin_share: float = 0.1
+    exact_sims_thin: int = 2_000_000
+    exact_draws: int = 1 << 25
+
+    def __post_init__(self) -> None:
+        """Each setting as its declared type (numpy scalars, an int for a float: the
+        ``settings()`` record stays plain JSON)."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("int", int):
+                value = int(value)
+            elif f.type in ("float", float):
+                value = float(value)
+            else:  # search_scales
+                value = tuple(float(s) for s in value)
+            setattr(self, f.name, value)
 
     def settings(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self).items()}
