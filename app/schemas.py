@@ -10,13 +10,21 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    WithJsonSchema,
+    field_serializer,
+    model_validator,
+)
 
+from app import jsonconv
 from sampler import SAMPLER_NAMES
 from sampler.region import constraint_pattern
 from sampler.scenario import ScenarioRecord
 
-__all__ = ["SEED_MAX", "ApiModel", "ConstraintText", "PRegion", "SamplingRequest",
+__all__ = ["SEED_MAX", "ApiModel", "ConstraintText", "PRegion", "RiskReport", "SamplingRequest",
            "ScenarioRecord", "schema_enum"]
 
 #: the largest seed a request may give: the largest integer every JSON parser holds exactly
@@ -110,3 +118,52 @@ class PRegion(ApiModel):
         if isinstance(data, dict) and "ci" not in data and "ci_low" in data:
             data = {**data, "ci": [data.get("ci_low"), data.get("ci_high")]}
         return data
+
+
+class RiskReport(ApiModel):
+    """A scenario's Monte-Carlo TTR risk (layout ``scengen.scenario-risk/1``)."""
+
+    format: str
+    settings: dict[str, Any] = Field(description="riskcore's RiskSettings used")
+    surfaces: dict[str, Any] = Field(description="input surfaces: source, interim")
+    summary: dict[str, float | str | None] = Field(
+        description="the scored record's fields: risk, risk_ind, min_ttr, ...")
+    evasion_bits: dict[str, int]
+    series: dict[str, list[float]] = Field(
+        description="per step: t, r_dep, r_ind, min_ttr, ttc, wttc, thw")
+    objects: list[dict[str, Any]] = Field(
+        description="per object: id, per-step series, and with samples=true the "
+        "per-sample arrays (a, omega, weight, ttr, collision_time, evasion)")
+    criticality: dict[str, float | bool | str | None] | None = Field(
+        description="the scenario's criticality record taken as a cut-in (class, btn, "
+        "a_req, ttr_true, the reference drivers' outcomes, ...; docs/criticality.md); "
+        "null when it is not a cut-in (see criticality_error)")
+    criticality_error: str | None = Field(
+        description="why there is no criticality record (null when there is one)")
+
+    @field_serializer("objects", when_used="json")
+    def _objects_json(self, objects: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        """The per-object series in the JSON convention (+inf as "Infinity"): the response
+        path keeps it for typed floats only, not for floats inside these free-form dicts."""
+        encoded: list[dict[str, Any]] = jsonconv.encode(objects)
+        return encoded
+
+    @field_serializer("settings", "surfaces", when_used="json")
+    def _free_json(self, value: dict[str, Any]) -> dict[str, Any]:
+        """The settings and surfaces in the JSON convention, as the objects."""
+        encoded: dict[str, Any] = jsonconv.encode(value)
+        return encoded
+
+    @field_serializer("summary", when_used="json")
+    def _summary_json(self, value: dict[str, float | str | None]
+                      ) -> dict[str, float | str | None]:
+        """The summary in the JSON convention (a float in a union with str loses it)."""
+        encoded: dict[str, float | str | None] = jsonconv.encode(value)
+        return encoded
+
+    @field_serializer("criticality", when_used="json")
+    def _criticality_json(self, value: dict[str, float | bool | str | None] | None
+                          ) -> dict[str, float | bool | str | None] | None:
+        """The criticality record in the JSON convention, as the summary."""
+        encoded: dict[str, float | bool | str | None] | None = jsonconv.encode(value)
+        return encoded

@@ -73,9 +73,8 @@ def _run(args: argparse.Namespace) -> int:
         report = risk.score(data, samples=args.samples, settings=settings, surfaces=surfaces)
     except InvalidInput as exc:  # name the file as well as the field
         raise CliError(f"{args.scenario}: {exc.message}") from None
-    out = ({**report["summary"], "criticality": report["criticality"]} if args.summary
-           else report)
-    text = jsonconv.dumps(out)
+    text = (jsonconv.dumps({**report.summary, "criticality": report.criticality})
+            if args.summary else report.model_dump_json())
     if args.summary:  # a page to read (issue 25 item 6): one field a line, no float noise
         text = json.dumps(readable(json.loads(text)), indent=2)
     elif args.pretty:

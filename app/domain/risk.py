@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from app import jsonconv
 from app.errors import InvalidInput
+from app.schemas import RiskReport
 from riskcore import (
     MANOEUVRES,
     RESULT_FORMAT,
@@ -83,11 +84,12 @@ def criticality_of(scenario: ConcreteScenario) -> dict[str, Any]:
 
 
 def risk_report(risk: ScenarioRisk, *, samples: bool = False,
-                scenario: ConcreteScenario | None = None) -> dict[str, Any]:
+                scenario: ConcreteScenario | None = None) -> RiskReport:
     """A scenario's risk as JSON-ready data (``format`` scengen.scenario-risk/1 layout):
     ``summary`` (the scored record's fields), ``series`` per step, ``objects`` with their
     per-step series, and with ``samples`` each object's per-sample arrays. Given the
-    ``scenario``, also its criticality record (:func:`criticality_of`)."""
+    ``scenario``, also its criticality record (:func:`criticality_of`; without it both
+    criticality fields are null)."""
     series: dict[str, Any] = {"t": np.asarray(risk.t, dtype=np.float64).tolist()}
     for name in SERIES:
         series[name] = risk.series(name).tolist()
@@ -102,20 +104,23 @@ def risk_report(risk: ScenarioRisk, *, samples: bool = False,
             obj["samples"]["evasion"] = _evasion(np.stack([o.evasion for o in per]),
                                                  np.stack([o.collision_time for o in per]))
         objects.append(obj)
-    return {
-        "format": RESULT_FORMAT,
-        "settings": risk.settings.to_dict(),
-        "surfaces": {"source": risk.surfaces_source, "interim": risk.surfaces_interim},
-        "summary": score_scenario(risk),
-        "evasion_bits": {m.name: 1 << i for i, m in enumerate(MANOEUVRES)},
-        "series": series,
-        "objects": objects,
-        **(criticality_of(scenario) if scenario is not None else {}),
-    }
+    crit = (criticality_of(scenario) if scenario is not None
+            else {"criticality": None, "criticality_error": None})
+    return RiskReport(
+        format=RESULT_FORMAT,
+        settings=risk.settings.to_dict(),
+        surfaces={"source": risk.surfaces_source, "interim": risk.surfaces_interim},
+        summary=score_scenario(risk),
+        evasion_bits={m.name: 1 << i for i, m in enumerate(MANOEUVRES)},
+        series=series,
+        objects=objects,
+        criticality=crit["criticality"],
+        criticality_error=crit["criticality_error"],
+    )
 
 
 def score_posted(data: Any, *, samples: bool = False, settings: RiskSettings | None = None,
-                 surfaces: InputSurfaces | None = None) -> dict[str, Any]:
+                 surfaces: InputSurfaces | None = None) -> RiskReport:
     """Score a posted concrete scenario (its JSON form): :func:`risk_report`."""
     scenario = parse_scenario(data)
     try:

@@ -5,11 +5,10 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Query
-from pydantic import Field, WithJsonSchema
+from pydantic import WithJsonSchema
 
-from app import jsonconv
 from app.deps import SettingsDep
-from app.schemas import ApiModel
+from app.schemas import RiskReport
 from app.services import risk
 
 router = APIRouter(prefix="/risk", tags=["risk"])
@@ -48,28 +47,6 @@ CONCRETE_SCENARIO_SCHEMA = {
 }
 
 
-class RiskReport(ApiModel):
-    """A scenario's Monte-Carlo TTR risk (layout ``scengen.scenario-risk/1``)."""
-
-    format: str
-    settings: dict[str, Any] = Field(description="riskcore's RiskSettings used")
-    surfaces: dict[str, Any] = Field(description="input surfaces: source, interim")
-    summary: dict[str, float | str | None] = Field(
-        description="the scored record's fields: risk, risk_ind, min_ttr, ...")
-    evasion_bits: dict[str, int]
-    series: dict[str, list[float]] = Field(
-        description="per step: t, r_dep, r_ind, min_ttr, ttc, wttc, thw")
-    objects: list[dict[str, Any]] = Field(
-        description="per object: id, per-step series, and with samples=true the "
-        "per-sample arrays (a, omega, weight, ttr, collision_time, evasion)")
-    criticality: dict[str, float | bool | str | None] | None = Field(
-        description="the scenario's criticality record taken as a cut-in (class, btn, "
-        "a_req, ttr_true, the reference drivers' outcomes, ...; docs/criticality.md); "
-        "null when it is not a cut-in (see criticality_error)")
-    criticality_error: str | None = Field(
-        description="why there is no criticality record (null when there is one)")
-
-
 @router.post("", response_model=RiskReport,
              summary="TTR Monte-Carlo risk of a concrete scenario (its JSON form, schema "
              "scengen.concrete-scenario/1): summary and per-step series")
@@ -81,6 +58,4 @@ def score(
     samples: Annotated[bool, Query(description="include every object's per-sample "
                                    "Monte-Carlo arrays (large: ~0.9 MB for 10 s)")] = False,
 ) -> RiskReport:
-    # encoded first: FastAPI loses ser_json_inf_nan inside ``Any`` and union values
-    return RiskReport.model_validate(jsonconv.encode(risk.score_posted(scenario, settings,
-                                                                       samples=samples)))
+    return risk.score_posted(scenario, settings, samples=samples)

@@ -17,6 +17,7 @@ from typing import Any
 from app import domain
 from app.errors import InvalidInput
 from app.limits import check_posted_scenario
+from app.schemas import RiskReport
 from app.settings import Settings
 from riskcore import InputSurfaces, RiskSettings, ScenarioError
 
@@ -48,13 +49,12 @@ SUMMARY_EGO = ("scripted: the ego drives its track as given and never reacts to 
 
 
 def score(data: Any, *, samples: bool = False, settings: RiskSettings | None = None,
-          surfaces: InputSurfaces | None = None) -> dict[str, Any]:
+          surfaces: InputSurfaces | None = None) -> RiskReport:
     """The risk report of a concrete scenario given in its JSON form; ``samples`` adds
     each object's per-sample Monte-Carlo arrays. Its summary names the ego it describes
     (``summary["ego"]``: the scripted one)."""
     report = domain.score_posted(data, samples=samples, settings=settings, surfaces=surfaces)
-    report["summary"] = {"ego": SUMMARY_EGO, **report["summary"]}
-    return report
+    return report.model_copy(update={"summary": {"ego": SUMMARY_EGO, **report.summary}})
 
 
 #: a track's time series (``riskcore.scenario``); ``a`` and ``yaw_rate`` may be null
@@ -84,7 +84,7 @@ def check_json_numbers(data: Any) -> None:
                                    f"{type(v).__name__}", field=f"body.{where}[{i}]")
 
 
-def score_posted(data: Any, service: Settings, *, samples: bool = False) -> dict[str, Any]:
+def score_posted(data: Any, service: Settings, *, samples: bool = False) -> RiskReport:
     """``POST /risk``: :func:`score` after the service's size limits (objects, steps)."""
     check_posted_scenario(data, service)
     check_json_numbers(data)

@@ -34,11 +34,11 @@ def test_report_matches_riskcore_to_dict() -> None:
     risk = evaluate_scenario(scenario)
     slow = risk.to_dict()
     fast = risk_report(risk, samples=True)
-    _same(fast["series"], slow["series"], "series")
-    _same(fast["objects"], slow["objects"], "objects")
-    assert fast["evasion_bits"] == slow["evasion_bits"]
-    assert fast["settings"] == slow["settings"] and fast["surfaces"] == slow["surfaces"]
-    labels = np.array(fast["objects"][0]["samples"]["evasion"], dtype=object)
+    _same(fast.series, slow["series"], "series")
+    _same(fast.objects, slow["objects"], "objects")
+    assert fast.evasion_bits == slow["evasion_bits"]
+    assert fast.settings == slow["settings"] and fast.surfaces == slow["surfaces"]
+    labels = np.array(fast.objects[0]["samples"]["evasion"], dtype=object)
     assert (labels != None).any() and (labels == None).any()  # noqa: E711  both kinds tested
     brief = risk_report(risk)
-    assert "samples" not in brief["objects"][0] and brief["series"] == fast["series"]
+    assert "samples" not in brief.objects[0] and brief.series == fast.series

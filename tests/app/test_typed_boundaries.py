@@ -214,3 +214,42 @@ def test_dashboard_view_4_is_typed_and_answers_as_before(client: Any, catalogue:
     r157 = body["profiles"]["r157_ego"]
     assert (r157["length"], r157["width"]) == (body["ego"]["length"], body["ego"]["width"])
     assert isinstance(r157["length"], float) and r157["length"] > 0
+
+
+#: POST /risk's fields in their order
+RISK_REPORT_FIELDS = ["format", "settings", "surfaces", "summary", "evasion_bits", "series",
+                      "objects", "criticality", "criticality_error"]
+
+
+def test_risk_report_is_typed_and_answers_as_before(client: Any,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    import math
+    from pathlib import Path
+
+    from app.cli.main import main
+    from app.schemas import RiskReport
+    from app.services import risk
+
+    example = json.loads(Path("examples/cut-in.json").read_text())
+    r = client.post("/risk", json=example)
+    body = r.json()
+    assert list(body) == RISK_REPORT_FIELDS
+    assert RiskReport.model_validate_json(r.text).model_dump_json() == r.text
+    report = risk.score(example)
+    assert isinstance(report, RiskReport)
+    assert report.model_dump_json() == r.text
+    # the CLI prints the same report
+    assert main(["risk", "examples/cut-in.json"]) == 0
+    assert capsys.readouterr().out == r.text + "\n"
+    # values from the posted scenario and within the report
+    n = len(example["t"])
+    assert body["series"]["t"] == example["t"]
+    assert all(len(v) == n for v in body["series"].values())
+    assert [o["id"] for o in body["objects"]] == [o["id"] for o in example["objects"]]
+    assert list(body["summary"])[0] == "ego" and body["summary"]["ego"] == risk.SUMMARY_EGO
+    assert body["summary"]["risk"] == max(body["series"]["r_dep"])
+    # +inf: a float in the typed object, "Infinity" in the JSON (also inside the objects)
+    ttr = report.objects[0]["series"]["min_ttr"]
+    k = next(i for i, v in enumerate(ttr) if math.isinf(v))
+    assert body["objects"][0]["series"]["min_ttr"][k] == "Infinity"
+    assert body["criticality"] is not None and body["criticality_error"] is None
