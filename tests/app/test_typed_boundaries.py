@@ -246,7 +246,7 @@ def test_risk_report_is_typed_and_answers_as_before(client: Any,
     assert body["series"]["t"] == example["t"]
     assert all(len(v) == n for v in body["series"].values())
     assert [o["id"] for o in body["objects"]] == [o["id"] for o in example["objects"]]
-    assert list(body["summary"])[0] == "ego" and body["summary"]["ego"] == risk.SUMMARY_EGO
+    assert next(iter(body["summary"])) == "ego" and body["summary"]["ego"] == risk.SUMMARY_EGO
     assert body["summary"]["risk"] == max(body["series"]["r_dep"])
     # +inf: a float in the typed object, "Infinity" in the JSON (also inside the objects)
     ttr = report.objects[0]["series"]["min_ttr"]
