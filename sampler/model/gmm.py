@@ -239,6 +239,38 @@ class CutInGMM:
         if n < max(2 * d, 10):
             raise ModelError(f"table: {n} rows are too few to fit {d} features "
                              f"(need at least {max(2 * d, 10)})")
+        transforms = self._fit_transforms(x, features)
+        self.features_ = features
+        self.transforms_ = tuple(transforms)
+        self.fixed_ = self._fixed_values(table, features)
+        self.lane_width_ = self._lane_width(table)
+        z, logj = self._forward(x)
+        sum_logj = float(logj.sum())
+
+        k_hi = min(k_hi, n - 1)
+        if k_hi < k_lo:
+            raise ModelError(f"k_range: {self.k_range} needs more than {n} rows")
+        curve, best = self._bic_curve(z, sum_logj, range(k_lo, k_hi + 1))
+        if best is None:
+            raise ModelError("fit: every number of components failed: "
+                             + "; ".join(f"K={c['k']}: {c['error']}" for c in curve))
+        gm = best[1]
+        self.set_mixture(np.asarray(gm.weights_, dtype=np.float64),
+                          np.asarray(gm.means_, dtype=np.float64),
+                          _full_covariances(gm, d))
+        self.bic_curve_ = curve
+        self.training_ = {"n_rows": n, "sha256": self._hash(x, features), "source": source}
+        self.support_ = support_dict(x, features)
+        self.sklearn_version_ = sklearn.__version__
+        self.fit_report_ = self._report(x, z, logj, best[0])
+        return self
+
+    def _fit_transforms(self, x: FloatArray, features: tuple[str, ...]
+                        ) -> list[FeatureTransform]:
+        """Each feature's transform (``transforms``, else the feature's default), centred
+        and scaled to the table's values ``x`` in transformed space. ModelError: a
+        transform for a feature the model does not have, a value outside a transform's
+        domain, a constant column."""
         specs = {f: transform_spec(f, (self.transforms or {}).get(f)) for f in features}
         unknown_t = sorted(set(self.transforms or {}) - set(features))
         if unknown_t:
@@ -260,19 +292,17 @@ class CutInGMM:
                 raise ModelError(f"table: column {f!r} is constant; drop it from features "
                                  "and give it as a fixed value")
             transforms.append(FeatureTransform(f, kind, shift, float(np.mean(y)), scale))
-        self.features_ = features
-        self.transforms_ = tuple(transforms)
-        self.fixed_ = self._fixed_values(table, features)
-        self.lane_width_ = self._lane_width(table)
-        z, logj = self._forward(x)
-        sum_logj = float(logj.sum())
+        return transforms
 
-        k_hi = min(k_hi, n - 1)
-        if k_hi < k_lo:
-            raise ModelError(f"k_range: {self.k_range} needs more than {n} rows")
+    def _bic_curve(self, z: FloatArray, sum_logj: float, ks: range
+                   ) -> tuple[list[dict[str, Any]], tuple[float, GaussianMixture] | None]:
+        """A mixture of each number of components in ``ks`` fitted to the transformed
+        rows ``z``: the BIC curve (in original units: ``sum_logj``, the transforms' log
+        Jacobian) and the (BIC, mixture) of the lowest BIC (None: every K failed)."""
+        n, d = z.shape
         curve: list[dict[str, Any]] = []
         best: tuple[float, GaussianMixture] | None = None
-        for k in range(k_lo, k_hi + 1):
+        for k in ks:
             gm, converged, err = self._fit_gm(k, z)
             entry: dict[str, Any] = {"k": k, "n_parameters": _n_parameters(k, d,
                                                                            self.covariance_type)}
@@ -285,19 +315,7 @@ class CutInGMM:
                 if best is None or bic < best[0]:
                     best = (bic, gm)
             curve.append(entry)
-        if best is None:
-            raise ModelError("fit: every number of components failed: "
-                             + "; ".join(f"K={c['k']}: {c['error']}" for c in curve))
-        gm = best[1]
-        self.set_mixture(np.asarray(gm.weights_, dtype=np.float64),
-                          np.asarray(gm.means_, dtype=np.float64),
-                          _full_covariances(gm, d))
-        self.bic_curve_ = curve
-        self.training_ = {"n_rows": n, "sha256": self._hash(x, features), "source": source}
-        self.support_ = support_dict(x, features)
-        self.sklearn_version_ = sklearn.__version__
-        self.fit_report_ = self._report(x, z, logj, best[0])
-        return self
+        return curve, best
 
     def _fit_gm(self, k: int, z: FloatArray) -> tuple[GaussianMixture | None, bool, str | None]:
         gm = GaussianMixture(n_components=k, covariance_type=self.covariance_type,
