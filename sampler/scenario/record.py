@@ -203,19 +203,11 @@ def score_vector(
     (ScenarioRecord, ConcreteScenario or None)
         The record and the built scenario (None when not built or refused).
     """
-    vector = {name: float(params[name]) for name in PARAM_NAMES}
-    fields: dict[str, Any] = {"index": index, "params": vector,
-                              "ttc": float(ttc_from_gap_dv(vector["gap"], vector["dv"])),
-                              "exposure_weight": exposure_weight}
-    if support is not None:
-        fields.update({k: support[k] for k in SUPPORT_FIELDS if k in support})
+    fields = _vector_fields(params, index, exposure_weight, support)
     if not (score or include_scenario):
         return ScenarioRecord(**fields), None
-    kwargs: dict[str, Any] = dict(builder_kwargs or {})
-    if lane_width is not None:
-        kwargs["lane_width"] = lane_width
     try:
-        scenario = build_scenario(vector, seed=seed, provenance=provenance, **kwargs)
+        scenario = _build(fields["params"], lane_width, seed, provenance, builder_kwargs)
     except ValueError as exc:  # BuilderError, or a bad builder argument
         return ScenarioRecord(**fields, error=f"build: {exc}"), None
     if include_scenario:
@@ -229,6 +221,30 @@ def score_vector(
             return ScenarioRecord(**fields, error=f"score: {exc}"), scenario
         fields.update(crit.to_record())
     return ScenarioRecord(**fields), scenario
+
+
+def _vector_fields(params: Mapping[str, float], index: int, exposure_weight: float | None,
+                   support: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The record's fields that need no scenario: the vector (``PARAM_NAMES`` as floats),
+    its index, ttc, exposure weight and data support."""
+    vector = {name: float(params[name]) for name in PARAM_NAMES}
+    fields: dict[str, Any] = {"index": index, "params": vector,
+                              "ttc": float(ttc_from_gap_dv(vector["gap"], vector["dv"])),
+                              "exposure_weight": exposure_weight}
+    if support is not None:
+        fields.update({k: support[k] for k in SUPPORT_FIELDS if k in support})
+    return fields
+
+
+def _build(vector: dict[str, float], lane_width: float | None, seed: int | None,
+           provenance: Mapping[str, Any] | None,
+           builder_kwargs: Mapping[str, Any] | None) -> ConcreteScenario:
+    """``build_scenario`` of the vector with the record's lane width (None: the builder's
+    default) and the other builder arguments."""
+    kwargs: dict[str, Any] = dict(builder_kwargs or {})
+    if lane_width is not None:
+        kwargs["lane_width"] = lane_width
+    return build_scenario(vector, seed=seed, provenance=provenance, **kwargs)
 
 
 def score_rows(
