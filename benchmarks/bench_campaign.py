@@ -236,8 +236,10 @@ def main() -> None:
         p_ref = None
         ci = (math.nan, math.nan)
         if a.naive_sut > 0:
+            # runner calls of 1024 rows: 512-4096 run equally fast, 128 and 16384 slower
+            # (bench_sut.py --only-runner --runner-blocks 128 512 1024 2048 4096 16384)
             k, n_in, secs_n = naive(model, runner_s, int(a.naive_sut), seed=777,
-                                    block=1 << 16, sim_block=4096)
+                                    block=1 << 16, sim_block=1024)
             p_ref = k / n_in if k else None
             ci = cp(k, n_in)
             per_run = secs_n / n_in
