@@ -28,8 +28,9 @@ from datasets.embedded import default_parameter_table
 from sampler import CutInGMM, sample
 from sampler.methods.probability import PRegionEstimator
 from sampler.methods.subset import region_limit_state, subset_simulation
+from sampler.model.io import model_from_dict, model_to_dict
 from sampler.region.btn_bound import a_req_bound
-from sampler.region.constraints import Region
+from sampler.region.constraints import QUANTITY_NAMES, Region, derive
 from sampler.region.criticality import criticality_quantities
 from sampler.scenario import build_scenario
 from sampler.scenario.record import score_vector
@@ -145,6 +146,32 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
                        PRegionEstimator(3, 5, 7, 9, 11, 0.2, 1.1, 13, (2.0,), 17, 1e-9, 0.9,
                                         19, 0.3, 23, 29).settings())
     cases["PRegionEstimator settings"] = estimator_case
+
+    def derive_case() -> str:
+        q = derive(xc, QUANTITY_NAMES, model=model)
+        return _digest(*(q[k] for k in QUANTITY_NAMES))
+    cases["derive every quantity"] = derive_case
+
+    def io_case() -> str:
+        d = model_to_dict(model)
+        out: list[Any] = [model_to_dict(model_from_dict(CutInGMM, d))]
+        t_bad = [dict(t) for t in d["transforms"]]
+        t_bad[1]["scale"] = 0.0
+        bads = [None, {**d, "format": "x"}, {k: v for k, v in d.items() if k != "means"},
+                {**d, "features": "gap"}, {**d, "settings": 3},
+                {**d, "settings": {"n_init": 2, "bogus": 1}},
+                {**d, "transforms": d["transforms"][:-1]}, {**d, "transforms": t_bad},
+                {**d, "weights": "abc"}, {**d, "means": [[0.0]]}, {**d, "fixed": 3},
+                {**d, "fixed": {}}, {**d, "lane_width": 11}, {**d, "lane_width": True},
+                {**d, "exposure": 3}, {**d, "bootstrap": {"weights": 1}},
+                {**d, "support": {"bogus": 1}}, {**d, "fit_report": None}]
+        for bad in bads:
+            try:
+                out.append(model_to_dict(model_from_dict(CutInGMM, bad)))
+            except Exception as exc:
+                out.append(f"{type(exc).__name__}: {exc}")
+        return _digest(out)
+    cases["model_to_dict / model_from_dict"] = io_case
     return cases
 
 
