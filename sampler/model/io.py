@@ -65,52 +65,11 @@ def model_from_dict(cls: type[CutInGMM], data: Any) -> CutInGMM:
     """Rebuild a model of class ``cls`` from ``model_to_dict``'s form.
 
     Raises ModelError naming the bad field."""
-    if not isinstance(data, Mapping):
-        raise ModelError(f"model: expected a JSON object, got {type(data).__name__}")
-    if data.get("format") != FORMAT:
-        raise ModelError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
-    for key in ("features", "transforms", "weights", "means", "covariances"):
-        if key not in data:
-            raise ModelError(f"{key}: missing")
-    features = data["features"]
-    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
-        raise ModelError("features: expected a list of names")
-    settings = data.get("settings") or {}
-    if not isinstance(settings, Mapping):
-        raise ModelError("settings: expected an object")
-    kwargs: dict[str, Any] = {
-        k: (tuple(v) if k == "k_range" else v) for k, v in settings.items()
-        if k in {"k_range", "n_init", "reg_covar", "max_iter", "random_state", "cv_folds",
-                 "n_report_samples", "lane_width"}}
-    try:
-        model = cls(features=features,
-                    covariance_type=str(data.get("covariance_type", "full")), **kwargs)
-    except TypeError as exc:
-        raise ModelError(f"settings: {exc}") from None
-    trs = data["transforms"]
-    if not isinstance(trs, list) or len(trs) != len(features):
-        raise ModelError("transforms: expected one entry per feature")
-    transforms = []
-    for i, (f, t) in enumerate(zip(features, trs, strict=True)):
-        if not isinstance(t, Mapping) or t.get("feature") != f:
-            raise ModelError(f"transforms[{i}]: expected an object for feature {f!r}")
-        kind, shift = transform_spec(f, {"kind": t.get("kind"), "shift": t.get("shift", 0)})
-        loc, scale = t.get("loc"), t.get("scale")
-        if not (isinstance(loc, int | float) and isinstance(scale, int | float)
-                and math.isfinite(loc) and math.isfinite(scale) and scale > 0):
-            raise ModelError(f"transforms[{i}]: loc and scale must be finite, scale > 0")
-        transforms.append(FeatureTransform(f, kind, shift, float(loc), float(scale)))
+    features = _checked_features(data)
+    model = _new_model(cls, data, features)
     model.features_ = tuple(features)
-    model.transforms_ = tuple(transforms)
-    try:
-        weights = np.asarray(data["weights"], dtype=np.float64)
-        means = np.asarray(data["means"], dtype=np.float64)
-        covs = np.asarray(data["covariances"], dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"mixture: expected numeric arrays ({exc})") from None
-    if means.ndim != 2 or means.shape[1] != len(features):
-        raise ModelError(f"means: expected shape (K, {len(features)}), got {means.shape}")
-    model.set_mixture(weights, means, covs)
+    model.transforms_ = tuple(_transforms(data["transforms"], features))
+    _set_mixture(model, data, len(features))
     fixed = data.get("fixed") or {}
     if not isinstance(fixed, Mapping):
         raise ModelError("fixed: expected an object")
@@ -127,6 +86,76 @@ def model_from_dict(cls: type[CutInGMM], data: Any) -> CutInGMM:
         model.fit_report_ = dict(data["fit_report"])
     model.training_ = dict(data.get("training") or {})
     model.sklearn_version_ = str(data.get("sklearn_version", "unknown"))
+    _set_extras(model, data, features)
+    return model
+
+
+def _checked_features(data: Any) -> list[str]:
+    """The form's features, after its envelope is checked (an object of this format with
+    the mixture's keys)."""
+    if not isinstance(data, Mapping):
+        raise ModelError(f"model: expected a JSON object, got {type(data).__name__}")
+    if data.get("format") != FORMAT:
+        raise ModelError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
+    for key in ("features", "transforms", "weights", "means", "covariances"):
+        if key not in data:
+            raise ModelError(f"{key}: missing")
+    features = data["features"]
+    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+        raise ModelError("features: expected a list of names")
+    return features
+
+
+def _new_model(cls: type[CutInGMM], data: Mapping[str, Any],
+               features: list[str]) -> CutInGMM:
+    """An unfitted ``cls`` with the form's settings."""
+    settings = data.get("settings") or {}
+    if not isinstance(settings, Mapping):
+        raise ModelError("settings: expected an object")
+    kwargs: dict[str, Any] = {
+        k: (tuple(v) if k == "k_range" else v) for k, v in settings.items()
+        if k in {"k_range", "n_init", "reg_covar", "max_iter", "random_state", "cv_folds",
+                 "n_report_samples", "lane_width"}}
+    try:
+        return cls(features=features,
+                   covariance_type=str(data.get("covariance_type", "full")), **kwargs)
+    except TypeError as exc:
+        raise ModelError(f"settings: {exc}") from None
+
+
+def _transforms(trs: Any, features: list[str]) -> list[FeatureTransform]:
+    """The features' transforms from the form's ``transforms`` (one object per feature)."""
+    if not isinstance(trs, list) or len(trs) != len(features):
+        raise ModelError("transforms: expected one entry per feature")
+    transforms = []
+    for i, (f, t) in enumerate(zip(features, trs, strict=True)):
+        if not isinstance(t, Mapping) or t.get("feature") != f:
+            raise ModelError(f"transforms[{i}]: expected an object for feature {f!r}")
+        kind, shift = transform_spec(f, {"kind": t.get("kind"), "shift": t.get("shift", 0)})
+        loc, scale = t.get("loc"), t.get("scale")
+        if not (isinstance(loc, int | float) and isinstance(scale, int | float)
+                and math.isfinite(loc) and math.isfinite(scale) and scale > 0):
+            raise ModelError(f"transforms[{i}]: loc and scale must be finite, scale > 0")
+        transforms.append(FeatureTransform(f, kind, shift, float(loc), float(scale)))
+    return transforms
+
+
+def _set_mixture(model: CutInGMM, data: Mapping[str, Any], d: int) -> None:
+    """The form's weights, means and covariances (``d`` features) into ``model``."""
+    try:
+        weights = np.asarray(data["weights"], dtype=np.float64)
+        means = np.asarray(data["means"], dtype=np.float64)
+        covs = np.asarray(data["covariances"], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"mixture: expected numeric arrays ({exc})") from None
+    if means.ndim != 2 or means.shape[1] != d:
+        raise ModelError(f"means: expected shape (K, {d}), got {means.shape}")
+    model.set_mixture(weights, means, covs)
+
+
+def _set_extras(model: CutInGMM, data: Mapping[str, Any], features: list[str]) -> None:
+    """The optional parts (exposure, bootstrap, tail calibration, data support), checked,
+    into ``model``."""
     for key in ("exposure", "bootstrap", "tail_calibration"):
         value = data.get(key)
         if value is not None and not isinstance(value, Mapping):
@@ -140,7 +169,6 @@ def model_from_dict(cls: type[CutInGMM], data: Any) -> CutInGMM:
     if support is not None:
         check_support_dict(support, features, model.training_.get("sha256"))
         model.support_ = dict(support)
-    return model
 
 
 def _check_bootstrap(boot: Mapping[str, Any], d: int, k: int) -> None:
