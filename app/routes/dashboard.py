@@ -16,7 +16,6 @@ from fastapi import APIRouter, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
-from app import jsonconv
 from app.dashboard import evaluation_views, views
 from app.dashboard.schemas import (
     CatalogueCriticalityView,
@@ -145,8 +144,7 @@ def model_rates(
     constraints: ConstraintsQuery = "ttc<3",
     seed: SeedQuery = 0,
 ) -> RegionReport:
-    return RegionReport.model_validate(
-        jsonconv.encode(rates.region_rates(ctx, model_id, constraints, seed)))
+    return rates.region_rates(ctx, model_id, constraints, seed)
 
 
 @router.get("/api/catalogues/{catalogue_id}/shift", response_model=ShiftView,

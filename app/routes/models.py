@@ -83,8 +83,7 @@ def compare(
                             description="samples of each model in the region")] = 400,
     seed: SeedQuery = 0,
 ) -> ModelComparison:
-    return ModelComparison.model_validate(jsonconv.encode(
-        rates_views.compare_models(ctx, a, b, constraints, n, seed)))
+    return rates_views.compare_models(ctx, a, b, constraints, n, seed)
 
 
 @router.get("/{model_id}", response_model=ModelDetail,

@@ -17,6 +17,7 @@ import pandas as pd
 from app import domain, jsonconv
 from app.context import ServiceContext
 from app.errors import InvalidInput, ServiceError
+from app.rates import ExposureInfo, ModelInterval, RegionRates, RegionReport, UncertainP
 from app.services.models import model_and_row
 from app.services.sampling import reference_draws, split_constraints
 
@@ -33,13 +34,25 @@ __all__ = [
 COMPARE_N_LIMIT = 5000
 
 
-def uncertain_p(p_region: dict[str, Any]) -> dict[str, Any]:
+def uncertain_p(p_region: dict[str, Any]) -> UncertainP:
     """The P(A) dict of ``domain.sample`` / ``region_uncertainty`` as ``UncertainP``."""
     p = jsonconv.decode(p_region)
-    return {"estimate": p.get("estimate"), "mc_ci": p.get("mc_ci") or p.get("ci"),
-            "model_ci": p.get("model_ci"), "method": p.get("method"),
-            "model_interval": p.get("model_interval"),
-            "model_interval_error": p.get("model_interval_error")}
+    interval = p.get("model_interval")
+    return UncertainP(estimate=p.get("estimate"), mc_ci=p.get("mc_ci") or p.get("ci"),
+                      model_ci=p.get("model_ci"), method=p.get("method"),
+                      model_interval=None if interval is None
+                      else ModelInterval.model_validate(interval),
+                      model_interval_error=p.get("model_interval_error"))
+
+
+def _rates(rates: dict[str, Any] | None) -> RegionRates | None:
+    """The rates of an uncertainty report (``sampler.rates``) as ``RegionRates``."""
+    return None if rates is None else RegionRates.model_validate(rates)
+
+
+def _exposure(exposure: dict[str, Any] | None) -> ExposureInfo | None:
+    """A model's exposure (``CutInGMM.exposure_``) as ``ExposureInfo``."""
+    return None if exposure is None else ExposureInfo.model_validate(exposure)
 
 
 def _cache(ctx: ServiceContext) -> Any:
@@ -47,7 +60,7 @@ def _cache(ctx: ServiceContext) -> Any:
 
 
 def region_rates(ctx: ServiceContext, model_id: str, constraint_text: str,
-                 seed: int) -> dict[str, Any]:
+                 seed: int) -> RegionReport:
     """P(A) of the region under the model with the "Monte Carlo" and the "model" interval,
     the bootstrap replicates, and the rates per hour / per 10^6 km (when the model has an
     exposure): the fields of ``app.rates.RegionReport``."""
@@ -55,14 +68,15 @@ def region_rates(ctx: ServiceContext, model_id: str, constraint_text: str,
     mid, model, _ = model_and_row(ctx, model_id)
     constraints = domain.parse_constraints(texts, field="query.constraints")
 
-    def compute() -> dict[str, Any]:
+    def compute() -> RegionReport:
         p = domain.estimate_region(model, constraints, seed)
         full = domain.region_uncertainty(model, constraints, p)
-        return {"model": mid, "constraints": texts, "seed": seed,
-                "p_region": uncertain_p(full), "rates": full.get("rates"),
-                "exposure": model.exposure_}
+        return RegionReport(model=mid, constraints=texts, seed=seed,
+                            p_region=uncertain_p(full),
+                            rates=_rates(jsonconv.decode(full.get("rates"))),
+                            exposure=_exposure(model.exposure_))
 
-    result: dict[str, Any] = _cache(ctx).get(("rates", mid, tuple(texts), seed), compute)
+    result: RegionReport = _cache(ctx).get(("rates", mid, tuple(texts), seed), compute)
     return result
 
 
@@ -75,9 +89,9 @@ class ComparedModel:
     dataset: str
     n_components: int
     features: list[str]
-    exposure: dict[str, Any] | None
-    p_region: dict[str, Any]
-    rates: dict[str, Any] | None
+    exposure: ExposureInfo | None
+    p_region: UncertainP
+    rates: RegionRates | None
     reference: pd.DataFrame
     constrained: pd.DataFrame
 
@@ -111,9 +125,10 @@ def compare_models(ctx: ServiceContext, a: str, b: str, constraint_text: str, n:
         drawn = domain.sample(model, constraints, n, seed)
         return ComparedModel(id=mid, dataset=row.dataset_id,
                              n_components=int(model.n_components_),
-                             features=domain.model_features(model), exposure=model.exposure_,
+                             features=domain.model_features(model),
+                             exposure=_exposure(model.exposure_),
                              p_region=uncertain_p(drawn.p_region),
-                             rates=jsonconv.decode(drawn.p_region).get("rates"),
+                             rates=_rates(jsonconv.decode(drawn.p_region).get("rates")),
                              reference=reference, constrained=drawn.params)
 
     def compute() -> Comparison:

@@ -253,3 +253,48 @@ def test_risk_report_is_typed_and_answers_as_before(client: Any,
     k = next(i for i, v in enumerate(ttr) if math.isinf(v))
     assert body["objects"][0]["series"]["min_ttr"][k] == "Infinity"
     assert body["criticality"] is not None and body["criticality_error"] is None
+
+
+def test_model_comparison_is_typed_and_answers_as_before(client: Any) -> None:
+    from app.dashboard import rates_views
+    from app.rates import ModelComparison
+    from datasets import PARAM_NAMES
+
+    query = "a=default&b=default&n=30&constraints=gap<5&seed=2"
+    r = client.get(f"/models/compare?{query}")
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert list(body) == ["constraints", "n", "seed", "models", "parameters"]
+    assert ModelComparison.model_validate_json(r.text).model_dump_json() == r.text
+    view = rates_views.compare_models(_ctx(client), "default", "default", "gap<5", 30, 2)
+    assert isinstance(view, ModelComparison)
+    assert view.model_dump_json() == r.text
+    assert (body["constraints"], body["n"], body["seed"]) == (["gap<5"], 30, 2)
+    a, b = body["models"]
+    assert list(a) == ["id", "dataset", "n_components", "features", "exposure", "p_region",
+                       "rates"]
+    assert a == b and a["id"] == _ctx(client).default_model_id  # the same model twice
+    assert [p["name"] for p in body["parameters"]] == list(PARAM_NAMES)
+    for p in body["parameters"]:
+        assert len(p["models"]) == 2
+        assert all(side["constrained"]["n"] == 30 for side in p["models"]), p["name"]
+
+
+def test_region_report_is_typed_and_answers_as_before(client: Any) -> None:
+    from app.rates import RegionReport
+    from app.services import rates
+
+    r = client.get("/dashboard/api/models/default/rates?constraints=gap<5&seed=2")
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert list(body) == ["model", "constraints", "seed", "p_region", "rates", "exposure"]
+    assert RegionReport.model_validate_json(r.text).model_dump_json() == r.text
+    report = rates.region_rates(_ctx(client), "default", "gap<5", 2)
+    assert isinstance(report, RegionReport)
+    assert report.model_dump_json() == r.text
+    # a rate is P(A) times the rate of all cut-ins (n_events / hours)
+    exposure = body["exposure"]
+    assert body["rates"]["exposure"] == exposure
+    per_hour = body["p_region"]["estimate"] * exposure["n_events"] / exposure["hours"]
+    assert body["rates"]["per_hour"]["estimate"] == pytest.approx(per_hour, rel=1e-12)
+
