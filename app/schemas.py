@@ -25,7 +25,7 @@ from sampler.region import constraint_pattern
 from sampler.scenario import ScenarioRecord
 
 __all__ = ["SEED_MAX", "ApiModel", "ConstraintText", "PRegion", "RiskReport", "SamplingRequest",
-           "ScenarioRecord", "schema_enum"]
+           "ScenarioRecord", "SutInfo", "schema_enum"]
 
 #: the largest seed a request may give: the largest integer every JSON parser holds exactly
 #: (JavaScript's Number.MAX_SAFE_INTEGER), so a seed survives any client unchanged
@@ -167,3 +167,14 @@ class RiskReport(ApiModel):
         """The criticality record in the JSON convention, as the summary."""
         encoded: dict[str, float | bool | str | None] | None = jsonconv.encode(value)
         return encoded
+
+
+# a registered system under test (GET /suts, scengen evaluate --list-suts)
+class SutInfo(ApiModel):
+    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="strings")
+
+    name: str
+    origin: str = Field(description="builtin | entry point (<distribution>)")
+    summary: str
+    parameters: dict[str, Any]
+    source: str

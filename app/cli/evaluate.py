@@ -127,7 +127,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from app.services import suts
 
     if args.list_suts:
-        print(json.dumps(jsonconv.encode(suts.list_suts()), indent=1))
+        print(json.dumps([s.model_dump(mode="json") for s in suts.list_suts()], indent=1))
         return 0
     if args.sut is None:
         raise CliError("--sut: give the system under test (a registered name, see "

@@ -15,7 +15,7 @@ from app.deps import ContextDep, JobsDep
 from app.limits import INDEX_MAX
 from app.quotas import client_of
 from app.routes._download import file_response
-from app.schemas import SEED_MAX, ApiModel, ConstraintText, schema_enum
+from app.schemas import SEED_MAX, ApiModel, ConstraintText, SutInfo, schema_enum
 from app.services import evaluations as service
 from app.services import suts
 from app.statuses import EvaluationStatus
@@ -100,16 +100,6 @@ class RunPage(ApiModel):
                                        "vs_careful, ...)")
 
 
-class SutInfo(ApiModel):
-    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="strings")
-
-    name: str
-    origin: str = Field(description="builtin | entry point (<distribution>)")
-    summary: str
-    parameters: dict[str, Any]
-    source: str
-
-
 class SutList(ApiModel):
     suts: list[SutInfo]
     conflicts: list[str] = Field(description="entry points left out: their name is taken")
@@ -119,8 +109,8 @@ class SutList(ApiModel):
             summary="The registered systems under test")
 def list_suts() -> SutList:
     reg = suts.registry()
-    return SutList(suts=[SutInfo.model_validate(jsonconv.encode(e.to_dict()))
-                         for e in reg.entries.values()], conflicts=list(reg.conflicts))
+    return SutList(suts=[e.info() for e in reg.entries.values()],
+                   conflicts=list(reg.conflicts))
 
 
 @router.post("/evaluations", status_code=202, response_model=EvaluationCreated,

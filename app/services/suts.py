@@ -39,7 +39,9 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from typing import Any
 
+from app import jsonconv
 from app.errors import InvalidInput
+from app.schemas import SutInfo
 
 log = logging.getLogger("scengen.app")
 
@@ -137,9 +139,11 @@ class SutEntry:
     def factory(self, params: Mapping[str, Any] | None = None) -> SutFactory:
         return SutFactory(self.name, self.ref, tuple(sorted((params or {}).items())))
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "origin": self.origin, "summary": self.summary,
-                "parameters": dict(self.parameters), "source": self.source}
+    def info(self) -> SutInfo:
+        """What ``GET /suts`` and ``scengen evaluate --list-suts`` show of it (its
+        parameters in the service's JSON convention)."""
+        return SutInfo(name=self.name, origin=self.origin, summary=self.summary,
+                       parameters=jsonconv.encode(dict(self.parameters)), source=self.source)
 
 
 @dataclass(frozen=True)
@@ -249,9 +253,9 @@ def make_factory(entry: SutEntry, params: Mapping[str, Any] | None = None,
     return factory
 
 
-def list_suts() -> list[dict[str, Any]]:
-    """The registered SUTs as dicts (``GET /suts``, ``scengen evaluate --list-suts``)."""
-    return [e.to_dict() for e in registry().entries.values()]
+def list_suts() -> list[SutInfo]:
+    """The registered SUTs (``GET /suts``, ``scengen evaluate --list-suts``)."""
+    return [e.info() for e in registry().entries.values()]
 
 
 __all__ = ["ENTRY_POINT_GROUP", "Registry", "SutEntry", "SutFactory", "list_suts",

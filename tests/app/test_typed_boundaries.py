@@ -298,3 +298,30 @@ def test_region_report_is_typed_and_answers_as_before(client: Any) -> None:
     per_hour = body["p_region"]["estimate"] * exposure["n_events"] / exposure["hours"]
     assert body["rates"]["per_hour"]["estimate"] == pytest.approx(per_hour, rel=1e-12)
 
+
+#: riskcore's built-in systems under test (docs/evaluation.md)
+BUILTIN_SUTS = ["none", "r157_cc", "r157_cc_conflict", "rss", "idm", "acc", "acc_aeb",
+                "ttr_aeb"]
+
+
+def test_sut_info_is_typed_and_answers_as_before(client: Any,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli.main import main
+    from app.schemas import SutInfo
+    from app.services import suts
+
+    r = client.get("/suts")
+    body = r.json()
+    assert list(body) == ["suts", "conflicts"]
+    names = [s["name"] for s in body["suts"]]
+    assert names[:len(BUILTIN_SUTS)] == BUILTIN_SUTS
+    for item in body["suts"]:
+        assert list(item) == ["name", "origin", "summary", "parameters", "source"]
+        assert SutInfo.model_validate(item).model_dump(mode="json") == item
+    listed = suts.list_suts()
+    assert all(isinstance(s, SutInfo) for s in listed)
+    assert [s.model_dump(mode="json") for s in listed] == body["suts"]
+    assert all(s.origin == "builtin" for s in listed[:len(BUILTIN_SUTS)])
+    # the CLI lists the same, one JSON document
+    assert main(["evaluate", "--list-suts"]) == 0
+    assert capsys.readouterr().out == json.dumps(body["suts"], indent=1) + "\n"
