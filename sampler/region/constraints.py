@@ -464,59 +464,75 @@ class _Quantities:
         if name in PARAM_NAMES:
             return self.p[:, PARAM_NAMES.index(name)]
         col = {k: self.p[:, i] for i, k in enumerate(PARAM_NAMES)}
-        c = self._cache
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            if name == "ttc":
-                c[name] = ttc_from_gap_dv(col["gap"], col["dv"])
-            elif name == "direction":
-                c[name] = np.where(col["p_y1"] > 0, 1.0, -1.0)
-            elif name == "psi_max":
-                c[name] = 2.0 * np.abs(col["p_y1"]) * col["p_t"] / np.pi
-            elif name == "v_cut_min":
-                before, after = plateau_speeds(col["p_a1"], col["p_a2"], col["p_a3"], col["p_v0"])
-                c[name] = np.minimum(before, after)
-            elif name == "btn_bound":
-                c[name] = btn_bound(self.p, self.lane_width, stop_at=self.bound_stop_at)
+            if name in ("ttc", "direction", "psi_max", "v_cut_min", "btn_bound"):
+                self._cache[name] = self._closed_form(name, col)
             elif name in CRITICALITY_QUANTITIES:
-                # the TTR scan costs more than the drivers: only when ttr_true is asked for
-                q = criticality_quantities(self.p, self.lane_width,
-                                           with_ttr=name == "ttr_true")
-                if name != "ttr_true":
-                    del q["ttr_true"]
-                c.update(q)
+                self._criticality(name)
             elif name == "density_pct" or name in _SUPPORT_NAMES:
-                if self.model is None:
-                    raise ConstraintError(f"{name} needs the model: use sample() or "
-                                          "estimate_p_region(), or Region.bind(model)")
-                # the model knows its own support (sampler.model.support); the region only
-                # asks it, so that this layer does not import the model's
-                if name == "density_pct":
-                    c[name] = np.asarray(self.model.density_percentile(self.p),
-                                         dtype=np.float64)
-                else:
-                    sm = self.model.support_measures(self.p)
-                    c["support"] = np.asarray(sm.code, dtype=np.float64)
-                    c["support_distance"] = np.asarray(sm.distance, dtype=np.float64)
-                    c["support_excess"] = np.asarray(sm.largest, dtype=np.float64)
+                self._support(name)
             elif name in DERIVED:
-                kin = crossing_kinematics(self.p, self.lane_width / 2.0)
-                c["t_cross"] = kin.t_cross + DEFAULT_LEAD_IN  # scenario time, as t_p
-                c["v_cross"] = kin.v_cross
-                c["v_ego"] = kin.v_cross + col["dv"]
-                c["thw"] = np.where(c["v_ego"] > 0, col["gap"] / np.where(
-                    c["v_ego"] > 0, c["v_ego"], 1.0), np.inf)
-                c["thw"][np.isnan(c["v_ego"])] = np.nan
-                c["lat_disp"] = np.abs(kin.y_end)
-                c["cross_margin"] = c["lat_disp"] - self.lane_width / 2.0
-                start = np.where(col["p_y1"] > 0, -self.lane_width, self.lane_width)
-                c["lat_offset"] = start + kin.y_end
-                c["end_margin"] = self.lane_width / 2.0 - np.abs(c["lat_offset"])
-                c["max_lat_speed"] = kin.max_lat_speed
+                self._crossing(col)
             else:
                 raise ConstraintError(
                     f"unknown quantity {name!r}; valid names: {', '.join(QUANTITY_NAMES)}"
                 )
-        return c[name]
+        return self._cache[name]
+
+    def _closed_form(self, name: str, col: dict[str, FloatArray]) -> FloatArray:
+        """A quantity with a formula of its own (``btn_bound``: sampler.region.btn_bound)."""
+        if name == "ttc":
+            return ttc_from_gap_dv(col["gap"], col["dv"])
+        if name == "direction":
+            return np.where(col["p_y1"] > 0, 1.0, -1.0)
+        if name == "psi_max":
+            return 2.0 * np.abs(col["p_y1"]) * col["p_t"] / np.pi
+        if name == "v_cut_min":
+            before, after = plateau_speeds(col["p_a1"], col["p_a2"], col["p_a3"], col["p_v0"])
+            return np.minimum(before, after)
+        return btn_bound(self.p, self.lane_width, stop_at=self.bound_stop_at)
+
+    def _criticality(self, name: str) -> None:
+        """The criticality quantities into the cache (sampler.region.criticality)."""
+        # the TTR scan costs more than the drivers: only when ttr_true is asked for
+        q = criticality_quantities(self.p, self.lane_width, with_ttr=name == "ttr_true")
+        if name != "ttr_true":
+            del q["ttr_true"]
+        self._cache.update(q)
+
+    def _support(self, name: str) -> None:
+        """``density_pct`` or the support measures into the cache, from the model."""
+        if self.model is None:
+            raise ConstraintError(f"{name} needs the model: use sample() or "
+                                  "estimate_p_region(), or Region.bind(model)")
+        # the model knows its own support (sampler.model.support); the region only
+        # asks it, so that this layer does not import the model's
+        c = self._cache
+        if name == "density_pct":
+            c[name] = np.asarray(self.model.density_percentile(self.p), dtype=np.float64)
+        else:
+            sm = self.model.support_measures(self.p)
+            c["support"] = np.asarray(sm.code, dtype=np.float64)
+            c["support_distance"] = np.asarray(sm.distance, dtype=np.float64)
+            c["support_excess"] = np.asarray(sm.largest, dtype=np.float64)
+
+    def _crossing(self, col: dict[str, FloatArray]) -> None:
+        """The quantities of the crossing and the lateral motion into the cache
+        (sampler.region.kinematics)."""
+        c = self._cache
+        kin = crossing_kinematics(self.p, self.lane_width / 2.0)
+        c["t_cross"] = kin.t_cross + DEFAULT_LEAD_IN  # scenario time, as t_p
+        c["v_cross"] = kin.v_cross
+        c["v_ego"] = kin.v_cross + col["dv"]
+        c["thw"] = np.where(c["v_ego"] > 0, col["gap"] / np.where(
+            c["v_ego"] > 0, c["v_ego"], 1.0), np.inf)
+        c["thw"][np.isnan(c["v_ego"])] = np.nan
+        c["lat_disp"] = np.abs(kin.y_end)
+        c["cross_margin"] = c["lat_disp"] - self.lane_width / 2.0
+        start = np.where(col["p_y1"] > 0, -self.lane_width, self.lane_width)
+        c["lat_offset"] = start + kin.y_end
+        c["end_margin"] = self.lane_width / 2.0 - np.abs(c["lat_offset"])
+        c["max_lat_speed"] = kin.max_lat_speed
 
 
 def derive(params: ArrayLike | Mapping[str, ArrayLike], names: Iterable[str] | None = None,
