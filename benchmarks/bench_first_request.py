@@ -17,10 +17,7 @@ with the load average. Nothing asserts on time.
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -28,30 +25,16 @@ import time
 from pathlib import Path
 
 import httpx
+from local_service import free_port, load, service_env, stop_group
 
 ROOT = Path(__file__).resolve().parents[1]
 BODY = {"n": 10, "seed": 1, "constraints": ["ttc<3"], "score": True}
 
 
-def load() -> str:
-    try:
-        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
-    except OSError:
-        return "n/a"
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
 def one_start(data_dir: Path, numba_dir: Path, wait_ready: bool, log: Path) -> dict[str, float]:
     port = free_port()
     base = f"http://127.0.0.1:{port}"
-    env = {k: v for k, v in os.environ.items() if not k.startswith("SCENGEN_")}
-    env.update({"SCENGEN_DATA_DIR": str(data_dir), "NUMBA_CACHE_DIR": str(numba_dir)})
+    env = service_env(data_dir, {"NUMBA_CACHE_DIR": str(numba_dir)})
     scengen = Path(sys.executable).with_name("scengen")
     t0 = time.monotonic()
     with open(log, "ab") as out:
@@ -82,12 +65,7 @@ def one_start(data_dir: Path, numba_dir: Path, wait_ready: bool, log: Path) -> d
         return {"health_answers_s": answered, "ready_s": ready, "first_s": times[0],
                 "second_s": times[1]}
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        stop_group(proc, 60)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -110,8 +88,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{label}: /health answers {r['health_answers_s']:.1f} s, ready "
                   f"{r['ready_s']:.1f} s; POST /scenarios n=10 scored: first "
                   f"{r['first_s']:.2f} s, second {r['second_s']:.2f} s, ratio "
-                  f"{r['first_s'] / r['second_s']:.1f}  [load {load()} on {os.cpu_count()} "
-                  "cores]", flush=True)
+                  f"{r['first_s'] / r['second_s']:.1f}  [{load()}]", flush=True)
     return 0
 
 

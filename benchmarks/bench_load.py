@@ -32,10 +32,7 @@ import argparse
 import json
 import os
 import shutil
-import signal
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
@@ -44,76 +41,15 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from local_service import Server, load, percentile
 
-ROOT = Path(__file__).resolve().parents[1]
 CONSTRAINTS = ["ttc<3"]
-
-
-def load() -> str:
-    try:
-        return "load " + " ".join(Path("/proc/loadavg").read_text().split()[:3])
-    except OSError:
-        return "load ?"
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-class Server:
-    def __init__(self, data_dir: Path, env_extra: dict[str, str], log: Path) -> None:
-        self.port = free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-        env = {k: v for k, v in os.environ.items() if not k.startswith("SCENGEN_")}
-        env.update({"SCENGEN_DATA_DIR": str(data_dir), "SCENGEN_LOCAL_WORKERS": "2",
-                    **env_extra})
-        self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
-             "--port", str(self.port), "--log-level", "warning"],
-            cwd=ROOT, env=env, stdout=self._log, stderr=self._log, start_new_session=True)
-
-    def wait(self, timeout: float = 900) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise SystemExit(f"uvicorn exited with {self.proc.returncode}; see the log")
-            try:
-                r = httpx.get(f"{self.base}/health", timeout=5)
-                if r.status_code == 200 and r.json().get("status") == "ok":
-                    return
-            except httpx.TransportError:
-                pass
-            time.sleep(0.5)
-        raise SystemExit("uvicorn did not come up")
-
-    def stop(self) -> None:
-        os.killpg(self.proc.pid, signal.SIGTERM)
-        try:
-            self.proc.wait(timeout=120)
-        except subprocess.TimeoutExpired:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-            self.proc.wait()
-        self._log.close()
 
 
 def client(base: str, k: int) -> httpx.Client:
     """A client talking from loopback address 127.0.0.k (its own peer address)."""
     return httpx.Client(base_url=base, timeout=60,
                         transport=httpx.HTTPTransport(local_address=f"127.0.0.{k}"))
-
-
-def percentile(values: list[float], p: float) -> float:
-    ordered = sorted(values)
-    if not ordered:
-        return float("nan")
-    pos = p * (len(ordered) - 1)
-    lo = int(pos)
-    hi = min(lo + 1, len(ordered) - 1)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (pos - lo)
 
 
 def run_phase(base: str, args: argparse.Namespace) -> dict[str, Any]:
@@ -244,13 +180,13 @@ def main() -> None:
     try:
         for name in args.only.split(","):
             db = work / f"{name}.db"
-            env = {"SCENGEN_DATABASE_URL": f"sqlite:///{db}", "SCENGEN_RESUME_JOBS": "0",
-                   **phases[name]}
+            env = {"SCENGEN_LOCAL_WORKERS": "2", "SCENGEN_DATABASE_URL": f"sqlite:///{db}",
+                   "SCENGEN_RESUME_JOBS": "0", **phases[name]}
             print(f"{name}: starting the service (log {work / 'server.log'})  [{load()}]",
                   file=sys.stderr, flush=True)
             server = Server(args.cache, env, work / "server.log")
             try:
-                server.wait()
+                server.wait(ready=True)
                 results[name] = run_phase(server.base, args)
             finally:
                 server.stop()

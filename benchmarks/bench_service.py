@@ -49,8 +49,6 @@ import argparse
 import json
 import os
 import shutil
-import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -65,70 +63,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the checkout this script is in, also for in-process parts
 
-
-def load() -> str:
-    """The machine's load averages (1, 5, 15 min) and core count, to print with a figure."""
-    try:
-        avg = " ".join(Path("/proc/loadavg").read_text().split()[:3])
-    except OSError:
-        avg = "n/a"
-    return f"load {avg} on {os.cpu_count()} cores"
+from local_service import Server, load, percentile  # noqa: E402
 
 
 def note(text: str) -> None:
     print(f"{text}  [{load()}]", file=sys.stderr, flush=True)
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-class Server:
-    """uvicorn in a subprocess on a free loopback port."""
-
-    def __init__(self, data_dir: Path, env_extra: dict[str, str], log: Path) -> None:
-        self.port = free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-        env = {k: v for k, v in os.environ.items() if not k.startswith("SCENGEN_")}
-        env.update({"SCENGEN_DATA_DIR": str(data_dir), **env_extra})
-        self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
-             "--port", str(self.port), "--log-level", "warning"],
-            cwd=ROOT, env=env, stdout=self._log, stderr=self._log, start_new_session=True)
-
-    def wait(self, timeout: float = 900) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise SystemExit(f"uvicorn exited with {self.proc.returncode}; see the log")
-            try:
-                if httpx.get(f"{self.base}/health", timeout=5).status_code == 200:
-                    return
-            except httpx.TransportError:
-                pass
-            time.sleep(0.5)
-        raise SystemExit("uvicorn did not come up")
-
-    def stop(self) -> None:
-        os.killpg(self.proc.pid, signal.SIGTERM)
-        try:
-            self.proc.wait(timeout=120)
-        except subprocess.TimeoutExpired:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-            self.proc.wait()
-        self._log.close()
-
-
-def percentile(values: list[float], p: float) -> float:
-    ordered = sorted(values)
-    pos = p * (len(ordered) - 1)
-    lo = int(pos)
-    hi = min(lo + 1, len(ordered) - 1)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (pos - lo)
 
 
 def latency(base: str, n: int, requests: int) -> dict[str, Any]:

@@ -1,4 +1,5 @@
-"""Run esmini headless on an exported scenario and read its CSV log back (test helper).
+"""Run esmini headless on an exported scenario and read its CSV log back (test helper), and
+the cut-ins the esmini tests run (test_exports_esmini.py, test_esmini_sut.py).
 
 The binary is ``$SCENGEN_ESMINI`` or ``<repo>/../shared/tools/esmini/bin/esmini``
 (``esmini_binary``); None when neither exists, so that the tests skip.
@@ -15,9 +16,29 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
+from riskcore.scenario import ConcreteScenario
+from sampler.scenario.builder import build_scenario
+
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_ESMINI = REPO.parent / "shared" / "tools" / "esmini" / "bin" / "esmini"
 ENV_VAR = "SCENGEN_ESMINI"
+
+#: cut-ins from the left and the right, closing (collisions) and opening, highway speeds
+CUTIN_PARAMS = [
+    {"p_y1": -0.05, "p_t": 2.0, "p_a1": 0.5, "p_a2": 0.25, "p_a3": 1.0, "p_v0": 25.0,
+     "dv": 4.0, "gap": 2.0},
+    {"p_y1": 0.08, "p_t": 1.5, "p_a1": -1.0, "p_a2": -0.5, "p_a3": 2.0, "p_v0": 20.0,
+     "dv": 3.0, "gap": 4.0},
+    {"p_y1": 0.05, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0, "p_v0": 31.0,
+     "dv": -1.0, "gap": 20.0},
+    {"p_y1": -0.04, "p_t": 2.5, "p_a1": 1.0, "p_a2": -3.0, "p_a3": 1.0, "p_v0": 33.0,
+     "dv": 6.0, "gap": 8.0},
+]
+
+
+def cutins(params: list[dict[str, float]]) -> list[ConcreteScenario]:
+    """The scenarios of ``params`` (scenario i built with seed i)."""
+    return [build_scenario(p, seed=i) for i, p in enumerate(params)]
 
 
 def esmini_binary() -> Path | None:

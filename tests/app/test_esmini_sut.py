@@ -52,22 +52,11 @@ from riskcore.sut import (
     simulate,
 )
 from sampler.scenario.builder import build_scenario
+from tests.app.esmini_run import CUTIN_PARAMS, cutins
 
 REPO = Path(__file__).resolve().parents[2]
 SHARED_LIB = REPO.parent / "shared" / "tools" / "esmini" / "lib" / "libesminiLib.so"
 
-#: cut-ins from the left and the right, closing (collisions) and opening (as
-#: tests/app/test_exports_esmini.py)
-PARAMS = [
-    {"p_y1": -0.05, "p_t": 2.0, "p_a1": 0.5, "p_a2": 0.25, "p_a3": 1.0, "p_v0": 25.0,
-     "dv": 4.0, "gap": 2.0},
-    {"p_y1": 0.08, "p_t": 1.5, "p_a1": -1.0, "p_a2": -0.5, "p_a3": 2.0, "p_v0": 20.0,
-     "dv": 3.0, "gap": 4.0},
-    {"p_y1": 0.05, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0, "p_v0": 31.0,
-     "dv": -1.0, "gap": 20.0},
-    {"p_y1": -0.04, "p_t": 2.5, "p_a1": 1.0, "p_a2": -3.0, "p_a3": 1.0, "p_v0": 33.0,
-     "dv": 6.0, "gap": 8.0},
-]
 GAP_TOL = 0.1  # m, issue 24 item 11
 EXACT = 1e-9
 
@@ -106,7 +95,7 @@ def test_no_library_is_a_field_error(monkeypatch: pytest.MonkeyPatch, tmp_path: 
         find_library()
     not_a_library = tmp_path / "libfake.so"
     not_a_library.write_text("not ELF")
-    scenario = build_scenario(PARAMS[0], seed=0)
+    scenario = build_scenario(CUTIN_PARAMS[0], seed=0)
     with pytest.raises(EsminiError, match="does not load") as err:
         simulate_esmini(make_sut("none"), [scenario], seeds=0, library=not_a_library)
     assert err.value.field == "library"
@@ -123,7 +112,7 @@ def _schema() -> etree.XMLSchema:
 def test_the_adapter_runs_the_test_file_without_its_conflict_over_stop(tmp_path: Path) -> None:
     manifest = build_manifest(seed=0, model_hash=None, sampler_settings={}, constraints=[],
                               p_region=None)
-    zpath = export_catalogue("xosc", [(build_scenario(PARAMS[0], seed=0), {})], manifest,
+    zpath = export_catalogue("xosc", [(build_scenario(CUTIN_PARAMS[0], seed=0), {})], manifest,
                              tmp_path / "c.zip", mode="test")
     with zipfile.ZipFile(zpath) as zf:
         exported = zf.read("scenario_0000000.xosc")
@@ -157,7 +146,7 @@ def library() -> Path:
 
 
 def _scenarios() -> list[ConcreteScenario]:
-    return [build_scenario(p, seed=i) for i, p in enumerate(PARAMS)]
+    return cutins(CUTIN_PARAMS)
 
 
 def _same_runs(a: RunBatch, b: RunBatch, tol: float) -> None:

@@ -29,12 +29,13 @@ from lxml import etree
 from app.exports import build_manifest, export_catalogue
 from riskcore.geometry import boxes_overlap
 from riskcore.scenario import ConcreteScenario, Track
-from sampler.scenario.builder import build_scenario
 from tests.app.esmini_run import (
+    CUTIN_PARAMS,
     DEFAULT_ESMINI,
     ENV_VAR,
     ESMINI_SUTS,
     EntityLog,
+    cutins,
     esmini_binary,
     run_esmini,
     with_controller,
@@ -42,17 +43,6 @@ from tests.app.esmini_run import (
 
 pytestmark = pytest.mark.esmini
 
-#: cut-ins from the left and the right, closing (collisions) and opening, highway speeds
-PARAMS = [
-    {"p_y1": -0.05, "p_t": 2.0, "p_a1": 0.5, "p_a2": 0.25, "p_a3": 1.0, "p_v0": 25.0,
-     "dv": 4.0, "gap": 2.0},
-    {"p_y1": 0.08, "p_t": 1.5, "p_a1": -1.0, "p_a2": -0.5, "p_a3": 2.0, "p_v0": 20.0,
-     "dv": 3.0, "gap": 4.0},
-    {"p_y1": 0.05, "p_t": 1.5, "p_a1": 0.0, "p_a2": 0.0, "p_a3": 0.0, "p_v0": 31.0,
-     "dv": -1.0, "gap": 20.0},
-    {"p_y1": -0.04, "p_t": 2.5, "p_a1": 1.0, "p_a2": -3.0, "p_a3": 1.0, "p_v0": 33.0,
-     "dv": 6.0, "gap": 8.0},
-]
 #: a slow cutter (0.9-1.2 m/s): 0.1 s steps are closer than esmini's 0.1 m filter
 SLOW = {"p_y1": 0.5, "p_t": 3.0, "p_a1": -0.1, "p_a2": 0.0, "p_a3": 3.0, "p_v0": 1.2,
         "dv": 0.5, "gap": 1.0}
@@ -72,10 +62,6 @@ def esmini() -> Path:
     return binary
 
 
-def _scenarios(params: list[dict[str, float]]) -> list[ConcreteScenario]:
-    return [build_scenario(p, seed=i) for i, p in enumerate(params)]
-
-
 def _unzipped(tmp: Path, scenarios: list[ConcreteScenario], mode: str) -> Path:
     manifest = build_manifest(seed=1, model_hash=None, sampler_settings={}, constraints=[],
                               p_region=None)
@@ -91,7 +77,7 @@ def _unzipped(tmp: Path, scenarios: list[ConcreteScenario], mode: str) -> Path:
 def runs(esmini: Path, tmp_path_factory: pytest.TempPathFactory
          ) -> dict[tuple[str, int], dict[str, EntityLog]]:
     tmp = tmp_path_factory.mktemp("esmini")
-    scenarios = _scenarios(PARAMS)
+    scenarios = cutins(CUTIN_PARAMS)
     out: dict[tuple[str, int], dict[str, EntityLog]] = {}
     for mode in ("replay", "test"):
         folder = _unzipped(tmp, scenarios, mode)
@@ -141,7 +127,7 @@ def _esmini_collision(log: EntityLog) -> float | None:
 def test_boxes_and_headings_match_scengen_at_every_step(
         runs: dict[tuple[str, int], dict[str, EntityLog]], mode: str) -> None:
     worst_box = worst_heading = 0.0
-    for i, s in enumerate(_scenarios(PARAMS)):
+    for i, s in enumerate(cutins(CUTIN_PARAMS)):
         t = s.t - s.t[0]
         logs = runs[(mode, i)]
         for track in (s.ego, *s.objects):
@@ -159,7 +145,7 @@ def test_boxes_and_headings_match_scengen_at_every_step(
 def test_collision_onset_within_one_step_and_the_run_stops_there(
         runs: dict[tuple[str, int], dict[str, EntityLog]], mode: str) -> None:
     seen = 0
-    for i, s in enumerate(_scenarios(PARAMS)):
+    for i, s in enumerate(cutins(CUTIN_PARAMS)):
         ours = _scengen_collision(s)
         log = runs[(mode, i)]["ego"]
         theirs = _esmini_collision(log)
@@ -176,7 +162,7 @@ def test_collision_onset_within_one_step_and_the_run_stops_there(
 
 def test_test_mode_with_a_constant_speed_ego_is_the_replay(
         runs: dict[tuple[str, int], dict[str, EntityLog]]) -> None:
-    for i in range(len(PARAMS)):
+    for i in range(len(CUTIN_PARAMS)):
         replay, test = runs[("replay", i)], runs[("test", i)]
         for name in ("ego", "cutter"):
             assert replay[name].t == test[name].t
@@ -188,14 +174,14 @@ def test_test_mode_with_a_constant_speed_ego_is_the_replay(
 def test_parameter_distribution_gives_one_run_per_tuple_equal_to_its_scenario(
         esmini: Path, runs: dict[tuple[str, int], dict[str, EntityLog]],
         tmp_path: Path) -> None:
-    folder = _unzipped(tmp_path, _scenarios(PARAMS), "test")
+    folder = _unzipped(tmp_path, cutins(CUTIN_PARAMS), "test")
     proc = subprocess.run([str(esmini), "--headless", "--osc", "cutin_logical.xosc",
                            "--param_dist", "cutin_distribution.xosc",
                            "--return_nr_permutations", "--disable_stdout",
                            "--logfile_path", str(tmp_path / "n.log")],
                           cwd=folder, capture_output=True, timeout=60, check=False)
-    assert proc.returncode == len(PARAMS)
-    for i in range(len(PARAMS)):
+    assert proc.returncode == len(CUTIN_PARAMS)
+    for i in range(len(CUTIN_PARAMS)):
         single, dist = runs[("test", i)], runs[("dist", i)]
         for name in ("ego", "cutter"):
             assert single[name].t == dist[name].t
@@ -205,7 +191,7 @@ def test_parameter_distribution_gives_one_run_per_tuple_equal_to_its_scenario(
 
 def test_a_slow_cutter_keeps_every_vertex_esmini_would_otherwise_merge(
         esmini: Path, tmp_path: Path) -> None:
-    [s] = _scenarios([SLOW])
+    [s] = cutins([SLOW])
     cutter = s.objects[0]
     assert np.min(np.hypot(np.diff(cutter.x), np.diff(cutter.y))) < 0.1  # would merge
     t = s.t - s.t[0]
@@ -243,7 +229,7 @@ def sut_runs(esmini: Path, tmp_path_factory: pytest.TempPathFactory
                         tuple[float, float]]:
     """Every test-mode scenario driven by each of esmini's controllers (and none)."""
     tmp = tmp_path_factory.mktemp("esmini_suts")
-    scenarios = _scenarios([*PARAMS, LATE])
+    scenarios = cutins([*CUTIN_PARAMS, LATE])
     folder = _unzipped(tmp, scenarios, "test")
     road = json.loads((folder / "manifest.json").read_text())["export"]["road_x_range"]
     schema = _schema()
@@ -356,5 +342,5 @@ def test_a_run_ends_at_a_collision_a_resolved_conflict_or_the_time_limit(
             assert not _conflict_over(s, ego, cut, -2), (label, i, end)
     # the late cut-in: the braking FSM model still closes in when the cutter's scripted
     # motion ends; the run goes on until contact lies beyond the follow horizon
-    late = len(PARAMS)
+    late = len(CUTIN_PARAMS)
     assert runs[("R157 FSM", late)]["ego"].t[-1] > float(scenarios[late].t[-1]) + 1.0

@@ -14,22 +14,15 @@ from pathlib import Path
 
 import httpx
 import pytest
-from playwright.sync_api import Page, Request, sync_playwright
+from playwright.sync_api import BrowserContext, Page, Request
 
-from app.db.database import Database
 from tests.app.factories import uvicorn_service
-from tests.browser.factories import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
-    prepare_data_dir,
-    store_synthetic_catalogue,
-    synthetic_rows,
-)
+from tests.browser.dashboard import Server, settle
+from tests.browser.factories import prepare_data_dir, synthetic_rows
 
 pytestmark = pytest.mark.browser
 
 KEY = "k3y-for-the-dashboard"
-TIMEOUT_MS = 120_000
 
 
 @pytest.fixture(scope="module")
@@ -54,30 +47,12 @@ N_ROWS = 7
 @pytest.fixture(scope="module")
 def catalogue(served: tuple[str, Path]) -> str:
     """A finished catalogue of N_ROWS hand-made rows (seed 3) in the service's store."""
-    url, data_dir = served
-    model: str = httpx.get(f"{url}/health").json()["default_model"]
-    db = Database(f"sqlite:///{(data_dir / 'scengen.db').resolve()}")
-    try:
-        return store_synthetic_catalogue(db, data_dir, model, N_ROWS, seed=3)
-    finally:
-        db.dispose()
+    return Server(*served).catalogue(n=N_ROWS, seed=3)
 
 
 @pytest.fixture
-def page() -> Iterator[Page]:
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            context = browser.new_context(viewport={"width": 1400, "height": 1000})
-            context.set_default_timeout(TIMEOUT_MS)
-            yield context.new_page()
-        finally:
-            browser.close()
-
-
-def settle(page: Page) -> None:
-    page.wait_for_selector("body[data-ready='1']")
-    page.wait_for_function("document.body.dataset.busy === '0'")
+def page(context: BrowserContext) -> Iterator[Page]:
+    yield context.new_page()
 
 
 def test_the_dashboard_asks_for_the_key_once_and_sends_it_on_every_request(

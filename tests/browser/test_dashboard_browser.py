@@ -11,60 +11,27 @@ screenshot of the view under ``test-artifacts/dashboard/``.
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
-from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
+from playwright.sync_api import BrowserContext, ConsoleMessage, Page
 
-from app.db.database import Database
-from tests.app.factories import uvicorn_service
-from tests.browser.factories import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
-    prepare_data_dir,
-    store_synthetic_catalogue,
-)
+from tests.browser.dashboard import ARTIFACTS, Server, dashboard_service, settle, shot
+from tests.browser.factories import prepare_data_dir, store_synthetic_catalogue
 
 pytestmark = pytest.mark.browser
 
-ROOT = Path(__file__).resolve().parents[2]
-ARTIFACTS = ROOT / "test-artifacts" / "dashboard"
-TIMEOUT_MS = 120_000
 #: the constraint typed in the page to draw a catalogue (two, to exercise the splitting)
 CONSTRAINT = "ttc<3; v_ego>=10"
 
 
-class Server:
-    def __init__(self, base: str, data_dir: Path) -> None:
-        self.base = base
-        self.data_dir = data_dir
-
-    def db(self) -> Database:
-        return Database(f"sqlite:///{(self.data_dir / 'scengen.db').resolve()}")
-
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    data_dir = prepare_data_dir(tmp_path_factory.mktemp("browser-data"))
-    env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0",
-               SCENGEN_CHUNK_SIZE="6")
-    for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
-        env.pop(name, None)
-    with uvicorn_service(env, data_dir / "uvicorn.log") as base:
-        yield Server(base, data_dir)
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
+    with dashboard_service(prepare_data_dir(tmp_path_factory.mktemp("browser-data"))) as s:
+        yield s
 
 
 class Console:
@@ -81,41 +48,19 @@ class Console:
 
 
 @pytest.fixture
-def page(browser: Browser) -> Iterator[Page]:
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    context.set_default_timeout(TIMEOUT_MS)
+def page(context: BrowserContext) -> Iterator[Page]:
     pg = context.new_page()
     # nothing may come from the network: every request goes to the app itself
     outside: list[str] = []
     pg.on("request", lambda req: outside.append(req.url)
           if not req.url.startswith(("http://127.0.0.1", "data:")) else None)
     yield pg
-    context.close()
+    pg.close()
     assert outside == [], f"requests outside the app: {outside}"
-
-
-def settle(page: Page) -> None:
-    page.wait_for_selector("body[data-ready='1']")
-    page.wait_for_function("document.body.dataset.busy === '0'")
 
 
 def count(page: Page, selector: str) -> int:
     return page.locator(selector).count()
-
-
-def shot(page: Page, selector: str, name: str) -> None:
-    """Screenshot of one element, whole: the viewport is made tall enough for it and the
-    sticky header is let go so it cannot cover the element."""
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    page.add_style_tag(content="header { position: static !important; }")
-    size = page.viewport_size or {"width": 1400, "height": 1000}
-    box = page.locator(selector).bounding_box()
-    tall = int(box["height"]) + 200 if box else size["height"]
-    page.set_viewport_size({"width": size["width"], "height": max(size["height"], tall)})
-    try:
-        page.locator(selector).screenshot(path=str(ARTIFACTS / name), animations="disabled")
-    finally:
-        page.set_viewport_size(size)
 
 
 PARAMS = ("p_y1", "p_t", "p_a1", "p_a2", "p_a3", "p_v0", "dv", "gap")
@@ -124,20 +69,20 @@ VIEW3_PLOTS = ("class-counts", "ttc-btn", "btn-hist", "ttr-hist", "impact-hist",
                "alarm-hist")
 
 
-def plot_data(page: Page, div: str) -> list[dict[str, object]]:
+def plot_data(page: Page, div: str) -> list[dict[str, Any]]:
     """The traces plotly holds for a plot (what it drew from)."""
-    data: list[dict[str, object]] = page.evaluate(
+    data: list[dict[str, Any]] = page.evaluate(
         "(id) => Array.from(document.getElementById(id).data || [])"
         ".map((t) => ({x: t.x, y: t.y, name: t.name, customdata: t.customdata}))", div)
     return data
 
 
-def check_view3(page: Page, base: str, cid: str) -> dict[str, object]:
+def check_view3(page: Page, base: str, cid: str) -> dict[str, Any]:
     """View 3 shows catalogue ``cid``: class bars equal the status's class counts, the
     drawn scatter points are the view's, every histogram with data has bars, the
     riskiest table lists the view's top rows."""
     status = httpx.get(f"{base}/catalogues/{cid}").json()
-    view: dict[str, object] = httpx.get(
+    view: dict[str, Any] = httpx.get(
         f"{base}/dashboard/api/catalogues/{cid}/criticality").json()
     classes = plot_data(page, "class-counts")[0]
     assert classes["customdata"] == ["no_conflict", "preventable", "unpreventable",

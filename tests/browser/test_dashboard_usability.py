@@ -11,63 +11,24 @@ Each test looks at the page as drawn (Plotly's data, the DOM) and saves a screen
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
-from playwright.sync_api import Browser, Page, sync_playwright
+from playwright.sync_api import BrowserContext, Page
 
-from app.db.database import Database
-from tests.app.factories import uvicorn_service
-from tests.browser.factories import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
-    prepare_data_dir,
-    store_synthetic_catalogue,
-)
+from tests.browser.dashboard import Server, dashboard_service, settle, shot
+from tests.browser.factories import prepare_data_dir
 
 pytestmark = pytest.mark.browser
 
-ROOT = Path(__file__).resolve().parents[2]
-ARTIFACTS = ROOT / "test-artifacts" / "dashboard"
-TIMEOUT_MS = 120_000
-
-
-class Server:
-    def __init__(self, base: str, data_dir: Path) -> None:
-        self.base = base
-        self.data_dir = data_dir
-
-    def db(self) -> Database:
-        return Database(f"sqlite:///{(self.data_dir / 'scengen.db').resolve()}")
-
-    def default_model(self) -> str:
-        model: str = httpx.get(f"{self.base}/health").json()["default_model"]
-        return model
-
-    def catalogue(self, rows: list[dict[str, Any]] | None = None, n: int = 60,
-                  seed: int = 3, **kw: Any) -> str:
-        db = self.db()
-        try:
-            return store_synthetic_catalogue(db, self.data_dir, self.default_model(), n,
-                                             seed=seed, rows=rows, **kw)
-        finally:
-            db.dispose()
-
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    data_dir = prepare_data_dir(tmp_path_factory.mktemp("usability-data"))
-    env = dict(os.environ, SCENGEN_DATA_DIR=str(data_dir), SCENGEN_LOCAL_WORKERS="0",
-               SCENGEN_CHUNK_SIZE="6", SCENGEN_WARM_START="0")
-    for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
-        env.pop(name, None)
-    with uvicorn_service(env, data_dir / "uvicorn.log") as base:
-        yield Server(base, data_dir)
+    with dashboard_service(prepare_data_dir(tmp_path_factory.mktemp("usability-data")),
+                           SCENGEN_WARM_START="0") as s:
+        yield s
 
 
 @pytest.fixture(scope="module")
@@ -87,45 +48,15 @@ def real_catalogue(server: Server) -> str:
     raise AssertionError("the catalogue did not finish")
 
 
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
-
-
 @pytest.fixture
-def page(browser: Browser) -> Iterator[Page]:
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    context.set_default_timeout(TIMEOUT_MS)
+def page(context: BrowserContext) -> Iterator[Page]:
     pg = context.new_page()
     errors: list[str] = []
     pg.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     pg.on("pageerror", lambda exc: errors.append(f"pageerror: {exc}"))
     yield pg
-    context.close()
+    pg.close()
     assert errors == []
-
-
-def settle(page: Page) -> None:
-    page.wait_for_selector("body[data-ready='1']")
-    page.wait_for_function("document.body.dataset.busy === '0'")
-
-
-def shot(page: Page, selector: str, name: str) -> None:
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    page.add_style_tag(content="header { position: static !important; }")
-    size = page.viewport_size or {"width": 1400, "height": 1000}
-    box = page.locator(selector).bounding_box()
-    tall = int(box["height"]) + 200 if box else size["height"]
-    page.set_viewport_size({"width": size["width"], "height": max(size["height"], tall)})
-    try:
-        page.locator(selector).screenshot(path=str(ARTIFACTS / name), animations="disabled")
-    finally:
-        page.set_viewport_size(size)
 
 
 def traces(page: Page, div: str) -> list[dict[str, Any]]:

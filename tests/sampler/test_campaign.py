@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import numpy as np
 import pytest
@@ -58,24 +59,32 @@ def _rare_halfspace(model: CutInGMM, target: float) -> tuple[np.ndarray, float, 
     return a, hi, _mass(model, a, hi)
 
 
-def test_unbiased_and_covering_on_a_closed_form_case(model: CutInGMM) -> None:
-    a, b, p_true = _rare_halfspace(model, 3e-5)
-    runner = halfspace_runner(model, a, b)
-    est, covered = [], 0
-    for s in range(40):
-        r = evaluate(model, runner, n=800, seed=s, batch_size=400, physical_bounds=False,
-                     bootstrap=False)
-        summ = r.summary()["p_collision"]
-        est.append(summ["estimate"])
-        lo, hi = summ["ci"]
+def _assert_unbiased_and_covering(model: CutInGMM, runner: Any, p_true: float,
+                                  **options: Any) -> list[dict[str, Any]]:
+    """40 campaigns ``evaluate(model, runner, seed=s, physical_bounds=False,
+    bootstrap=False, **options)``, s = 0 … 39, on a stand-in with the known probability
+    ``p_true``: the mean of their estimates within 3 standard errors of it and within
+    15 %, and the 95 % interval covering it in at least 34. Returns their summaries."""
+    summaries = [evaluate(model, runner, seed=s, physical_bounds=False, bootstrap=False,
+                          **options).summary() for s in range(40)]
+    e = np.asarray([summ["p_collision"]["estimate"] for summ in summaries])
+    covered = 0
+    for summ in summaries:
+        lo, hi = summ["p_collision"]["ci"]
         covered += int(lo is not None and lo <= p_true <= hi)
-    e = np.asarray(est)
     se_mean = e.std(ddof=1) / math.sqrt(e.size)
     # unbiased: the mean of 40 independent estimates within 3 standard errors of P
     assert abs(e.mean() - p_true) <= 3 * se_mean
     assert abs(e.mean() / p_true - 1) < 0.15
     # the 95 % interval covers P in (nearly) 95 % of the campaigns
     assert covered >= 34
+    return summaries
+
+
+def test_unbiased_and_covering_on_a_closed_form_case(model: CutInGMM) -> None:
+    a, b, p_true = _rare_halfspace(model, 3e-5)
+    _assert_unbiased_and_covering(model, halfspace_runner(model, a, b), p_true, n=800,
+                                  batch_size=400)
 
 
 def test_stop_rule_reaches_the_relative_half_width(model: CutInGMM) -> None:
