@@ -18,13 +18,15 @@ from pydantic import (
     field_serializer,
     model_validator,
 )
+from typing_extensions import TypedDict  # pydantic reads it on Python 3.11 (the tests)
 
 from app import jsonconv
 from sampler import SAMPLER_NAMES
 from sampler.region import constraint_pattern
 from sampler.scenario import ScenarioRecord
 
-__all__ = ["SEED_MAX", "ApiModel", "ConstraintText", "PRegion", "RiskReport", "SamplingRequest",
+__all__ = ["SEED_MAX", "ApiModel", "ConstraintText", "JsonFloat", "PRegion", "PRegionJSON",
+           "PRegionReport", "RiskReport", "SamplingRequest",
            "ScenarioRecord", "SutInfo", "schema_enum"]
 
 #: the largest seed a request may give: the largest integer every JSON parser holds exactly
@@ -82,6 +84,46 @@ class SamplingRequest(BaseModel):
     wagner_scan: bool = Field(default=False, description="with score: also Wagner's "
                               "scan: alarm_time, risk_peak and the risks at the crossing "
                               "(about two thirds of the scoring cost; null otherwise)")
+
+
+#: a float in the service's JSON convention: a number, or "Infinity", "-Infinity", "NaN"
+JsonFloat = float | str
+
+
+class _PRegionFields(TypedDict):
+    """``sampler.methods.PRegion``'s fields (``to_dict``) and ``ci`` = [ci_low, ci_high]."""
+
+    estimate: JsonFloat
+    ci_low: JsonFloat
+    ci_high: JsonFloat
+    confidence: float
+    method: str
+    n_draws: int
+    n_hits: int
+    p_bounds: JsonFloat
+    p_bounds_ci: list[JsonFloat]
+    p_joint: JsonFloat
+    cov: JsonFloat | None
+    ci: list[JsonFloat]
+
+
+class PRegionReport(TypedDict, total=False):
+    """What the uncertainty report adds to a P(A) (``sampler.rates.uncertainty_report``):
+    its two intervals, the model interval's details (``app.rates.ModelInterval``) or why
+    there is none, and the rates (``app.rates.RegionRates``)."""
+
+    mc_ci: list[JsonFloat]
+    model_ci: list[JsonFloat] | None
+    model_interval_error: str
+    model_interval: dict[str, Any]
+    rates: dict[str, Any]
+
+
+class PRegionJSON(_PRegionFields, PRegionReport, total=False):
+    """P(A) as the service keeps it from the sampler's result to the store (a catalogue's
+    ``p_region`` column, ``domain.SampleResult.p_region``, a chunk's diagnostics), in the
+    JSON convention and in this key order: ``app.domain.sampling.region_dict`` writes it,
+    the report's keys follow. :class:`PRegion` reads it (the report's keys as extras)."""
 
 
 class PRegion(ApiModel):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from app import budget, jsonconv
 from app.errors import InvalidInput, domain_field
+from app.schemas import PRegionJSON, PRegionReport
 from riskcore import FieldError
 from sampler import (
     Constraint,
@@ -73,17 +74,17 @@ class SampleResult:
 
     params: pd.DataFrame  # columns PARAM_NAMES, one row per sample
     weights: NDArray[np.float64]  # exposure weight per sample
-    p_region: dict[str, Any]  # {"estimate", "ci": [lo, hi], ...}
+    p_region: PRegionJSON
     diagnostics: dict[str, Any]
     lane_width: float  # m, the region's lane width: build the scenarios with it
     sample_set: SampleSet | None = None  # the sampler's set (for ``add_region_report``)
 
 
-def region_dict(pr: PRegion) -> dict[str, Any]:
+def region_dict(pr: PRegion) -> PRegionJSON:
     """A PRegion as JSON: its fields plus ``ci`` = [ci_low, ci_high]."""
     out = dict(pr.to_dict())
     out["ci"] = [out.get("ci_low"), out.get("ci_high")]
-    encoded: dict[str, Any] = jsonconv.encode(out)
+    encoded: PRegionJSON = jsonconv.encode(out)
     return encoded
 
 
@@ -94,7 +95,7 @@ def _sampling_error(exc: FieldError) -> InvalidInput:
     return InvalidInput(f"sampling failed: {exc}", field=field)
 
 
-def region_of(data: dict[str, Any]) -> PRegion:
+def region_of(data: Mapping[str, Any]) -> PRegion:
     """A stored P(A) dict (``region_dict``, maybe JSON-encoded) back as a PRegion."""
     values = jsonconv.decode(data)
     names = {f.name for f in fields(PRegion)}
@@ -102,7 +103,7 @@ def region_of(data: dict[str, Any]) -> PRegion:
 
 
 def sample(model: CutInGMM, constraints: Sequence[Constraint], n: int, seed: int | None,
-           method: str = "auto", known_region: dict[str, Any] | None = None, *,
+           method: str = "auto", known_region: Mapping[str, Any] | None = None, *,
            report: bool = True, lane_width: float | None = None, use_envelope: bool = True,
            progress: ProgressFn | None = None) -> SampleResult:
     """``n`` samples of ``model`` in the region (``sampler.sample``; ``seed`` None: a fresh
@@ -140,11 +141,13 @@ def add_region_report(model: CutInGMM, result: SampleResult) -> None:
     when the model has bootstrap refits or an exposure."""
     if result.sample_set is None or not (model.bootstrap_ or model.exposure_):
         return
-    result.p_region.update(_uncertainty_fields(region_report(model, result.sample_set)))
+    merged: PRegionJSON = {**result.p_region,
+                           **_uncertainty_fields(region_report(model, result.sample_set))}
+    result.p_region.update(merged)
 
 
 def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
-                    seed: int, progress: ProgressFn | None = None) -> dict[str, Any]:
+                    seed: int, progress: ProgressFn | None = None) -> PRegionJSON:
     """P(A) of the constraint region under the model: ``{"estimate", "ci": [lo, hi], ...}``;
     ``progress`` hears the estimator's stages."""
     try:
@@ -154,7 +157,7 @@ def estimate_region(model: CutInGMM, constraints: Sequence[Constraint],
         raise _sampling_error(exc) from None
 
 
-def _uncertainty_fields(report: dict[str, Any]) -> dict[str, Any]:
+def _uncertainty_fields(report: dict[str, Any]) -> PRegionReport:
     """The keys a P(A) dict gets from ``uncertainty_report``: ``mc_ci``, ``model_ci``,
     ``model_interval`` and ``rates`` (JSON-encoded); ``model_interval_error`` when the
     model interval could not be estimated."""
@@ -165,14 +168,14 @@ def _uncertainty_fields(report: dict[str, Any]) -> dict[str, Any]:
     for key in ("model_interval", "rates"):
         if key in report:
             out[key] = report[key]
-    encoded: dict[str, Any] = jsonconv.encode(out)
+    encoded: PRegionReport = jsonconv.encode(out)
     return encoded
 
 
 def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
-                       p_region: dict[str, Any],
+                       p_region: PRegionJSON,
                        n_samples: int | None = None,
-                       per_replicate: bool = False) -> dict[str, Any]:
+                       per_replicate: bool = False) -> PRegionJSON:
     """``p_region`` (a ``region_dict``) with the "model" interval beside the Monte Carlo one
     and the rates per hour / per 10^6 km with both, when the model has bootstrap replicates
     and an exposure (``sampler.rates.exposure.uncertainty_report``); unchanged otherwise.
@@ -185,4 +188,5 @@ def region_uncertainty(model: CutInGMM, constraints: Sequence[Constraint],
                                     per_replicate=per_replicate)
     except FieldError as exc:  # the user's input; a library's ValueError is our bug (500)
         raise _sampling_error(exc) from None
-    return {**p_region, **_uncertainty_fields(report)}
+    out: PRegionJSON = {**p_region, **_uncertainty_fields(report)}
+    return out

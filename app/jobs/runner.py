@@ -16,10 +16,10 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import wait
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from app import domain, jsonconv
 from app.db import chunkfile
@@ -29,6 +29,9 @@ from app.db.models import CatalogueRow, utcnow
 from app.jobs.chunk import CatalogueSpec, ChunkStopped, region_seed
 from app.jobs.executors import ChunkExecutor
 from app.jobs.fair import JobCancelled, Share
+
+if TYPE_CHECKING:  # annotations only: app.schemas imports the sampler
+    from app.schemas import PRegionJSON
 
 log = logging.getLogger("scengen.jobs")
 
@@ -80,7 +83,7 @@ def worker_spec(row: CatalogueRow, model_json: str) -> CatalogueSpec:
     )
 
 
-def estimate_region(spec: CatalogueSpec, stage: Stage | None = None) -> dict[str, Any]:
+def estimate_region(spec: CatalogueSpec, stage: Stage | None = None) -> PRegionJSON:
     """P(A) of the catalogue's region: one estimate from the catalogue's seed, with the
     "model" interval and the rates when the model has replicates and an exposure.
     ``stage`` hears the estimator's stages (pilot, plain Monte Carlo, subset-is, ...)."""
@@ -90,19 +93,19 @@ def estimate_region(spec: CatalogueSpec, stage: Stage | None = None) -> dict[str
     p_region = domain.estimate_region(model, constraints, seed, progress=stage)
     if stage is not None and (model.bootstrap_ or model.exposure_):
         stage("model interval and rates", 0, 1)
-    encoded: dict[str, Any] = jsonconv.encode(
+    encoded: PRegionJSON = jsonconv.encode(
         domain.region_uncertainty(model, constraints, p_region, n_samples=spec.n))
     return encoded
 
 
-def needs_refinement(p_region: dict[str, Any]) -> bool:
+def needs_refinement(p_region: Mapping[str, Any]) -> bool:
     """Whether the P(A) dict has a model interval with an end left unresolved."""
     interval = p_region.get("model_interval")
     return isinstance(interval, dict) and not (interval.get("lower_resolved", True)
                                                and interval.get("upper_resolved", True))
 
 
-def refine_region(spec: CatalogueSpec, p_region: dict[str, Any]) -> dict[str, Any] | None:
+def refine_region(spec: CatalogueSpec, p_region: Mapping[str, Any]) -> PRegionJSON | None:
     """The catalogue's P(A) dict with its model interval refined when that interval left an
     end unresolved (rare regions: every unresolved bootstrap replicate gets its own
     subset-is run, ``sampler.rates.pooled_interval(per_replicate=True)``); None when there
@@ -112,7 +115,7 @@ def refine_region(spec: CatalogueSpec, p_region: dict[str, Any]) -> dict[str, An
         return None
     model = domain.load_model(spec.model_json)
     constraints = domain.parse_constraints(spec.constraints)
-    refined: dict[str, Any] = jsonconv.encode(domain.region_uncertainty(
+    refined: PRegionJSON = jsonconv.encode(domain.region_uncertainty(
         model, constraints, jsonconv.decode(p_region), n_samples=spec.n, per_replicate=True))
     return refined
 
@@ -121,12 +124,12 @@ class _Refine:
     """``refine(spec, p_region)`` as a region function ``(spec, stage)`` (picklable when
     ``refine`` is: it is sent to a worker)."""
 
-    def __init__(self, refine: Callable[[CatalogueSpec, dict[str, Any]], dict[str, Any] | None],
-                 p_region: dict[str, Any]) -> None:
+    def __init__(self, refine: Callable[[CatalogueSpec, Mapping[str, Any]], PRegionJSON | None],
+                 p_region: Mapping[str, Any]) -> None:
         self.refine = refine
         self.p_region = p_region
 
-    def __call__(self, spec: CatalogueSpec, stage: Stage) -> dict[str, Any] | None:
+    def __call__(self, spec: CatalogueSpec, stage: Stage) -> PRegionJSON | None:
         return self.refine(spec, self.p_region)
 
 
@@ -238,8 +241,8 @@ class CatalogueRunner:
     """Runs catalogue jobs against one database/data dir with one executor."""
 
     def __init__(self, db: Database, data_dir: Path, executor: ChunkExecutor,
-                 region: Callable[[CatalogueSpec, Stage], dict[str, Any]] = estimate_region,
-                 refine: Callable[[CatalogueSpec, dict[str, Any]], dict[str, Any] | None]
+                 region: Callable[[CatalogueSpec, Stage], PRegionJSON] = estimate_region,
+                 refine: Callable[[CatalogueSpec, Mapping[str, Any]], PRegionJSON | None]
                  = refine_region) -> None:
         self.db = db
         self.data_dir = Path(data_dir)
@@ -292,7 +295,7 @@ class CatalogueRunner:
                                                 stages, halt)
                 with self.db.session() as s:
                     row = repo.get_catalogue(s, catalogue_id)
-                    row.p_region = p_region
+                    row.p_region = dict(p_region)  # the JSON column: a plain dict
                     spec = worker_spec(row, model_json)
             spec = dataclasses.replace(spec, progress_dir=str(folder))
             todo = [i for i in range(total) if i not in done]
@@ -389,7 +392,7 @@ class CatalogueRunner:
                 self.data_dir, catalogue_id), stage=lambda *_: None, stages=stage, halt=halt)
         if refined is not None:
             with self.db.session() as s:
-                repo.get_catalogue(s, catalogue_id).p_region = refined
+                repo.get_catalogue(s, catalogue_id).p_region = dict(refined)
 
     def request_stop(self, catalogue_id: str) -> None:
         """Have the workers give up the catalogue's chunks in flight (its job was

@@ -18,6 +18,7 @@ from app import domain, jsonconv
 from app.context import ServiceContext
 from app.errors import InvalidInput, ServiceError
 from app.rates import ExposureInfo, ModelInterval, RegionRates, RegionReport, UncertainP
+from app.schemas import PRegionJSON
 from app.services.models import model_and_row
 from app.services.sampling import reference_draws, split_constraints
 
@@ -34,7 +35,7 @@ __all__ = [
 COMPARE_N_LIMIT = 5000
 
 
-def uncertain_p(p_region: dict[str, Any]) -> UncertainP:
+def uncertain_p(p_region: PRegionJSON) -> UncertainP:
     """The P(A) dict of ``domain.sample`` / ``region_uncertainty`` as ``UncertainP``."""
     p = jsonconv.decode(p_region)
     interval = p.get("model_interval")

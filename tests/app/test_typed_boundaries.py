@@ -325,3 +325,42 @@ def test_sut_info_is_typed_and_answers_as_before(client: Any,
     # the CLI lists the same, one JSON document
     assert main(["evaluate", "--list-suts"]) == 0
     assert capsys.readouterr().out == json.dumps(body["suts"], indent=1) + "\n"
+
+
+#: P(A)'s keys as the store holds them, in their order: the sampler's PRegion fields, ci,
+#: then what the uncertainty report adds (the test model has replicates and an exposure)
+STORED_P_REGION = ["estimate", "ci_low", "ci_high", "confidence", "method", "n_draws",
+                   "n_hits", "p_bounds", "p_bounds_ci", "p_joint", "cov", "ci", "mc_ci",
+                   "model_ci", "model_interval", "rates"]
+
+
+def test_p_region_keeps_its_declared_shape_from_the_sampler_to_the_store(
+        client: Any, catalogue: str) -> None:
+    from pydantic import TypeAdapter
+
+    from app import domain
+    from app.db.models import CatalogueRow, ChunkRow
+    from app.schemas import PRegion, PRegionJSON
+
+    ctx = _ctx(client)
+    declared = TypeAdapter(PRegionJSON)
+    with ctx.db.read_session() as s:
+        stored = s.get(CatalogueRow, catalogue).p_region
+        chunks = s.query(ChunkRow).filter(ChunkRow.catalogue_id == catalogue).all()
+        in_chunks = [c.diagnostics["p_region"] for c in chunks]
+    # the catalogue's P(A): every key declared, of the declared type, in the declared order
+    assert list(stored) == STORED_P_REGION
+    assert declared.validate_python(stored, strict=True) == stored
+    assert set(stored) <= set(PRegionJSON.__annotations__)
+    # what a sample's result carries (POST /scenarios, the chunks) has the same shape
+    model = ctx.model(ctx.default_model_id)
+    drawn = domain.sample(model, domain.parse_constraints(["ttc<3"]), 20, 1)
+    assert list(drawn.p_region) == STORED_P_REGION
+    assert declared.validate_python(drawn.p_region, strict=True) == drawn.p_region
+    for p in in_chunks:  # a chunk reuses the catalogue's P(A): its fields, no report
+        assert list(p) == STORED_P_REGION[:12]
+        assert declared.validate_python(p, strict=True) == p
+    # and the response schema reads each of them
+    for p in (stored, drawn.p_region, *in_chunks):
+        read = PRegion.model_validate(p)
+        assert read.estimate == p["estimate"] and read.ci == p["ci"]
