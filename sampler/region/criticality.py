@@ -547,6 +547,21 @@ def _ego_speed(params: FloatArray, lane_width: float) -> FloatArray:
     return np.asarray(kin.v_cross + params[:, 6], dtype=np.float64)
 
 
+def _manoeuvre_inputs(arr: FloatArray, lane_width: float, rs: RiskSettings,
+                      with_ttr: bool) -> tuple[FloatArray, FloatArray]:
+    """The TTR scan's manoeuvres' inputs (acceleration, yaw rate) at each row's ego speed,
+    shape (n, len(MANOEUVRES)) each; zeros without the scan."""
+    n = arr.shape[0]
+    man_a = np.zeros((n, len(MANOEUVRES)))
+    man_w = np.zeros((n, len(MANOEUVRES)))
+    if with_ttr and n:
+        v_e = _ego_speed(arr, lane_width)
+        v_safe = np.where(np.isfinite(v_e) & (v_e > 0), v_e, 1.0)
+        for k, man in enumerate(MANOEUVRES):
+            man_a[:, k], man_w[:, k] = man.inputs(v_safe, rs)
+    return man_a, man_w
+
+
 def criticality_quantities(params: FloatArray, lane_width: float = DEFAULT_LANE_WIDTH, *,
                            settings: CriticalitySettings | None = None,
                            risk_settings: RiskSettings | None = None,
@@ -585,15 +600,8 @@ def criticality_quantities(params: FloatArray, lane_width: float = DEFAULT_LANE_
         raise SamplerError(f"settings.step: must divide {_DT} s for the sampler-level "
                            f"quantities, got {s.step}", field="settings.step",
                            problem="does not divide the sample step", value=s.step)
-    n = arr.shape[0]
-    man_a = np.zeros((n, len(MANOEUVRES)))
-    man_w = np.zeros((n, len(MANOEUVRES)))
-    if with_ttr and n:
-        v_e = _ego_speed(arr, lane_width)
-        v_safe = np.where(np.isfinite(v_e) & (v_e > 0), v_e, 1.0)
-        for k, man in enumerate(MANOEUVRES):
-            man_a[:, k], man_w[:, k] = man.inputs(v_safe, rs)
-    out = np.empty((n, len(CRITICALITY_QUANTITIES)))
+    man_a, man_w = _manoeuvre_inputs(arr, lane_width, rs, with_ttr)
+    out = np.empty((arr.shape[0], len(CRITICALITY_QUANTITIES)))
     vec = np.array([s.wandering_zone, s.reaction_time, s.jerk, s.decel_max, s.critical_ttc,
                     s.step, s.tail, s.follow_horizon, rs.dt,
                     s.ttr_tail if with_ttr else -1.0, 1.0 if baseline else 0.0])
