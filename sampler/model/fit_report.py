@@ -26,16 +26,8 @@ def fit_report(model: CutInGMM, x: FloatArray, z: FloatArray, logj: FloatArray,
     """The fit report of ``CutInGMM.fit`` (see its docstring for the keys)."""
     n = x.shape[0]
     folds = min(int(model.cv_folds), n // 2)
-    per_fold = []
-    kf = KFold(n_splits=folds, shuffle=True, random_state=int(model.random_state))
     tails = _TailCalibration(model, x)
-    for fold, (train, test) in enumerate(kf.split(z)):
-        gm, _, _err = model._fit_gm(model.n_components_, z[train])
-        if gm is None:
-            per_fold.append(float("nan"))
-            continue
-        per_fold.append(float(np.mean(gm.score_samples(z[test]) + logj[test])))
-        tails.add_fold(gm, test, np.random.default_rng([int(model.random_state), fold]))
+    per_fold = _heldout(model, z, logj, folds, tails)
     rng = np.random.default_rng(int(model.random_state))
     m = int(model.n_report_samples)
     draws = model.sample(m, rng)
@@ -43,20 +35,6 @@ def fit_report(model: CutInGMM, x: FloatArray, z: FloatArray, logj: FloatArray,
     for j, f in enumerate(model.features_):
         res = stats.ks_2samp(x[:, j], draws[:, j])
         ks[f] = {"statistic": float(res.statistic), "pvalue": float(res.pvalue)}
-    region = Region(lane_width=model.lane_width_)
-    params = model.params_matrix(draws)
-    inside = region.in_bounds(params)
-    k_out = int((~inside).sum())
-    lo, hi = clopper_pearson(k_out, m)
-    # each outside draw is attributed to the first bound it violates (in the order of
-    # PHYSICAL_BOUNDS), so the shares add up to the total
-    viol = region.violations(params)
-    remaining = np.ones(m, dtype=bool)
-    per_bound = {}
-    for b in PHYSICAL_BOUNDS:
-        hit = viol[str(b)] & remaining
-        per_bound[str(b)] = float(hit.sum() / m)
-        remaining &= ~hit
     pf = np.asarray(per_fold)
     return {
         "n_rows": n,
@@ -71,10 +49,48 @@ def fit_report(model: CutInGMM, x: FloatArray, z: FloatArray, logj: FloatArray,
         },
         "ks": ks,
         "tail_calibration": tails.result(),
-        "outside_bounds": {"fraction": k_out / m, "ci95": [lo, hi],
-                           "per_bound": per_bound, "lane_width": model.lane_width_,
-                           "n_samples": m},
+        "outside_bounds": _outside_bounds(model, draws),
     }
+
+
+def _heldout(model: CutInGMM, z: FloatArray, logj: FloatArray, folds: int,
+             tails: _TailCalibration) -> list[float]:
+    """K-fold cross-validation with the chosen K: the held-out log-likelihood per row of
+    each fold (NaN where the fit failed), original units; each fold's mixture also goes
+    to ``tails``."""
+    per_fold = []
+    kf = KFold(n_splits=folds, shuffle=True, random_state=int(model.random_state))
+    for fold, (train, test) in enumerate(kf.split(z)):
+        gm, _, _err = model._fit_gm(model.n_components_, z[train])
+        if gm is None:
+            per_fold.append(float("nan"))
+            continue
+        per_fold.append(float(np.mean(gm.score_samples(z[test]) + logj[test])))
+        tails.add_fold(gm, test, np.random.default_rng([int(model.random_state), fold]))
+    return per_fold
+
+
+def _outside_bounds(model: CutInGMM, draws: FloatArray) -> dict[str, Any]:
+    """The share of the model's draws outside the physical bounds, its interval and its
+    split by bound."""
+    m = draws.shape[0]
+    region = Region(lane_width=model.lane_width_)
+    params = model.params_matrix(draws)
+    inside = region.in_bounds(params)
+    k_out = int((~inside).sum())
+    lo, hi = clopper_pearson(k_out, m)
+    # each outside draw is attributed to the first bound it violates (in the order of
+    # PHYSICAL_BOUNDS), so the shares add up to the total
+    viol = region.violations(params)
+    remaining = np.ones(m, dtype=bool)
+    per_bound = {}
+    for b in PHYSICAL_BOUNDS:
+        hit = viol[str(b)] & remaining
+        per_bound[str(b)] = float(hit.sum() / m)
+        remaining &= ~hit
+    return {"fraction": k_out / m, "ci95": [lo, hi], "per_bound": per_bound,
+            "lane_width": model.lane_width_, "n_samples": m}
+
 
 def report_text(model: CutInGMM) -> str:
     """Human-readable BIC curve and fit report (what ``scengen fit`` prints)."""
