@@ -17,9 +17,10 @@ Issue 24 asks >= 20,000 built-in runs per second per core at dt = 0.01 s.
 
 (c) The campaign's runner (``sampler.campaign.sut_runner``, acc, careful=False) end to
 end from in-bounds model draws to outcomes, in blocks of ``--runner-blocks`` rows, against
-its previous path (the tracks built twice: once for ``ok``, once more by ``cutin_batch``)
-on the same blocks, with the share of the track builder and a bit-for-bit comparison of
-every field.
+its previous path (the tracks built twice: once for ``ok``, once more by ``cutin_batch``,
+one grid per block) on the same blocks, with the share of the track builder and the share
+of runs equal field for field (the runner puts each row on its own grid, so runs outliving
+their script's end differ from the previous path in low bits).
 
 Usage (from the repository root): ``PYTHONPATH=. .venv/bin/python benchmarks/bench_sut.py
 [--runs 20000] [--scenarios 400] [--model-draws 5000] [--baseline 200] [--seed 7]
@@ -200,10 +201,9 @@ def runner_previous(x: np.ndarray, seeds: np.ndarray, st: SimSettings,
 def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
     """(c) ``sampler.campaign.sut_runner`` end to end (acc k2=0.5, careful=False, t_max
     40 s, collisions only) on model draws, in blocks of each size, against the previous
-    path on the same blocks; all fields compared bit for bit."""
-    from riskcore.sut import RUN_FIELDS
+    path on the same blocks; all fields compared (``_agreement``)."""
     from sampler.campaign import sut_runner
-    from sampler.scenario.batch import buildable_batch
+    from sampler.scenario.batch import buildable_batches
 
     lane = 3.75
     st = SimSettings(t_max=40.0)
@@ -225,18 +225,44 @@ def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
         t_old = time.process_time() - c
         c = time.process_time()
         for i in range(0, x.shape[0], b):
-            buildable_batch(x[i:i + b], lane_width=lane)
+            buildable_batches(x[i:i + b], lane_width=lane)
         t_build = time.process_time() - c
-        same = all(np.array_equal(r.collided, o[0]) and all(
-            np.ascontiguousarray(getattr(r, f)[o[1]]).tobytes()
-            == np.ascontiguousarray(getattr(o[2], f)).astype(getattr(r, f).dtype).tobytes()
-            for f in RUN_FIELDS) for r, o in zip(new, old, strict=True))
+        agree, worst = _agreement(new, old)
         m = x.shape[0]
         print(f"  blocks of {b:6d}: runner {m / t_new:8,.0f} runs/s per core (CPU); previous "
               f"path {m / t_old:8,.0f} runs/s -> {t_old / t_new:.2f}x; of the runner's time "
               f"{t_build / t_new:.0%} builds the tracks ({m / t_build:,.0f} rows/s); "
-              f"{sum(int(r.collided.sum()) for r in new)} collisions; every field "
-              f"bit-identical: {same}")
+              f"{sum(int(r.collided.sum()) for r in new)} collisions; runs with every "
+              f"field bit-identical to the previous path: {agree:.1%}, largest difference "
+              f"of a float field {worst:.1e} (relative)")
+
+
+def _agreement(new: list, old: list) -> tuple[float, float]:
+    """(share of runs whose every field is bit-identical, largest relative difference of
+    a float field) between the runner and the previous path."""
+    from riskcore.sut import RUN_FIELDS
+
+    same = 0
+    total = 0
+    worst = 0.0
+    for r, (collided, rows, runs) in zip(new, old, strict=True):
+        ok = np.asarray(r.collided) == collided
+        ok = ok[rows]
+        for f, spec in RUN_FIELDS.items():
+            a = np.asarray(getattr(r, f))[rows]
+            b = np.asarray(getattr(runs, f))
+            if spec.kind == "float":
+                eq = (a == b) | (np.isnan(a) & np.isnan(b))
+                both = np.isfinite(a) & np.isfinite(b)
+                if both.any():
+                    rel = np.abs(a[both] - b[both]) / np.maximum(np.abs(b[both]), 1e-12)
+                    worst = max(worst, float(rel.max()))
+            else:
+                eq = a == b
+            ok &= eq
+        same += int(ok.sum())
+        total += rows.size
+    return same / max(total, 1), worst
 
 
 def main() -> None:

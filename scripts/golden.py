@@ -8,7 +8,8 @@ scripts/behaviour_snapshot.py, which takes minutes).
 Cases: ``region_limit_state`` of several regions (one quantity, kinematic only, flat
 criticality, layered, support class) evaluated on fixed draws; ``subset_simulation`` on
 ``ttc<3``; ``build_scenario`` on fixed vectors (with and without a duration, and its
-refusals); ``sample()`` with rejection and mcmc. Each output's bytes are hashed with
+refusals); ``sample()`` with rejection and mcmc; the campaign's SUT runner (acc, with the
+careful driver) on fixed draws. Each output's bytes are hashed with
 SHA-256; ``compare`` prints the cases whose hash changed and exits 1 if any did.
 """
 
@@ -172,6 +173,18 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
                 out.append(f"{type(exc).__name__}: {exc}")
         return _digest(out)
     cases["model_to_dict / model_from_dict"] = io_case
+
+    def runner_case() -> str:
+        from riskcore.sut import SimSettings, make_sut
+        from sampler.campaign import sut_runner
+
+        runner = sut_runner(lambda: make_sut("acc", k2=0.5), careful=True,
+                            settings=SimSettings(t_max=40.0), lane_width=model.lane_width_)
+        seeds = np.arange(xc.shape[0], dtype=np.uint64)
+        out = [runner(xc[i:i + 100], seeds[i:i + 100]) for i in (0, 100, 200)]
+        return _digest(*(np.asarray(o.arrays[k]) if o.arrays[k].dtype.kind != "U"
+                         else o.arrays[k].tolist() for o in out for k in sorted(o.arrays)))
+    cases["sut_runner acc k2=0.5, careful, t_max 40 s"] = runner_case
     return cases
 
 

@@ -1,7 +1,8 @@
-"""A runner that drives a system under test: the batch of cut-ins
-(``sampler.scenario.buildable_batch``, the builder's tracks) through riskcore's closed-loop
-simulator (``riskcore.sut.simulate``), and the same runs with UN R157's careful driver
-(``r157_cc``) for ``vs_careful``.
+"""A runner that drives a system under test: the batches of cut-ins
+(``sampler.scenario.buildable_batches``, the builder's tracks, each run on its own grid
+so that its outcome is a function of its own vector, seed and settings) through
+riskcore's closed-loop simulator (``riskcore.sut.simulate``), and the same runs with UN
+R157's careful driver (``r157_cc``) for ``vs_careful``.
 
 A vector the builder refuses (no crossing at this lane width, a non-positive ego speed,
 a reversing cutter) is not a cut-in: it is not simulated and counts as no collision
@@ -28,7 +29,7 @@ from riskcore.sut import (
     make_sut,
     simulate,
 )
-from sampler.scenario.batch import buildable_batch
+from sampler.scenario.batch import buildable_batches
 from sampler.scenario.builder import DEFAULT_VEHICLE_SIZE
 
 __all__ = ["SutRuns", "sut_runner"]
@@ -58,18 +59,22 @@ class SutRuns:
         return (SutRuns, (self.arrays,))
 
 
-def _full(batch: RunBatch, rows: NDArray[np.int64], n: int) -> dict[str, NDArray[Any]]:
+def _full(parts: list[tuple[NDArray[np.intp], RunBatch]], n: int) -> dict[str, NDArray[Any]]:
+    """Every field as an (n,) array: the runs of each part at its rows, the rest not
+    buildable."""
     out: dict[str, NDArray[Any]] = {}
     for name, spec in RUN_FIELDS.items():
-        src = np.asarray(getattr(batch, name))
+        srcs = [(rows, np.asarray(getattr(runs, name))) for rows, runs in parts]
         if spec.kind == "bool":
             arr: NDArray[Any] = np.zeros(n, dtype=bool)
         elif spec.kind == "str":
-            width = max(16, src.dtype.itemsize // 4 if src.dtype.kind == "U" else 16)
+            width = max([16] + [src.dtype.itemsize // 4 for _, src in srcs
+                                if src.dtype.kind == "U"])
             arr = np.full(n, "not_buildable", dtype=f"<U{width}")
         else:
             arr = np.full(n, 0.0 if name == "impact_speed" else np.nan)
-        arr[rows] = src
+        for rows, src in srcs:
+            arr[rows] = src
         out[name] = arr
     return out
 
@@ -94,27 +99,32 @@ class SutRunner:
         n = x.shape[0]
         length, width = self.vehicle_size
         lane = 3.75 if self.lane_width is None else self.lane_width
-        # the tracks once: ok of every row, the batch of the buildable ones (equal to
-        # cutin_batch(x[rows]))
-        _status, rows, batch = buildable_batch(x, lane_width=lane, ego_length=length,
-                                               ego_width=width, cutter_length=length,
-                                               cutter_width=width)
+        # the tracks once, each row on its own grid (its outcome depends on it alone),
+        # rows with the same grid in one batch
+        _status, groups = buildable_batches(x, lane_width=lane, ego_length=length,
+                                            ego_width=width, cutter_length=length,
+                                            cutter_width=width)
         ok = np.zeros(n, dtype=bool)
-        ok[rows] = True
         seeds = np.asarray(seeds, dtype=np.uint64)
-        if batch is not None:
-            runs = simulate(self._sut(), batch, seeds=seeds[rows], settings=self.settings,
-                            risk=self.risk)
-            arrays = _full(runs, rows, n)
+        parts: list[tuple[NDArray[np.intp], RunBatch]] = []
+        careful: list[tuple[NDArray[np.intp], RunBatch]] = []
+        for rows, batch in groups:
+            ok[rows] = True
+            parts.append((rows, simulate(self._sut(), batch, seeds=seeds[rows],
+                                         settings=self.settings, risk=self.risk)))
+            if self.careful:
+                careful.append((rows, simulate(make_sut("r157_cc"), batch,
+                                               seeds=seeds[rows], settings=self.settings)))
+        if parts:
+            arrays = _full(parts, n)
             vs = np.full(n, "", dtype="<U6")
             if self.careful:
-                ref = simulate(make_sut("r157_cc"), batch, seeds=seeds[rows],
-                               settings=self.settings)
                 arrays["careful_collided"] = np.zeros(n, dtype=bool)
-                arrays["careful_collided"][rows] = ref.collided
                 arrays["careful_impact_speed"] = np.zeros(n)
-                arrays["careful_impact_speed"][rows] = ref.impact_speed
-                vs[rows] = compare_careful(runs, ref)
+                for (rows, runs), (_, ref) in zip(parts, careful, strict=True):
+                    arrays["careful_collided"][rows] = ref.collided
+                    arrays["careful_impact_speed"][rows] = ref.impact_speed
+                    vs[rows] = compare_careful(runs, ref)
             arrays["vs_careful"] = vs
         else:
             arrays = {"collided": np.zeros(n, dtype=bool), "impact_speed": np.zeros(n),

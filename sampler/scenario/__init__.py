@@ -10,7 +10,13 @@
   gives (sampler starts no processes).
 """
 
-from sampler.scenario.batch import CutInTracks, buildable_batch, cutin_batch, cutin_tracks
+from sampler.scenario.batch import (
+    CutInTracks,
+    buildable_batch,
+    buildable_batches,
+    cutin_batch,
+    cutin_tracks,
+)
 from sampler.scenario.builder import (
     DEFAULT_DT,
     DEFAULT_HORIZON,
@@ -40,6 +46,7 @@ __all__ = [
     "ScenarioRecord",
     "build_scenario",
     "buildable_batch",
+    "buildable_batches",
     "cutin_batch",
     "cutin_tracks",
     "score_part",

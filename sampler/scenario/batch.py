@@ -40,12 +40,16 @@ from sampler.scenario.builder import (
 
 jit.register(__file__)  # before the first @njit: one cache per version of the kernels
 
-__all__ = ["CutInTracks", "buildable_batch", "cutin_batch", "cutin_tracks", "reasons"]
+__all__ = ["GRID_BIN", "CutInTracks", "buildable_batch", "buildable_batches", "cutin_batch",
+           "cutin_tracks", "own_grid_steps", "reasons"]
 
 FloatArray = NDArray[np.float64]
 
 #: the builder's integration step of the lateral motion, s (``CutInTrajectory``)
 SUBSTEP = 1e-3
+#: ``buildable_batches``: a row's own grid ends at its script's end plus the risk horizon,
+#: rounded up to a whole multiple of this, s (rows whose grids end alike share a batch)
+GRID_BIN = 5.0
 #: UN R157's wandering zone: t_p is when the cutter's centre has moved this far, m
 WANDERING_ZONE = 0.375
 
@@ -483,3 +487,59 @@ def buildable_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                        c_width=np.full(k, float(cutter_width)), t_p=per_row[:, 2],
                        t_cross=per_row[:, 1], t_end=per_row[:, 3], c_yaw_rate=cw)
     return status, rows, batch
+
+
+def own_grid_steps(params: Any, *, dt: float = DEFAULT_DT,
+                   lead_in: float = DEFAULT_LEAD_IN) -> NDArray[np.int64]:
+    """The number of steps of each row's own grid (``buildable_batches``): its script's
+    end (``t_end``: the lane change and the acceleration pulse are over) plus the risk
+    horizon (3 s) in whole steps, rounded up to a whole multiple of ``GRID_BIN`` (5 s).
+    A function of the row alone. Rows the builder refuses before their end is known
+    (a non-finite end, or one past the builder's longest scenario) get the first bin."""
+    x = np.atleast_2d(np.asarray(params, dtype=np.float64))
+    dt = _positive(dt, "dt")
+    with np.errstate(invalid="ignore"):
+        pulse_end = np.where(x[:, 4] > 0, x[:, 3] + x[:, 4], 0.0)
+        settle = lead_in + np.maximum(np.maximum(2.0 * x[:, 1], pulse_end), 0.0)
+    good = np.isfinite(settle) & (settle <= MAX_DURATION)
+    end = np.where(good, settle, lead_in) + DEFAULT_HORIZON
+    steps = np.maximum(np.ceil(end / dt - 1e-9), 1.0)
+    q = max(math.ceil(GRID_BIN / dt - 1e-9), 1)
+    return (np.ceil(steps / q) * q).astype(np.int64)
+
+
+def buildable_batches(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
+                      ego_length: float = DEFAULT_VEHICLE_SIZE[0],
+                      ego_width: float = DEFAULT_VEHICLE_SIZE[1],
+                      cutter_length: float = DEFAULT_VEHICLE_SIZE[0],
+                      cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
+                      lead_in: float = DEFAULT_LEAD_IN,
+                      wandering_zone: float = WANDERING_ZONE
+                      ) -> tuple[NDArray[np.int64], list[tuple[NDArray[np.intp], CutInBatch]]]:
+    """Every row's ``status`` and the buildable rows as batches ``(rows, batch)``, each row
+    on its own grid (``own_grid_steps``: its script's end plus the risk horizon, rounded
+    up to a whole multiple of 5 s); rows with the same grid share a batch, in increasing
+    order of the grid's length.
+
+    A row's tracks, and so its simulated outcome, are a function of the row alone: the
+    simulator continues the cutter past a batch's grid from the grid's last step, so on
+    one grid sized by the longest row of a block (``buildable_batch``) a run outliving its
+    own script would depend on which rows share its block. Each batch equals
+    ``cutin_batch(params[rows], duration=its grid's end)`` array for array.
+    """
+    x = jit.kernel_input(np.atleast_2d(np.asarray(params, dtype=np.float64)))
+    if x.ndim != 2 or x.shape[1] != 8:
+        raise BuilderError(f"params: expected shape (N, 8), got {x.shape}", field="params")
+    steps = own_grid_steps(x, dt=dt, lead_in=lead_in)
+    status = np.empty(x.shape[0], dtype=np.int64)
+    groups: list[tuple[NDArray[np.intp], CutInBatch]] = []
+    for m in np.unique(steps):
+        idx = np.flatnonzero(steps == m)
+        st, local, batch = buildable_batch(
+            x[idx], lane_width=lane_width, ego_length=ego_length, ego_width=ego_width,
+            cutter_length=cutter_length, cutter_width=cutter_width, dt=dt, lead_in=lead_in,
+            duration=int(m) * float(dt), wandering_zone=wandering_zone)
+        status[idx] = st
+        if batch is not None:
+            groups.append((idx[local], batch))
+    return status, groups

@@ -149,3 +149,48 @@ def test_buildable_batch_equals_cutin_batch_of_the_buildable_rows() -> None:
             assert getattr(batch, name) == getattr(ref, name)
     none = buildable_batch(x[3:6])
     assert none[1].size == 0 and none[2] is None
+
+
+def test_own_grid_steps_by_hand() -> None:
+    """A row's own grid: lead-in 2.5 s + max(2 p_t, pulse end) + 3 s, in steps of 0.1 s,
+    rounded up to a whole 5 s; a refused row (not finite) gets the first bin."""
+    from sampler.scenario.batch import own_grid_steps
+
+    x = np.array([[0.1, 2.0, 0.0, 0.0, 1.0, 25.0, 1.0, 10.0],  # 2.5 + 4 + 3 = 9.5 s -> 10
+                  [0.1, 12.0, 0.0, 0.0, 1.0, 25.0, 1.0, 10.0],  # 2.5 + 24 + 3 -> 30 s
+                  [0.1, 1.0, -1.0, 3.0, 6.0, 25.0, 1.0, 10.0],  # pulse ends at 9: 14.5 -> 15
+                  [0.1, 2.25, 0.0, 0.0, 0.0, 25.0, 1.0, 10.0],  # exactly 10 s -> 10
+                  [0.1, np.nan, 0.0, 0.0, 0.0, 25.0, 1.0, 10.0]])  # 5.5 s -> 10
+    assert own_grid_steps(x).tolist() == [100, 300, 150, 100, 100]
+    assert own_grid_steps(x, dt=0.05, lead_in=0.0).tolist() == [200, 600, 300, 200, 100]
+
+
+def test_buildable_batches_put_each_row_on_its_own_grid() -> None:
+    """Every batch equals ``cutin_batch`` of its rows on their own grid, array for array;
+    the rows of all batches are the buildable ones, each once."""
+    from sampler.scenario.batch import buildable_batches, cutin_batch, own_grid_steps
+
+    x = synthetic_parameter_table(80, seed=9)[list(PARAM_NAMES)].to_numpy(
+        dtype=np.float64).copy()
+    x[3, 0] = 0.0  # no lane change
+    x[4, 1], x[4, 0] = 30.0, 1e-4  # the longest script, never reaches the marking
+    x[5, 2] = np.nan
+    x[6, 1] = 12.0  # a long lane change: a grid of its own
+    status, groups = buildable_batches(x, lane_width=3.5, ego_length=4.2, ego_width=1.7,
+                                       cutter_length=5.0, cutter_width=2.0)
+    ref_tr = cutin_tracks(x, lane_width=3.5, ego_length=4.2, cutter_length=5.0)
+    assert np.array_equal(status, ref_tr.status)
+    rows = np.concatenate([r for r, _ in groups])
+    assert sorted(rows.tolist()) == np.flatnonzero(ref_tr.ok).tolist()
+    assert len(groups) >= 2 and 6 in rows
+    steps = own_grid_steps(x)
+    for r, batch in groups:
+        assert (steps[r] == steps[r[0]]).all()
+        assert batch.t.shape[0] == steps[r[0]] + 1
+        ref = cutin_batch(x[r], lane_width=3.5, ego_length=4.2, ego_width=1.7,
+                          cutter_length=5.0, cutter_width=2.0,
+                          duration=float(steps[r[0]]) * 0.1)
+        for name in ("t", "ego_v0", "cx", "cy", "cpsi", "cv", "ca", "c_length", "c_width",
+                     "t_p", "t_cross", "t_end", "c_yaw_rate"):
+            a, b = getattr(batch, name), getattr(ref, name)
+            assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
