@@ -35,6 +35,7 @@ from sampler.region.constraints import QUANTITY_NAMES, Region, derive
 from sampler.region.criticality import criticality_quantities
 from sampler.scenario import build_scenario
 from sampler.scenario.record import score_vector
+from sampler.scenario.scoring import score_samples
 
 REGIONS = [["ttc<3"], ["ttc<2", "thw<1"], ["btn>0.5"], ["ttc<4", "btn>0.3"],
            ["ttc<5", "gap<40", "ttr_true<3", "btn>0.05"], ["ttc<3", "support<=near"],
@@ -49,6 +50,10 @@ def _digest(*arrays: Any) -> str:
         else:
             h.update(json.dumps(a, sort_keys=True, default=str).encode())
     return h.hexdigest()
+
+
+def _note(calls: list[tuple[int, int]], done: int, total: int) -> None:
+    calls.append((done, total))
 
 
 def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
@@ -185,6 +190,19 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
         return _digest(*(np.asarray(o.arrays[k]) if o.arrays[k].dtype.kind != "U"
                          else o.arrays[k].tolist() for o in out for k in sorted(o.arrays)))
     cases["sut_runner acc k2=0.5, careful, t_max 40 s"] = runner_case
+
+    def score_samples_case() -> str:
+        drawn = sample(model, ["ttc<3"], n=30, seed=21, method="rejection")
+        out: list[Any] = []
+        for src, kw in ((drawn, {"chunk_size": 7}), (drawn.params, {"score": False}),
+                        (rows[:5], {"include_scenarios": True, "chunk_size": 2,
+                                    "builder_kwargs": {"duration": 12.0}})):
+            got: list[tuple[int, int]] = []
+            recs = score_samples(src, progress=partial(_note, got), **kw)
+            out.append([vars(r) for r in recs])
+            out.append(got)
+        return _digest(out)
+    cases["score_samples"] = score_samples_case
     return cases
 
 

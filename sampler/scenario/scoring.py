@@ -131,18 +131,8 @@ def score_samples(
                           "surfaces": surfaces, "score": score,
                           "include_scenario": include_scenarios,
                           "wagner_scan": wagner_scan}
-    weights: list[float] | None = None
-    support: list[dict[str, Any] | None] | None = None
-    if _is_sample_set(samples):
-        kw["lane_width"] = samples.lane_width
-        kw["seed"] = samples.seed
-        weights = [float(w) for w in samples.exposure_weights]
-        support = getattr(samples, "support", None)
+    parts = _parts(samples, table, chunk_size, kw)
     total = len(table)
-    starts = list(range(0, total, chunk_size))
-    parts = [(table.iloc[s:s + chunk_size].reset_index(drop=True), s,
-              None if weights is None else weights[s:s + chunk_size],
-              None if support is None else support[s:s + chunk_size]) for s in starts]
     out: list[ScenarioRecord] = []
     if executor is None or len(parts) <= 1:
         for part, start, w, sup in parts:
@@ -157,3 +147,23 @@ def score_samples(
         if progress is not None:
             progress(len(out), total)
     return out
+
+
+_Part = tuple[pd.DataFrame, int, list[float] | None, list[dict[str, Any] | None] | None]
+
+
+def _parts(samples: _Samples | pd.DataFrame | Iterable[Mapping[str, float]], table: pd.DataFrame,
+           chunk_size: int, kw: dict[str, Any]) -> list[_Part]:
+    """The table in parts of ``chunk_size`` rows: (rows, first index, exposure weights,
+    support). A SampleSet also gives ``kw`` its lane width and seed."""
+    weights: list[float] | None = None
+    support: list[dict[str, Any] | None] | None = None
+    if _is_sample_set(samples):
+        kw["lane_width"] = samples.lane_width
+        kw["seed"] = samples.seed
+        weights = [float(w) for w in samples.exposure_weights]
+        support = getattr(samples, "support", None)
+    starts = list(range(0, len(table), chunk_size))
+    return [(table.iloc[s:s + chunk_size].reset_index(drop=True), s,
+             None if weights is None else weights[s:s + chunk_size],
+             None if support is None else support[s:s + chunk_size]) for s in starts]
