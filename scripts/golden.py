@@ -28,6 +28,7 @@ from datasets import PARAM_NAMES
 from datasets.embedded import default_parameter_table
 from sampler import CutInGMM, sample
 from sampler.methods.probability import PRegionEstimator
+from sampler.methods.rare import rare_probability
 from sampler.methods.subset import region_limit_state, subset_simulation
 from sampler.model.io import model_from_dict, model_to_dict
 from sampler.region.btn_bound import a_req_bound
@@ -50,6 +51,15 @@ def _digest(*arrays: Any) -> str:
         else:
             h.update(json.dumps(a, sort_keys=True, default=str).encode())
     return h.hexdigest()
+
+
+def _no_clock(obj: Any) -> Any:
+    """``obj`` without its wall-clock figures (keys naming seconds), recursively."""
+    if isinstance(obj, dict):
+        return {k: _no_clock(v) for k, v in obj.items() if "seconds" not in str(k)}
+    if isinstance(obj, list | tuple):
+        return [_no_clock(v) for v in obj]
+    return obj
 
 
 def _note(calls: list[tuple[int, int]], done: int, total: int) -> None:
@@ -203,6 +213,21 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
             out.append(got)
         return _digest(out)
     cases["score_samples"] = score_samples_case
+
+    def subset_is_case() -> str:
+        s = sample(model, ["ttc<1.5"], 100, seed=4, method="subset-is")
+        return _digest(np.asarray(s.params), s.log_density, s.exposure_weights,
+                       _no_clock(s.diagnostics), _no_clock(s.p_region.to_dict()))
+    cases["sample subset-is ttc<1.5"] = subset_is_case
+
+    def stratified_case() -> str:
+        out = []
+        kw: dict[str, Any]
+        for cons, kw in ((["ttc<2"], {"stratify": "always"}), (["ttc<1.5", "gap<15"], {})):
+            r = rare_probability(model, cons, 5, **kw)
+            out.append(_digest(r.z, r.log_w, _no_clock(r.summary()), r.method))
+        return _digest(out)
+    cases["rare_probability stratified ttc<2, auto ttc<1.5 & gap<15"] = stratified_case
     return cases
 
 
