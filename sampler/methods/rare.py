@@ -360,20 +360,7 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, cfg: Importanc
         lw = stage.log_w
         ok = np.isfinite(lw)
         if ok.sum() > d + 1:
-            zi, lwi = stage.z[ok], lw[ok]
-            ww = np.exp(lwi - lwi.max())
-            pick = rng.choice(zi.shape[0], size=min(cfg.n_centres, zi.shape[0]),
-                              p=ww / ww.sum())
-            # weighted_centres: each resampled centre as often as it was drawn (a part of A
-            # the previous q under-covered, whose draws carry large weights, gets more
-            # kernels), the bandwidth from the distinct ones; else the distinct centres
-            if weighted_centres:
-                proposal = KernelProposal(base, zi[pick], cfg.inflate, cfg.alpha, cfg.nu,
-                                          shape=zi[pick],
-                                          n_bandwidth=int(np.unique(pick).size))
-            else:
-                proposal = KernelProposal(base, zi[np.unique(pick)], cfg.inflate, cfg.alpha, cfg.nu,
-                                          shape=zi[pick])
+            proposal = _recentred(base, stage.z[ok], lw[ok], cfg, rng, weighted_centres)
     final: Proposal = proposal
     if cfg.level_share > 0 and proposal is not first:
         # the kernel density on the subset levels' final points keeps a share: the
@@ -381,6 +368,22 @@ def _explore(model: CutInGMM, limit_state: LimitState, seed: int, cfg: Importanc
         final = KernelMixture(base, [proposal, first],
                               [1.0 - cfg.level_share, cfg.level_share], cfg.alpha)
     return _Explored(base, limit_state, sub, final, n_adapt_evals, rng, deadline, pilot)
+
+
+def _recentred(base: ZDensity, zi: FloatArray, lwi: FloatArray, cfg: ImportanceSettings,
+               rng: np.random.Generator, weighted_centres: bool) -> KernelProposal:
+    """The next adaptation round's kernel density: centres resampled by their weights
+    from the importance draws ``zi`` inside A (log weights ``lwi``)."""
+    ww = np.exp(lwi - lwi.max())
+    pick = rng.choice(zi.shape[0], size=min(cfg.n_centres, zi.shape[0]), p=ww / ww.sum())
+    # weighted_centres: each resampled centre as often as it was drawn (a part of A
+    # the previous q under-covered, whose draws carry large weights, gets more
+    # kernels), the bandwidth from the distinct ones; else the distinct centres
+    if weighted_centres:
+        return KernelProposal(base, zi[pick], cfg.inflate, cfg.alpha, cfg.nu,
+                              shape=zi[pick], n_bandwidth=int(np.unique(pick).size))
+    return KernelProposal(base, zi[np.unique(pick)], cfg.inflate, cfg.alpha, cfg.nu,
+                          shape=zi[pick])
 
 
 def _level_share(prop: Proposal) -> float:
