@@ -222,8 +222,9 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
 
     def stratified_case() -> str:
         out = []
-        kw: dict[str, Any]
-        for cons, kw in ((["ttc<2"], {"stratify": "always"}), (["ttc<1.5", "gap<15"], {})):
+        runs: list[tuple[list[str], dict[str, Any]]] = [
+            (["ttc<2"], {"stratify": "always"}), (["ttc<1.5", "gap<15"], {})]
+        for cons, kw in runs:
             r = rare_probability(model, cons, 5, **kw)
             out.append(_digest(r.z, r.log_w, _no_clock(r.summary()), r.method))
         return _digest(out)
