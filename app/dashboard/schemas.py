@@ -3,8 +3,9 @@
 All derive from ``app.schemas.ApiModel``: a non-finite float in a typed field is written
 as ``"Infinity"``, ``"-Infinity"`` or ``"NaN"`` (the service's one convention). Plot arrays
 (``list[float | None]``) carry null where a value is not finite or not defined: plotly draws
-null as a gap (``app.jsonconv.plot_values``). Free-form parts (the catalogue status, the
-scenario summary) are passed through ``app.jsonconv.encode`` before validation.
+null as a gap (``app.jsonconv.plot_values``). Free-form parts are plain JSON values: the
+catalogue status in its stored form (``app.statuses.catalogue_status_plain``), the scenario
+summary through ``app.jsonconv.encode``. The views build these models directly.
 """
 
 from __future__ import annotations
