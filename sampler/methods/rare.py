@@ -719,6 +719,27 @@ def _stratum_seed(seed: int, i: int) -> int:
     return int(np.random.default_rng([int(seed) % (2**32), 7, i]).integers(0, 2**31 - 1))
 
 
+def _stratum_info(r: StratumRun, ps: float, se: float) -> dict[str, Any]:
+    """One stratum's figures in the result's ``proposal["strata"]`` (``ps``, ``se``: its
+    estimate and standard error)."""
+    pi = r.stratum.mass
+    info: dict[str, Any] = {"stratum": r.stratum.label, "mass": pi, "p": ps,
+                            "cov": se / ps if ps > 0 else None,
+                            "contribution": pi * ps,
+                            "n_evaluations": r.n_evaluations + (r.stage.n if r.stage else 0)}
+    if r.sub is not None:
+        info["subset_levels"] = len(r.sub.thresholds)
+    else:
+        info["empty_upper"] = pi * r.p_upper
+        info["empty_reason"] = r.note
+    if r.stage is not None:
+        inside = np.isfinite(r.stage.log_w)
+        info["n_is"] = r.stage.n
+        info["level_share"] = _level_share(r.stage.proposal)
+        info["n_hits"] = int(inside.sum())
+    return info
+
+
 def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> RareResult:
     p = 0.0
     var = 0.0
@@ -732,27 +753,17 @@ def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> Rar
         pi = r.stratum.mass
         p += pi * ps
         var += (pi * se) ** 2
-        info: dict[str, Any] = {"stratum": r.stratum.label, "mass": pi, "p": ps,
-                                "cov": se / ps if ps > 0 else None,
-                                "contribution": pi * ps,
-                                "n_evaluations": r.n_evaluations + (r.stage.n if r.stage
-                                                                    else 0)}
+        strata.append(_stratum_info(r, ps, se))
         if r.sub is not None:
             n_sub += r.sub.n_evaluations
             n_adapt += r.n_evaluations - r.sub.n_evaluations
-            info["subset_levels"] = len(r.sub.thresholds)
         else:
             n_sub += r.n_evaluations
-            info["empty_upper"] = pi * r.p_upper
-            info["empty_reason"] = r.note
         if r.stage is not None:
             n_is += r.stage.n
             lw = r.stage.log_w
             inside = np.isfinite(lw)
             n_hits += int(inside.sum())
-            info["n_is"] = r.stage.n
-            info["level_share"] = _level_share(r.stage.proposal)
-            info["n_hits"] = int(inside.sum())
             zs.append(r.stage.z[inside])
             # weights relative to the whole model, on the plain result's scale:
             # P = sum(exp(log_w)) / n_is as there (each stratum's draws estimate pi_s P_s:
@@ -760,7 +771,6 @@ def _stratified_result(runs: list[StratumRun], t0: float, inflate: float) -> Rar
             lws.append(lw[inside] + math.log(pi) - math.log(r.stage.n))
             if r.sub is not None and (best is None or pi * ps > best[0]):
                 best = (pi * ps, r.sub)
-        strata.append(info)
     if best is None or p <= 0:
         raise EmptyRegionError("stratified subset-is: no importance draw fell inside the "
                                "region in any stratum; raise n_is",
