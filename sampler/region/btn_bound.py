@@ -77,14 +77,61 @@ Y_MARGIN = 0.02
 H_FINE = 0.02
 
 
+class _Row(NamedTuple):
+    """What the looser bounds read of a row: p_t, dv and gap, the cutter's speeds before
+    and after its pulse, |amp| = |p_y1| p_t / pi, the peak heading, the rear's extent
+    (m) and the lateral move at which the box may first meet the ego's band (m)."""
+
+    p_t: float
+    dv: float
+    gap: float
+    before: float
+    after: float
+    amp: float
+    psi_max: float
+    extent: float
+    y_band: float
+
+
+class _Relaxed(NamedTuple):
+    """The relaxed cutter (relaxation 2): its crossing moment, the distance it has covered
+    by then and by the end of the lane change, the shrink 1 - cos psi_max of its
+    x-progress in between, the gap less its rear's extent, and its speed profile (the
+    arguments of :func:`_speed` after tau)."""
+
+    tau_c: float
+    s_c: float
+    s_lc: float
+    shrink: float
+    d_c: float
+    p_a1: float
+    p_a2: float
+    p_a3: float
+    p_v0: float
+    c0: float
+
+
+class _Setup(NamedTuple):
+    """What every row's bound shares: the road, the criticality's settings, the boxes."""
+
+    lane_width: float
+    wandering: float  # wandering zone (m)
+    reaction: float  # reaction time (s)
+    ehw: float  # the ego's half width
+    chl: float  # the cutter's half length ...
+    chw: float  # ... and half width
+    stop_at: float  # > 0: a looser bound below it settles the row
+
+
 @numba.njit(cache=True, nogil=True)
-def _quick_bound(dv: float, gap: float, before: float, after: float, psi_max: float,
-                 extent: float, window: float,
+def _quick_bound(row: _Row, window: float,
                  delay: float) -> float:  # pragma: no cover - compiled
     """A looser bound in O(1) from speeds alone: the cutter's speed stays within [min,
     max] of its two plateaus (times cos psi_max along x), the ego's is the cutter's at the
     crossing plus ``dv``; ``window``: how long before the crossing the cutter may be in the
     band or the ego may brake; ``delay``: how long after the crossing braking may start."""
+    dv, gap, before, after = row.dv, row.gap, row.before, row.after
+    psi_max, extent = row.psi_max, row.extent
     v_hi = max(before, after)
     v_lo = min(before, after) * math.cos(psi_max)
     ve_hi = v_hi + dv
@@ -124,14 +171,14 @@ def _psi_inv(target: float, p_t: float, upper: bool) -> float:  # pragma: no cov
 
 
 @numba.njit(cache=True, nogil=True)
-def _bracket_bound(p_t: float, dv: float, gap: float, before: float, after: float,
-                   amp: float, psi_max: float, extent: float, lane_width: float,
-                   y_band: float, wandering: float,
-                   reaction: float) -> float:  # pragma: no cover - compiled
+def _bracket_bound(row: _Row, cfg: _Setup) -> float:  # pragma: no cover - compiled
     """:func:`_quick_bound` with the lateral moments bracketed in closed form: |y(t)| =
     int v |sin psi| lies between k_lo Psi(t) and k_hi Psi(t) (v within its plateaus,
     psi - psi^3 / 6 <= sin psi <= psi, |psi| = amp (1 - cos(pi t / p_t))), which brackets
     t_p, the crossing and the first moment in the band."""
+    p_t, before, after, amp, psi_max = row.p_t, row.before, row.after, row.amp, row.psi_max
+    lane_width, y_band, wandering, reaction = (cfg.lane_width, row.y_band, cfg.wandering,
+                                               cfg.reaction)
     k_lo = min(before, after) * (1.0 - psi_max * psi_max / 6.0) * amp
     k_hi = max(before, after) * amp
     if not (k_lo > 0.0 and k_hi > 0.0):
@@ -152,7 +199,7 @@ def _bracket_bound(p_t: float, dv: float, gap: float, before: float, after: floa
     first = min(e_lo, tp_lo - T_MARGIN + reaction)
     window = max(c_hi - first, 0.0)
     delay = max(tp_hi + T_MARGIN + reaction - c_lo, 0.0)
-    return _quick_bound(dv, gap, before, after, psi_max, extent, window, delay)
+    return _quick_bound(row, window, delay)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -184,36 +231,6 @@ def _dist(tau: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float,
     """int_0^tau v(s) ds for the cutter's speed v(s) = p_v0 + p_a1 (clip(s - p_a2, 0, p_a3)
     - c0)."""
     return (p_v0 - p_a1 * c0) * tau + p_a1 * (_h(tau - p_a2, p_a3) - _h(-p_a2, p_a3))
-
-
-class _Relaxed(NamedTuple):
-    """The relaxed cutter (relaxation 2): its crossing moment, the distance it has covered
-    by then and by the end of the lane change, the shrink 1 - cos psi_max of its
-    x-progress in between, the gap less its rear's extent, and its speed profile (the
-    arguments of :func:`_speed` after tau)."""
-
-    tau_c: float
-    s_c: float
-    s_lc: float
-    shrink: float
-    d_c: float
-    p_a1: float
-    p_a2: float
-    p_a3: float
-    p_v0: float
-    c0: float
-
-
-class _Setup(NamedTuple):
-    """What every row's bound shares: the road, the criticality's settings, the boxes."""
-
-    lane_width: float
-    wandering: float  # wandering zone (m)
-    reaction: float  # reaction time (s)
-    ehw: float  # the ego's half width
-    chl: float  # the cutter's half length ...
-    chw: float  # ... and half width
-    stop_at: float  # > 0: a looser bound below it settles the row
 
 
 @numba.njit(cache=True, nogil=True)
@@ -327,13 +344,12 @@ def _bound_row(row: FloatArray, cfg: _Setup,
         # cheaper, looser bounds first: below what is asked, they settle the row.
         # Speeds alone (t_p and the crossing lie in [0, 2 p_t], t_p before the
         # crossing: braking at most the reaction time after it) ...
-        quick = _quick_bound(dv, gap, before, after, psi_max, extent, 2.0 * p_t,
-                             cfg.reaction + T_MARGIN)
+        loose = _Row(p_t, dv, gap, before, after, abs(amp), psi_max, extent, y_band)
+        quick = _quick_bound(loose, 2.0 * p_t, cfg.reaction + T_MARGIN)
         if quick < cfg.stop_at:
             return quick
         # ... then with the lateral moments bracketed in closed form
-        quick = _bracket_bound(p_t, dv, gap, before, after, abs(amp), psi_max, extent,
-                               cfg.lane_width, y_band, cfg.wandering, cfg.reaction)
+        quick = _bracket_bound(loose, cfg)
         if quick < cfg.stop_at:
             return quick
     tau_p, tau_e, tau_c = _lateral_moments(row, c0, amp, one_minus_cos,
