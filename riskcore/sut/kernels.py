@@ -60,38 +60,37 @@ def _piece(x: float, v: float, a: float, jj: float,
     if T <= 0.0:
         return x, v, a, False
     v_end = v + a * T + 0.5 * jj * T * T
-    # the speed v + a tau + jj tau^2 / 2: its first downward zero crossing in [0, T]
-    t_stop = np.inf
-    if v <= 0.0 and (a < 0.0 or (a == 0.0 and jj < 0.0)):
-        t_stop = 0.0
-    elif jj == 0.0:
-        if a < 0.0:
+    # the first root of v + a tau + jj tau^2 / 2 in [0, T] where the speed falls, if any
+    t_stop = -1.0
+    if jj == 0.0:
+        if a < 0.0 and v + a * T < 0.0:
             t_stop = -v / a
     else:
         disc = a * a - 2.0 * jj * v
         if disc >= 0.0:
-            # the roots in the cancellation-free form: q / (jj / 2) and v / q
-            q = -0.5 * (a + math.copysign(math.sqrt(disc), a))
-            r1 = q / (0.5 * jj)
-            r2 = v / q if q != 0.0 else np.inf
-            for root in (min(r1, r2), max(r1, r2)):
-                slope = a + jj * root
-                if root >= 0.0 and (slope < 0.0 or (slope == 0.0 and jj < 0.0)):
-                    t_stop = root
-                    break
-    if t_stop > T and v_end < 0.0:
-        # rounding (e.g. a subnormal speed or acceleration) hid the root: the speed starts
-        # >= 0 and ends below 0, so it crosses 0 in between; bisect for it
-        lo = 0.0
-        hi = T
-        for _ in range(_BISECT):
-            mid = 0.5 * (lo + hi)
-            if v + a * mid + 0.5 * jj * mid * mid < 0.0:
-                hi = mid
-            else:
-                lo = mid
-        t_stop = lo
-    if t_stop <= T:
+            sq = math.sqrt(disc)
+            r1 = (-a - sq) / jj
+            r2 = (-a + sq) / jj
+            lo = min(r1, r2)
+            hi = max(r1, r2)
+            slope = a + jj * lo
+            if 0.0 <= lo <= T and (slope < 0.0 or (slope == 0.0 and jj < 0.0)):
+                t_stop = lo  # (not where the speed rises from 0: v = 0, a > 0)
+            elif 0.0 <= hi <= T and v_end < 0.0:
+                t_stop = hi
+        if t_stop < 0.0 and v_end < 0.0:
+            # rounding (e.g. a subnormal speed or acceleration) hid the root: the speed
+            # starts >= 0 and ends below 0, so it falls through 0 in between; bisect
+            lo = 0.0
+            hi = T
+            for _ in range(_BISECT):
+                mid = 0.5 * (lo + hi)
+                if v + a * mid + 0.5 * jj * mid * mid < 0.0:
+                    hi = mid
+                else:
+                    lo = mid
+            t_stop = lo
+    if t_stop >= 0.0:
         tt = t_stop
         xs = x + v * tt + 0.5 * a * tt * tt + jj * tt * tt * tt / 6.0
         return xs, 0.0, 0.0, True
