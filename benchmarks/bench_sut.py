@@ -17,10 +17,11 @@ Issue 24 asks >= 20,000 built-in runs per second per core at dt = 0.01 s.
 
 (c) The campaign's runner (``sampler.campaign.sut_runner``, acc, careful=False) end to
 end from in-bounds model draws to outcomes, in blocks of ``--runner-blocks`` rows, against
-its previous path (the tracks built twice: once for ``ok``, once more by ``cutin_batch``,
-one grid per block) on the same blocks, with the share of the track builder and the share
-of runs equal field for field (the runner puts each row on its own grid, so runs outliving
-their script's end differ from the previous path in low bits).
+its previous path (the same with the builder's previous rule: the lateral motion by the
+trapezoid on 1 ms steps instead of Gauss-Legendre on 0.1 s panels) on the same blocks,
+with the share of the track builder (and of the previous rule's) and the share of runs
+equal field for field and the largest relative difference (the rules differ in the
+positions' low bits, about 5e-6 m at most).
 
 Usage (from the repository root): ``PYTHONPATH=. .venv/bin/python benchmarks/bench_sut.py
 [--runs 20000] [--scenarios 400] [--model-draws 5000] [--baseline 200] [--seed 7]
@@ -184,18 +185,21 @@ def runner_draws(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
 
 def runner_previous(x: np.ndarray, seeds: np.ndarray, st: SimSettings,
                     lane: float) -> tuple[np.ndarray, np.ndarray, RunBatch]:
-    """The campaign runner's previous path: one build for ``ok``, a second build of the
-    buildable rows (``cutin_batch``), simulate. Returns (collided of every row, the
-    buildable rows, their runs)."""
-    from sampler.scenario.batch import cutin_batch, cutin_tracks
+    """The campaign runner's path with the builder's previous rule (``quadrature=
+    "trapezoid"``: the lateral motion on 1 ms steps): each row on its own grid
+    (``buildable_batches``), simulate. Returns (collided of every row, the buildable rows,
+    their runs)."""
+    from sampler.scenario.batch import buildable_batches
 
-    ok = cutin_tracks(x, lane_width=lane).ok
-    rows = np.flatnonzero(ok)
-    runs = simulate(make_sut("acc", k2=0.5), cutin_batch(x[rows], lane_width=lane),
-                    seeds=seeds[rows], settings=st)
+    _, groups = buildable_batches(x, lane_width=lane, quadrature="trapezoid")
+    parts = [(rows, simulate(make_sut("acc", k2=0.5), batch, seeds=seeds[rows],
+                             settings=st)) for rows, batch in groups]
+    rows = np.concatenate([r for r, _ in parts])
+    order = np.argsort(rows)
+    runs = RunBatch.concat([r for _, r in parts]).subset(order)
     collided = np.zeros(x.shape[0], dtype=bool)
-    collided[rows] = runs.collided
-    return collided, rows, runs
+    collided[rows[order]] = runs.collided
+    return collided, rows[order], runs
 
 
 def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
@@ -227,11 +231,17 @@ def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
         for i in range(0, x.shape[0], b):
             buildable_batches(x[i:i + b], lane_width=lane)
         t_build = time.process_time() - c
+        c = time.process_time()
+        for i in range(0, x.shape[0], b):
+            buildable_batches(x[i:i + b], lane_width=lane, quadrature="trapezoid")
+        t_build_old = time.process_time() - c
         agree, worst = _agreement(new, old)
         m = x.shape[0]
         print(f"  blocks of {b:6d}: runner {m / t_new:8,.0f} runs/s per core (CPU); previous "
               f"path {m / t_old:8,.0f} runs/s -> {t_old / t_new:.2f}x; of the runner's time "
-              f"{t_build / t_new:.0%} builds the tracks ({m / t_build:,.0f} rows/s); "
+              f"{t_build / t_new:.0%} builds the tracks ({m / t_build:,.0f} rows/s; "
+              f"previous rule {m / t_build_old:,.0f} rows/s, {t_build_old / t_old:.0%} of "
+              "its path); "
               f"{sum(int(r.collided.sum()) for r in new)} collisions; runs with every "
               f"field bit-identical to the previous path: {agree:.1%}, largest difference "
               f"of a float field {worst:.1e} (relative)")

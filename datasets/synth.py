@@ -86,7 +86,7 @@ def _solve_p_y1(base: dict[str, float], target: float) -> float:
     v = base["p_v0"]
     guess = target * np.pi / (2.0 * max(v, 1.0) * base["p_t"] ** 2)
     for _ in range(2):
-        d = lateral_displacement(CutInParams(**{**base, "p_y1": guess}), substep=2e-3)
+        d = lateral_displacement(CutInParams(**{**base, "p_y1": guess}))
         guess *= target / d
     return float(guess)
 

@@ -9,10 +9,11 @@ crossing moments and the end of the cutter's script: the same numbers
 the closed-loop simulator's input.
 
 How: one compiled loop over the vectors doing what the builder does per vector
-(``datasets.cutin_model.CutInTrajectory``): the lateral motion integrated by the composite
-trapezoid on the same 1 ms grid with the pulse edges inserted, linear interpolation
-inside it, the exact integral of the piecewise-linear speed outside it, the crossing moment
-by the same rule, the cutter placed so that the gap at the crossing is ``gap``. After its
+(``datasets.cutin_model.CutInTrajectory``): the lateral motion integrated by composite
+4-point Gauss-Legendre quadrature on the same panels (at most 0.1 s, the pulse edges among
+their edges) and from the panel edge before each time asked for, the exact integral of the
+piecewise-linear speed outside it, the crossing moment by the same root finder, the
+cutter placed so that the gap at the crossing is ``gap``. After its
 script ends (``t_end``: the lane change and the acceleration pulse are over) the cutter
 drives straight at constant speed, exactly as the builder's formulas continue.
 """
@@ -27,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datasets import DEFAULT_LANE_WIDTH
+from datasets.cutin_model import GL_NODES, GL_WEIGHTS, PANEL
 from riskcore import jit
 from riskcore.sut import CutInBatch
 from sampler.errors import BuilderError
@@ -45,8 +47,12 @@ __all__ = ["GRID_BIN", "CutInTracks", "buildable_batch", "buildable_batches", "c
 
 FloatArray = NDArray[np.float64]
 
-#: the builder's integration step of the lateral motion, s (``CutInTrajectory``)
+#: the previous rule's integration step of the lateral motion, s (``quadrature="trapezoid"``)
 SUBSTEP = 1e-3
+_GL_NODES = np.array(GL_NODES)
+_GL_WEIGHTS = np.array(GL_WEIGHTS)
+#: ``quadrature`` -> kernel switch
+_QUADRATURES = {"gauss": 0, "trapezoid": 1}
 #: ``buildable_batches``: a row's own grid ends at its script's end plus the risk horizon,
 #: rounded up to a whole multiple of this, s (rows whose grids end alike share a batch)
 GRID_BIN = 5.0
@@ -134,11 +140,86 @@ def _interp_at(x: float, xp: FloatArray, fp: FloatArray, j: int
 
 
 @numba.njit(cache=True)
+def _gl(a: float, b: float, amp: float, p_t: float, p_a1: float, p_a2: float, p_a3: float,
+        p_v0: float) -> tuple[float, float]:  # pragma: no cover - jit
+    """``int_a^b v cos psi``, ``int_a^b v sin psi``: 4-point Gauss-Legendre on one panel
+    (no pulse edge inside; ``datasets.cutin_model._gl``, the same arithmetic)."""
+    mid = 0.5 * (a + b)
+    half = 0.5 * (b - a)
+    sx = 0.0
+    sy = 0.0
+    for q in range(4):
+        s = mid + half * _GL_NODES[q]
+        v = _speed(s, p_a1, p_a2, p_a3, p_v0)
+        psi = amp * (1.0 - math.cos(math.pi * s / p_t))
+        sx = sx + _GL_WEIGHTS[q] * (v * math.cos(psi))
+        sy = sy + _GL_WEIGHTS[q] * (v * math.sin(psi))
+    return half * sx, half * sy
+
+
+@numba.njit(cache=True)
+def _root(a: float, b: float, y_a: float, y_b: float, offset: float, amp: float, p_t: float,
+          p_a1: float, p_a2: float, p_a3: float, p_v0: float) -> float:  # pragma: no cover
+    """``datasets.cutin_model.crossing_root``: |y(t)| = offset inside the panel [a, b]."""
+    lo = a
+    hi = b
+    ya = abs(y_a)
+    yb = abs(y_b)
+    tau = a + (b - a) * (offset - ya) / (yb - ya)
+    for _ in range(60):
+        dy = _gl(a, tau, amp, p_t, p_a1, p_a2, p_a3, p_v0)[1]
+        g = abs(y_a + dy) - offset
+        if g == 0.0:
+            break
+        if g < 0.0:
+            lo = tau
+        else:
+            hi = tau
+        d = abs(_speed(tau, p_a1, p_a2, p_a3, p_v0)
+                * math.sin(amp * (1.0 - math.cos(math.pi * tau / p_t))))
+        nt = tau - g / d if d > 0.0 else math.nan
+        if not lo < nt < hi:
+            nt = 0.5 * (lo + hi)
+        if abs(nt - tau) <= 1e-15 * max(1.0, abs(tau)) or hi - lo <= 1e-15 * max(1.0, hi):
+            tau = nt
+            break
+        tau = nt
+    return tau
+
+
+@numba.njit(cache=True)
+def _trapezoid(grid: FloatArray, amp: float, p_t: float, p_a1: float, p_a2: float,
+               p_a3: float, p_v0: float, xs: FloatArray,
+               ys: FloatArray) -> None:  # pragma: no cover - jit
+    """The previous rule: x, y at the points of ``grid`` by the composite trapezoid."""
+    v_prev = _speed(grid[0], p_a1, p_a2, p_a3, p_v0)
+    psi_prev = amp * (1.0 - math.cos(math.pi * grid[0] / p_t))
+    vc_prev = v_prev * math.cos(psi_prev)
+    vs_prev = v_prev * math.sin(psi_prev)
+    ax = 0.0
+    ay = 0.0
+    for i in range(1, grid.shape[0]):
+        v = _speed(grid[i], p_a1, p_a2, p_a3, p_v0)
+        psi = amp * (1.0 - math.cos(math.pi * grid[i] / p_t))
+        vc = v * math.cos(psi)
+        vs = v * math.sin(psi)
+        h = grid[i] - grid[i - 1]
+        ax += 0.5 * (vc + vc_prev) * h
+        ay += 0.5 * (vs + vs_prev) * h
+        xs[i] = ax
+        ys[i] = ay
+        vc_prev = vc
+        vs_prev = vs
+
+
+@numba.njit(cache=True)
 def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
          ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
-         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray
+         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray, method: int
          ) -> tuple[int, float, float, float, float]:  # pragma: no cover - jit
-    """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end)."""
+    """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end).
+    ``method`` 1: the previous rule (the composite trapezoid on a 1 ms grid, the pulse
+    edges inserted, linear interpolation between its points and for the crossing)."""
     nan = math.nan
     for j in range(8):
         if not math.isfinite(row[j]):
@@ -155,13 +236,15 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
     t_settle = lead_in + max(2.0 * p_t, pulse_end, 0.0)
     if t_settle > MAX_DURATION:
         return _TOO_LONG, nan, nan, nan, nan
-    # the builder's integration grid: linspace(0, end, n_sub + 1) plus the pulse edges
+    # the quadrature's panel edges: a uniform grid of panels of at most panel_width, plus
+    # the pulse edges (datasets.cutin_model.CutInTrajectory, the same arithmetic)
     end = 2.0 * p_t
-    n_sub = max(math.ceil(end / SUBSTEP), 1)
+    width = SUBSTEP if method == 1 else min(PANEL, p_t / 8.0, 0.25 / abs(p_y1))
+    n_sub = max(math.ceil(end / width), 1)
     step = end / n_sub
     base = np.empty(n_sub + 1)
     for i in range(n_sub + 1):
-        base[i] = i * step + 0.0
+        base[i] = i * step
     base[n_sub] = end
     e1 = p_a2
     e2 = p_a2 + p_a3
@@ -199,44 +282,39 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
     xs[0] = 0.0
     ys[0] = 0.0
     amp = p_y1 * p_t / math.pi
-    v_prev = _speed(grid[0], p_a1, p_a2, p_a3, p_v0)
-    psi_prev = amp * (1.0 - math.cos(math.pi * grid[0] / p_t))
-    vc_prev = v_prev * math.cos(psi_prev)
-    vs_prev = v_prev * math.sin(psi_prev)
-    ax = 0.0
-    ay = 0.0
-    for i in range(1, ng):
-        v = _speed(grid[i], p_a1, p_a2, p_a3, p_v0)
-        psi = amp * (1.0 - math.cos(math.pi * grid[i] / p_t))
-        vc = v * math.cos(psi)
-        vs = v * math.sin(psi)
-        h = grid[i] - grid[i - 1]
-        ax += 0.5 * (vc + vc_prev) * h
-        ay += 0.5 * (vs + vs_prev) * h
-        xs[i] = ax
-        ys[i] = ay
-        vc_prev = vc
-        vs_prev = vs
+    if method == 1:
+        _trapezoid(grid, amp, p_t, p_a1, p_a2, p_a3, p_v0, xs, ys)
+    else:
+        for i in range(1, ng):
+            dx, dy = _gl(grid[i - 1], grid[i], amp, p_t, p_a1, p_a2, p_a3, p_v0)
+            xs[i] = xs[i - 1] + dx
+            ys[i] = ys[i - 1] + dy
     s_end = _pulse_integral(end, p_a1, p_a2, p_a3, p_v0)
-    # the crossing: first |y| >= lane_width / 2, linear between grid points
+    # the crossing: first |y| >= lane_width / 2, then the root inside that panel
     offset = lane_width / 2.0
     tau_c = nan
+    ic = -1
     for i in range(ng):
         if abs(ys[i]) >= offset:
-            if i == 0:
-                tau_c = 0.0
-            else:
-                y0 = abs(ys[i - 1])
-                y1 = abs(ys[i])
-                frac = (offset - y0) / (y1 - y0)
-                tau_c = grid[i - 1] + frac * (grid[i] - grid[i - 1])
+            ic = i
             break
-    if tau_c != tau_c:
+    if ic < 0:
         return _NO_CROSS, nan, nan, nan, nan
+    if ic == 0:
+        tau_c = 0.0
+        x_rel_c = 0.0
+    elif method == 1:
+        y0 = abs(ys[ic - 1])
+        frac = (offset - y0) / (abs(ys[ic]) - y0)
+        tau_c = grid[ic - 1] + frac * (grid[ic] - grid[ic - 1])
+        x_rel_c = _interp(tau_c, grid, xs)
+    else:
+        tau_c = _root(grid[ic - 1], grid[ic], ys[ic - 1], ys[ic], offset, amp, p_t, p_a1,
+                      p_a2, p_a3, p_v0)
+        x_rel_c = xs[ic - 1] + _gl(grid[ic - 1], tau_c, amp, p_t, p_a1, p_a2, p_a3, p_v0)[0]
     v_ego = _speed(tau_c, p_a1, p_a2, p_a3, p_v0) + dv
     if not v_ego > 0:
         return _EGO_SPEED, nan, nan, nan, nan
-    x_rel_c = _interp(tau_c, grid, xs)
     t_c = lead_in + tau_c
     x_cut0 = gap + 0.5 * (cut_len + ego_len) + v_ego * t_c - x_rel_c
     y_start = -lane_width if p_y1 > 0 else lane_width
@@ -259,8 +337,13 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
         else:
             while grid[jg + 1] <= tau:
                 jg += 1
-            xr = _interp_at(tau, grid, xs, jg)
-            yr = _interp_at(tau, grid, ys, jg)
+            if method == 1:
+                xr = _interp_at(tau, grid, xs, jg)
+                yr = _interp_at(tau, grid, ys, jg)
+            else:
+                dx, dy = _gl(grid[jg], tau, amp, p_t, p_a1, p_a2, p_a3, p_v0)
+                xr = xs[jg] + dx
+                yr = ys[jg] + dy
         v = _speed(tau, p_a1, p_a2, p_a3, p_v0)
         if v < 0.0:
             return _NEG_SPEED, nan, nan, nan, nan
@@ -297,15 +380,16 @@ def _all(params: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
          ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
          cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray,
          status: NDArray[np.int64], out: FloatArray,
-         compact: bool) -> None:  # pragma: no cover - jit
+         compact: bool, method: int) -> None:  # pragma: no cover - jit
     """Every row; the tracks of row i in row i of the track arrays or, ``compact``, those
-    of the buildable rows one after another (a refused row's slot is reused)."""
+    of the buildable rows one after another (a refused row's slot is reused). ``method``
+    1: the previous rule (:func:`_one`)."""
     j = 0
     for i in range(params.shape[0]):
         r = j if compact else i
         s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width, ego_len,
                                          cut_len, wz, cx[r], cy[r], cpsi[r], cv[r], ca[r],
-                                         cw[r])
+                                         cw[r], method)
         status[i] = s
         out[i, 0] = v_ego
         out[i, 1] = t_c
@@ -372,16 +456,20 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                  ego_length: float = DEFAULT_VEHICLE_SIZE[0],
                  cutter_length: float = DEFAULT_VEHICLE_SIZE[0], dt: float = DEFAULT_DT,
                  lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
-                 wandering_zone: float = WANDERING_ZONE) -> CutInTracks:
+                 wandering_zone: float = WANDERING_ZONE,
+                 quadrature: str = "gauss") -> CutInTracks:
     """The builder's tracks of N vectors (N, 8) in ``PARAM_NAMES`` order on one grid.
 
     ``duration`` (s): the grid's end; default the latest end of a valid row's script plus
     the risk horizon (3 s), in whole steps. Rows the builder would refuse get ``ok``
     False, their ``status`` code (``reasons``) and NaN or zero tracks; nothing raises.
+    ``quadrature``: "gauss" (the builder's rule, module docstring) or "trapezoid" (the
+    previous rule: composite trapezoid on 1 ms, linear between its points; kept as the
+    reference of the accuracy tests and the benchmark's baseline).
     """
     _, t, status, out, (cx, cy, cpsi, cv, ca, cw) = _build(
         params, lane_width, ego_length, cutter_length, dt, lead_in, duration,
-        wandering_zone, compact=False)
+        wandering_zone, compact=False, quadrature=quadrature)
     ok = status == _OK
     return CutInTracks(t=t, ego_v0=out[:, 0], cx=cx, cy=cy, cpsi=cpsi, cv=cv, ca=ca,
                        c_yaw_rate=cw, t_p=out[:, 2], t_cross=out[:, 1], t_end=out[:, 3], ok=ok,
@@ -390,13 +478,17 @@ def cutin_tracks(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
 
 def _build(params: Any, lane_width: float, ego_length: float, cutter_length: float,
            dt: float, lead_in: float, duration: float | None, wandering_zone: float,
-           compact: bool) -> tuple[FloatArray, FloatArray, NDArray[np.int64], FloatArray,
-                                   tuple[FloatArray, ...]]:
+           compact: bool, quadrature: str = "gauss"
+           ) -> tuple[FloatArray, FloatArray, NDArray[np.int64], FloatArray,
+                      tuple[FloatArray, ...]]:
     """(params, t, status, the (N, 4) v_ego / t_cross / t_p / t_end, the six (N, T) track
     arrays: row i's or, ``compact``, the buildable rows' one after another)."""
     x = jit.kernel_input(np.atleast_2d(np.asarray(params, dtype=np.float64)))
     if x.ndim != 2 or x.shape[1] != 8:
         raise BuilderError(f"params: expected shape (N, 8), got {x.shape}", field="params")
+    if quadrature not in _QUADRATURES:
+        raise BuilderError(f"quadrature: expected one of {sorted(_QUADRATURES)}, got "
+                           f"{quadrature!r}", field="quadrature")
     dt = _positive(dt, "dt")
     lane_width = _positive(lane_width, "lane_width")
     ego_length = _positive(ego_length, "ego_length")
@@ -413,7 +505,7 @@ def _build(params: Any, lane_width: float, ego_length: float, cutter_length: flo
     status = np.zeros(n, dtype=np.int64)
     out = np.full((n, 4), np.nan)
     _all(x, t, float(lead_in), lane_width, ego_length, cutter_length, float(wandering_zone),
-         cx, cy, cpsi, cv, ca, cw, status, out, compact)
+         cx, cy, cpsi, cv, ca, cw, status, out, compact, _QUADRATURES[quadrature])
     return x, t, status, out, (cx, cy, cpsi, cv, ca, cw)
 
 
@@ -428,13 +520,14 @@ def cutin_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                 cutter_length: float = DEFAULT_VEHICLE_SIZE[0],
                 cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
                 lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
-                wandering_zone: float = WANDERING_ZONE) -> CutInBatch:
+                wandering_zone: float = WANDERING_ZONE,
+                quadrature: str = "gauss") -> CutInBatch:
     """``riskcore.sut.CutInBatch`` of N vectors (N, 8): the builder's tracks (module
     docstring). A row the builder would refuse is an error naming the row and why
     (``cutin_tracks`` reports them instead)."""
     tr = cutin_tracks(params, lane_width=lane_width, ego_length=ego_length,
                       cutter_length=cutter_length, dt=dt, lead_in=lead_in, duration=duration,
-                      wandering_zone=wandering_zone)
+                      wandering_zone=wandering_zone, quadrature=quadrature)
     bad = np.flatnonzero(~tr.ok)
     if bad.size:
         i = int(bad[0])
@@ -455,7 +548,7 @@ def buildable_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                     cutter_length: float = DEFAULT_VEHICLE_SIZE[0],
                     cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
                     lead_in: float = DEFAULT_LEAD_IN, duration: float | None = None,
-                    wandering_zone: float = WANDERING_ZONE
+                    wandering_zone: float = WANDERING_ZONE, quadrature: str = "gauss"
                     ) -> tuple[NDArray[np.int64], NDArray[np.intp], CutInBatch | None]:
     """Every row's ``status`` (``cutin_tracks``'s; ``reasons``), the buildable rows
     ``rows`` and their batch, equal to ``cutin_batch(params[rows], same keywords)`` array
@@ -469,7 +562,8 @@ def buildable_batch(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
     buildable rows' tracks are written one after another and cut in place: no copy.
     """
     x, t, status, out, arrays = _build(params, lane_width, ego_length, cutter_length, dt,
-                                       lead_in, duration, wandering_zone, compact=True)
+                                       lead_in, duration, wandering_zone, compact=True,
+                                       quadrature=quadrature)
     rows = np.flatnonzero(status == _OK)
     k = rows.size
     if k == 0:
@@ -514,7 +608,7 @@ def buildable_batches(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
                       cutter_length: float = DEFAULT_VEHICLE_SIZE[0],
                       cutter_width: float = DEFAULT_VEHICLE_SIZE[1], dt: float = DEFAULT_DT,
                       lead_in: float = DEFAULT_LEAD_IN,
-                      wandering_zone: float = WANDERING_ZONE
+                      wandering_zone: float = WANDERING_ZONE, quadrature: str = "gauss"
                       ) -> tuple[NDArray[np.int64], list[tuple[NDArray[np.intp], CutInBatch]]]:
     """Every row's ``status`` and the buildable rows as batches ``(rows, batch)``, each row
     on its own grid (``own_grid_steps``: its script's end plus the risk horizon, rounded
@@ -538,7 +632,8 @@ def buildable_batches(params: Any, *, lane_width: float = DEFAULT_LANE_WIDTH,
         st, local, batch = buildable_batch(
             x[idx], lane_width=lane_width, ego_length=ego_length, ego_width=ego_width,
             cutter_length=cutter_length, cutter_width=cutter_width, dt=dt, lead_in=lead_in,
-            duration=int(m) * float(dt), wandering_zone=wandering_zone)
+            duration=int(m) * float(dt), wandering_zone=wandering_zone,
+            quadrature=quadrature)
         status[idx] = st
         if batch is not None:
             groups.append((idx[local], batch))
