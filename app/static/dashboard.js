@@ -1018,7 +1018,11 @@
       const start = Math.min(sc.t.length - 1,
                              Math.max(0, atTp >= 0 ? atTp : sm.step_of_max_risk || 0));
       slider.value = String(start);
+      // the plots are hidden until a scenario is opened (empty, they only pushed view
+      // 4's evaluation run panel down)
       $("slider-row").hidden = false;
+      $("topdown-plot").hidden = false;
+      $("series-plot").hidden = false;
       await drawScenario(start);
       $("view-scenario").scrollIntoView({ block: "start" });
     } catch (e) {

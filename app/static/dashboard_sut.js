@@ -1,7 +1,8 @@
 /* scengen dashboard, section 7 (docs/dashboard.md, docs/evaluation.md): a system under
  * test. Its collision rate per hour with the Monte Carlo and the model interval beside the
- * R157 careful driver's, the failing runs, the SUT's peak r_dep against btn, and one run's
- * speed, acceleration and r_dep beside the careful driver's. Reads /evaluations and
+ * R157 careful driver's, the failing runs, the SUT's peak r_dep against btn; one run's
+ * speed, acceleration and r_dep beside the careful driver's is drawn in the scenario view
+ * (view 4, #scenario-run), opened from a failing run or a point. Reads /evaluations and
  * /dashboard/api/evaluations/{id}; starts an evaluation with POST /evaluations. Plot <div>s
  * get data-rendered="1"; the note gets data-state="done" | "empty" | "error".
  */
@@ -21,20 +22,27 @@
   let poll = null;
   let carefulPoll = null;
 
+  // rates and probabilities in one notation (before, 0.00131 [8.09e-4, 0.00213]: the ends
+  // of one interval in two notations)
+  function sci(x) {
+    const v = typeof x === "string" ? Number(x) : x;
+    return typeof v === "number" && isFinite(v) && v !== 0 ? v.toExponential(2) : S.fmt(x, 3);
+  }
+
   function interval(ci) {
     if (!ci) return "–";
-    return "[" + S.fmt(ci[0], 3) + ", " + S.fmt(ci[1], 3) + "]";
+    return "[" + sci(ci[0]) + ", " + sci(ci[1]) + "]";
   }
 
   function figureRows(label, f) {
     if (!f) return [[label, "–", "–", "–", "–"]];
     const r = f.rate_per_hour || {};
     const p = f.p_collision || {};
-    const rows = [[label + " · collisions per hour", S.fmt(r.estimate, 3), interval(r.ci),
+    const rows = [[label + " · collisions per hour", sci(r.estimate), interval(r.ci),
                    interval(r.model_ci), f.collisions + " in " + f.runs + " runs"]];
-    rows.push([label + " · P(collision) per cut-in", S.fmt(p.estimate, 3), interval(p.ci),
+    rows.push([label + " · P(collision) per cut-in", sci(p.estimate), interval(p.ci),
                interval(p.model_ci), p.upper_bound !== null && p.upper_bound !== undefined
-                 ? "no collision: ≤ " + S.fmt(p.upper_bound, 3) + " (95 %)"
+                 ? "no collision: ≤ " + sci(p.upper_bound) + " (95 %)"
                  : "ESS " + S.fmt(f.ess, 3) + ", ×" + S.fmt(f.acceleration, 3) + " vs naive MC"]);
     return rows;
   }
@@ -137,8 +145,13 @@
     drawFailures(view);
     await drawScatter(view);
     note.dataset.state = "done";
-    if (view.failures.length) await openRun(ev.id, view.failures[0].run);
-    else S.clearPlot($("sut-run-plot"), "No failing run to show.");
+    // the first failing run is drawn in view 4 without moving the page there
+    if (view.failures.length) await openRun(ev.id, view.failures[0].run, false);
+    else {
+      $("sut-run-info").textContent = "Evaluation " + ev.id + " of " + ev.sut +
+        ": no run collided, so no failing run to drive again.";
+      S.clearPlot($("sut-run-plot"), "No failing run to show.");
+    }
   }
 
   // the SUT's rates and the careful driver's beside them; without a finished careful
@@ -209,19 +222,23 @@
       box.innerHTML = "<p class=\"note\">No run collided.</p>";
       return;
     }
-    const head = ["run", "impact speed [m/s]", "peak r_dep", "vs careful", "cutter v0 [m/s]",
-                  "dv [m/s]", "gap [m]", "weight"];
+    const head = ["run", "impact speed (relative) [m/s]", "peak r_dep", "vs careful",
+                  "cutter v0 [m/s]", "dv [m/s]", "gap [m]", "weight"];
     const body = view.failures.map((r) => "<tr data-run=\"" + r.run + "\"><td><a href=\"#\">" +
       r.run + "</a></td><td>" + S.esc(S.fmt(r.impact_speed)) + "</td><td>" +
       S.esc(riskCell(r.r_dep_peak)) + "</td><td>" + S.esc(r.vs_careful || "–") + "</td><td>" +
       S.esc(S.fmt(r.p_v0)) + "</td><td>" + S.esc(S.fmt(r.dv)) + "</td><td>" +
       S.esc(S.fmt(r.gap)) + "</td><td>" + S.esc(S.fmt(r.weight)) + "</td></tr>").join("");
-    box.innerHTML = "<p class=\"note\">" + view.failures_total + " failing runs, highest " +
-      "impact speed first (click one to drive it again):</p><table><tr>" +
+    const shown = view.failures.length < view.failures_total
+      ? "the " + view.failures.length + " with the highest impact speed"
+      : "highest impact speed first";
+    box.innerHTML = "<p class=\"note\">" + view.failures_total + " failing runs, " + shown +
+      " (click one to drive it again beside the careful driver in " +
+      "view 4 · Scenario):</p><table><tr>" +
       head.map((h) => "<th>" + S.esc(h) + "</th>").join("") + "</tr>" + body + "</table>";
     box.querySelectorAll("tr[data-run]").forEach((tr) => tr.addEventListener("click", (e) => {
       e.preventDefault();
-      openRun(view.evaluation.id, parseInt(tr.dataset.run, 10));
+      openRun(view.evaluation.id, parseInt(tr.dataset.run, 10), true);
     }));
   }
 
@@ -235,7 +252,7 @@
     const pick = (hit) => s.run.map((_, i) => i).filter((i) => s.collided[i] === hit);
     // without r_dep (the runner did not compute it) the impact speed stands in, said so
     const y = s.note ? s.impact_speed : s.r_dep_peak;
-    const yName = s.note ? "impact speed [m/s]" : "peak r_dep of the SUT's drive";
+    const yName = s.note ? "impact speed, relative [m/s]" : "peak r_dep of the SUT's drive";
     const trace = (idx, name, color) => ({
       type: "scatter", mode: "markers", name: name,
       x: idx.map((i) => s.btn[i]), y: idx.map((i) => y[i]),
@@ -254,11 +271,13 @@
     }, view.evaluation.id);
     div.on("plotly_click", (ev) => {
       const p = ev.points && ev.points[0];
-      if (p) openRun(view.evaluation.id, p.customdata);
+      if (p) openRun(view.evaluation.id, p.customdata, true);
     });
   }
 
-  async function openRun(id, run) {
+  // one run driven again by the SUT and by the careful driver, drawn in the scenario view
+  // (view 4); `scroll`: move the page there (a click), not when the section first loads
+  async function openRun(id, run, scroll) {
     const div = $("sut-run-plot");
     let view;
     try {
@@ -267,23 +286,39 @@
       S.reportError("run " + run + " (section 7)", e);
       return;
     }
+    // the user went on to another evaluation while this run was driven again
+    if ($("eval-select").value !== id) return;
     const d = view.drivers;
-    const line = (drv, key, color, axis, dash, label) => ({
-      type: "scatter", mode: "lines", name: label, x: key === "r_dep" ? drv.t_risk : drv.t,
-      y: drv[key] || [], xaxis: "x", yaxis: axis,
-      line: { color: color, width: 2, dash: dash },
-    });
+    // the series end at the drive's end: trailing nulls (the risk's time grid runs on
+    // past a collision) only stretched the time axis
+    const line = (drv, key, color, axis, dash, label) => {
+      const x = (key === "r_dep" ? drv.t_risk : drv.t) || [];
+      const y = drv[key] || [];
+      let n = Math.min(x.length, y.length);
+      while (n > 0 && (y[n - 1] === null || y[n - 1] === undefined)) n--;
+      return { type: "scatter", mode: "lines", name: label, x: x.slice(0, n),
+               y: y.slice(0, n), xaxis: "x", yaxis: axis,
+               line: { color: color, width: 2, dash: dash } };
+    };
     const traces = [];
     for (const [drv, color, who] of [[d.sut, SUT, d.sut.name], [d.careful, CAREFUL, "careful"]]) {
       traces.push(line(drv, "v", color, "y", null, who + " speed"));
       traces.push(line(drv, "a", color, "y2", "dot", who + " accel"));
       if (drv.r_dep) traces.push(line(drv, "r_dep", color, "y3", "dash", who + " r_dep"));
     }
-    const outcome = (drv) => drv.collided ? "collides at " + S.fmt(drv.impact_speed) + " m/s"
+    // the impact speed is the relative speed at contact, not the ego's speed plotted below
+    const outcome = (drv) => drv.collided ? "collides at a relative speed of " +
+      S.fmt(drv.impact_speed) + " m/s"
       : "no collision (smallest gap " + S.fmt(drv.min_gap) + " m)";
-    $("sut-run-info").textContent = "Run " + run + ": " + d.sut.name + " " + outcome(d.sut) +
+    const info = $("sut-run-info");
+    info.textContent = "Run " + run + ": " + d.sut.name + " " + outcome(d.sut) +
       "; careful driver " + outcome(d.careful) + (d.sut.r_dep ? "" :
-        " (r_dep of the drive not computed by this version of the simulator)") + ".";
+        " (r_dep of the drive not computed by this version of the simulator)") +
+      " (evaluation " + id + "). ";
+    const back = document.createElement("a");
+    back.href = "#view-sut";
+    back.textContent = "Back to its failing runs (section 7)";
+    info.append(back);
     await S.draw(div, traces, {
       title: { text: "Run " + run + ": speed, acceleration and r_dep, SUT beside the careful " +
                "driver", font: { size: 12 } },
@@ -295,6 +330,11 @@
       legend: { orientation: "h", y: -0.15, x: 0, font: { size: 10 } },
       height: 520,
     }, id + "#" + run);
+    if (scroll) {
+      // to the panel's top, just below the sticky header (its height varies with the width)
+      const top = $("scenario-run").getBoundingClientRect().top + window.scrollY;
+      window.scrollTo({ top: top - document.querySelector("header").offsetHeight - 8 });
+    }
   }
 
   async function init() {

@@ -4,19 +4,21 @@ shown; the table holds both rates, the failures list and the scatter hold what t
 JSON says, and clicking a failing run drives it again; the Evaluate button passes the
 "score the drive with TTR risk" checkbox as ``risk``. Without a careful evaluation the
 section says how to get one and its button starts it. Screenshots:
-``test-artifacts/dashboard/sut.png``, ``sut-no-careful.png``."""
+``test-artifacts/dashboard/sut.png``, ``sut-no-careful.png``, ``4-evaluation-run.png`` (a
+failing run opened in the scenario view, view 4)."""
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
 import pytest
-from playwright.sync_api import sync_playwright
+from playwright.sync_api import BrowserContext, sync_playwright
 
 from tests.app.factories import make_settings, uvicorn_service
 from tests.browser.factories import CHROMIUM, CHROMIUM_ARGS, prepare_data_dir
@@ -214,3 +216,73 @@ def test_without_a_careful_evaluation_the_section_says_how_and_starts_one(
             assert errors == []
         finally:
             browser.close()
+
+
+def test_a_failing_run_opens_in_the_scenario_view(served: tuple[str, dict[str, str]],
+                                                  context: BrowserContext) -> None:
+    """Issue's wording: one run's speed, acceleration and r_dep beside the careful driver's
+    *in the scenario view*. The run's panel is part of view 4, its heading says what it is,
+    a click on a failing run in section 7 draws that run there and moves the page to it,
+    and the panel links back to section 7. (Last in this module: it uses the conftest's
+    browser, started once the tests above have closed their own Playwright.)"""
+    base, ids = served
+    view = httpx.get(f"{base}/dashboard/api/evaluations/{ids['acc']}", timeout=120).json()
+    failures = view["failures"]
+    assert len(failures) >= 2  # acc, 400 draws, seed 1: a few collide
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"{base}/dashboard#view-sut")
+    page.wait_for_selector("#sut-note[data-state=done]", timeout=TIMEOUT_MS)
+    # the evaluation of 400 draws (the test above adds two of 6 draws, newer)
+    page.select_option("#eval-select", ids["acc"])
+    # its highest-impact failing run is drawn in view 4, beside the careful driver
+    plot = "#view-scenario #scenario-run #sut-run-plot"
+    page.wait_for_selector(f"{plot}[data-source='{ids['acc']}#{failures[0]['run']}']"
+                           "[data-rendered='1']", timeout=TIMEOUT_MS)
+    assert "4 · Scenario" in page.locator("#view-scenario h2").inner_text()
+    assert "a run of an evaluation" in page.locator("#view-scenario h2").inner_text()
+    heading = page.locator("#scenario-run h3").inner_text()
+    assert "system under test beside the careful driver" in heading
+    names = page.evaluate("""() => document.getElementById('sut-run-plot').data
+                             .map((t) => t.name)""")
+    assert {"acc speed", "acc accel", "careful speed", "careful accel"} <= set(names)
+    # the rates and probabilities of section 7's table in one notation: before, 0.00131
+    # [8.09e-4, 0.00213] (two notations in one interval)
+    cells = page.evaluate("""() => [...document.querySelectorAll('#sut-table tr')].slice(1)
+        .flatMap((tr) => [...tr.querySelectorAll('td')].slice(0, 3).map((td) => td.innerText))""")
+    numbers = [x for c in cells for x in re.findall(r"[-0-9.e]+", c)]
+    assert numbers and all(re.fullmatch(r"-?\d\.\d\de[-+]\d+", x) for x in numbers), numbers
+    # every series ends where the drive ends (trailing nulls stretched the time axis past
+    # a collision by seconds)
+    assert page.evaluate("""() => document.getElementById('sut-run-plot').data.every(
+        (t) => t.y.length > 0 && t.y[t.y.length - 1] !== null)""")
+    note = page.locator("#sut-failures p.note").inner_text()
+    if len(failures) < view["failures_total"]:
+        assert f"the {len(failures)} with the highest impact speed" in note
+    # section 7 no longer holds the profile; it says where it is
+    assert page.locator("#view-sut #sut-run-plot").count() == 0
+    where = page.locator("#view-sut a[href='#scenario-run']")
+    assert where.count() == 1 and "view 4" in where.inner_text()
+    # a click on another failing run draws it in view 4 and scrolls there
+    second = failures[1]["run"]
+    page.locator("#sut-failures tr[data-run]").nth(1).click()
+    page.wait_for_selector(f"{plot}[data-source='{ids['acc']}#{second}']",
+                           timeout=TIMEOUT_MS)
+    info = page.locator("#sut-run-info")
+    assert f"Run {second}: acc " in info.inner_text()
+    assert f"(evaluation {ids['acc']})" in info.inner_text()
+    # the impact speed is relative: said so beside a plot of the ego's own speed
+    assert "collides at a relative speed of" in info.inner_text()
+    page.wait_for_function("""() => { const r = document.getElementById('scenario-run')
+        .getBoundingClientRect(); return r.top >= 0 && r.top < window.innerHeight / 2; }""")
+    # not hidden under the sticky header
+    header = page.locator("header").bounding_box()
+    panel = page.locator("#scenario-run h3").bounding_box()
+    assert header is not None and panel is not None
+    assert panel["y"] >= header["y"] + header["height"]
+    assert info.locator("a[href='#view-sut']").count() == 1
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.locator("#scenario-run").screenshot(path=str(ARTIFACTS / "4-evaluation-run.png"))
+    assert errors == []
