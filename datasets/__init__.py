@@ -20,6 +20,9 @@ from typing import TYPE_CHECKING, Any
 
 from datasets.cutin_model import (
     DEFAULT_LANE_WIDTH,
+    GL_NODES,
+    GL_WEIGHTS,
+    PANEL,
     PARAM_DOCS,
     PARAM_NAMES,
     PARAM_UNITS,
@@ -62,6 +65,9 @@ __all__ = [
     "DEFAULT_EVENTS_PATH",
     "DEFAULT_LANE_WIDTH",
     "EMBEDDED_SOURCE",
+    "GL_NODES",
+    "GL_WEIGHTS",
+    "PANEL",
     "PARAM_DOCS",
     "PARAM_NAMES",
     "PARAM_UNITS",

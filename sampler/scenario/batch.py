@@ -27,8 +27,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from datasets import DEFAULT_LANE_WIDTH
-from datasets.cutin_model import GL_NODES, GL_WEIGHTS, PANEL
+from datasets import DEFAULT_LANE_WIDTH, GL_NODES, GL_WEIGHTS, PANEL
 from riskcore import jit
 from riskcore.sut import CutInBatch
 from sampler.errors import BuilderError

@@ -242,13 +242,13 @@ def test_sampler_diagnostics_over_chunks_by_hand() -> None:
             "method": "rejection", "acceptance_rate": 0.05, "ess": 50.0, "n_draws": 500}}),
     ]
     d = _diagnostics(chunks)
-    assert d["chunks"] == 3 and d["methods"] == ["mcmc", "rejection"]
-    assert d["acceptance_mean"] == pytest.approx((0.05 + 0.3 + 0.5) / 3)
-    assert d["acceptance_min"] == pytest.approx(0.05)  # the rejection chunk's rate
-    assert d["tau_max"] == 30.0 and d["ess_total"] == 115.0 and d["n_draws"] == 500.0
-    assert d["warnings"] == ["chain shorter than 50 tau"]
+    assert d.chunks == 3 and d.methods == ["mcmc", "rejection"]
+    assert d.acceptance_mean == pytest.approx((0.05 + 0.3 + 0.5) / 3)
+    assert d.acceptance_min == pytest.approx(0.05)  # the rejection chunk's rate
+    assert d.tau_max == 30.0 and d.ess_total == 115.0 and d.n_draws == 500.0
+    assert d.warnings == ["chain shorter than 50 tau"]
     empty = _diagnostics([])
-    assert empty["chunks"] == 0 and empty["acceptance_mean"] is None
+    assert empty.chunks == 0 and empty.acceptance_mean is None
 
 
 # --------------------------------------------------------------------------- cache
