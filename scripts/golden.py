@@ -201,6 +201,26 @@ def _cases(model: CutInGMM) -> dict[str, Callable[[], str]]:
                          else o.arrays[k].tolist() for o in out for k in sorted(o.arrays)))
     cases["sut_runner acc k2=0.5, careful, t_max 40 s"] = runner_case
 
+    def tracks_case() -> str:
+        from sampler.scenario.batch import buildable_batches, cutin_tracks
+
+        odd = np.repeat(xc[:1], 6, axis=0)  # refusals: not finite, p_t, p_a3, p_y1, dv
+        odd[0, 0], odd[1, 1], odd[2, 4], odd[3, 0], odd[4, 6] = np.nan, -1, -1, 0, -80
+        odd[5, 3], odd[5, 4] = 0.0, 0.0  # a pulse edge on a panel edge
+        xs = np.vstack([xc, odd])
+        out = []
+        for quad in ("gauss", "trapezoid"):
+            for kw in ({}, {"lane_width": 3.2, "lead_in": 0.0, "dt": 0.05}):
+                out.append(_digest(*cutin_tracks(xs, quadrature=quad, **kw)))
+        for quad in ("gauss", "trapezoid"):
+            status, batches = buildable_batches(xs[:80], quadrature=quad)
+            out.append(_digest(status))
+            for idx, b in batches:
+                out.append(_digest(idx, *(v for v in vars(b).values()
+                                          if isinstance(v, np.ndarray))))
+        return _digest(out)
+    cases["cutin_tracks gauss/trapezoid, buildable_batches"] = tracks_case
+
     def score_samples_case() -> str:
         drawn = sample(model, ["ttc<3"], n=30, seed=21, method="rejection")
         out: list[Any] = []
