@@ -91,9 +91,52 @@ class CutInTracks(NamedTuple):
     status: NDArray[np.int64]
 
 
+class _Script(NamedTuple):
+    """One vector's script in the model's time tau (s; 0: the lane change starts)."""
+
+    p_y1: float  # peak yaw rate, rad/s
+    p_t: float  # half the lane change's duration, s
+    p_a1: float  # the pulse's acceleration, m/s^2
+    p_a2: float  # its start, s
+    p_a3: float  # its duration, s
+    p_v0: float  # speed at tau = 0, m/s
+    amp: float  # the heading's amplitude p_y1 * p_t / pi, rad
+    end: float  # the lane change's end 2 p_t, s
+
+
+class _Path(NamedTuple):
+    """The cutter's displacement from tau = 0 (x, y) at the quadrature's panel edges."""
+
+    grid: FloatArray
+    xs: FloatArray
+    ys: FloatArray
+
+
+class _Track(NamedTuple):
+    """One row of the track arrays: centre, heading, speed, acceleration, yaw rate."""
+
+    cx: FloatArray
+    cy: FloatArray
+    cpsi: FloatArray
+    cv: FloatArray
+    ca: FloatArray
+    cw: FloatArray
+
+
+class _Placement(NamedTuple):
+    """Where the script sits in the scenario: its start on the scenario's clock and the
+    cutter's start (x at tau = 0, y of its own lane's centre)."""
+
+    lead_in: float
+    x0: float
+    y0: float
+
+
 @numba.njit(cache=True)
 def _speed(t: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float
            ) -> float:  # pragma: no cover - jit
+    """The speed profile at t: v0, then the pulse's constant acceleration p_a1 over
+    [p_a2, p_a2 + p_a3] (the part before t = 0 taken off, so v(0) = v0)."""
     c = min(max(t - p_a2, 0.0), p_a3)
     c0 = min(max(-p_a2, 0.0), p_a3)
     return p_v0 + p_a1 * (c - c0)
@@ -102,12 +145,31 @@ def _speed(t: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float
 @numba.njit(cache=True)
 def _pulse_integral(t: float, p_a1: float, p_a2: float, p_a3: float, p_v0: float
                     ) -> float:  # pragma: no cover - jit
+    """``int_0^t`` of :func:`_speed` in closed form (negative for t < 0)."""
     u = min(max(t - p_a2, 0.0), p_a3)
     ht = 0.5 * u * u + p_a3 * max(t - p_a2 - p_a3, 0.0)
     u0 = min(max(0.0 - p_a2, 0.0), p_a3)
     h0 = 0.5 * u0 * u0 + p_a3 * max(0.0 - p_a2 - p_a3, 0.0)
     c0 = min(max(-p_a2, 0.0), p_a3)
     return p_v0 * t + p_a1 * (ht - h0 - c0 * t)
+
+
+@numba.njit(cache=True)
+def _v(tau: float, sc: _Script) -> float:  # pragma: no cover - jit
+    """The cutter's speed at tau."""
+    return _speed(tau, sc.p_a1, sc.p_a2, sc.p_a3, sc.p_v0)
+
+
+@numba.njit(cache=True)
+def _s(tau: float, sc: _Script) -> float:  # pragma: no cover - jit
+    """The distance the speed profile covers from 0 to tau (straight, no heading)."""
+    return _pulse_integral(tau, sc.p_a1, sc.p_a2, sc.p_a3, sc.p_v0)
+
+
+@numba.njit(cache=True)
+def _psi(tau: float, sc: _Script) -> float:  # pragma: no cover - jit
+    """The cutter's heading at tau inside the lane change."""
+    return sc.amp * (1.0 - math.cos(math.pi * tau / sc.p_t))
 
 
 @numba.njit(cache=True)
@@ -139,8 +201,7 @@ def _interp_at(x: float, xp: FloatArray, fp: FloatArray, j: int
 
 
 @numba.njit(cache=True)
-def _gl(a: float, b: float, amp: float, p_t: float, p_a1: float, p_a2: float, p_a3: float,
-        p_v0: float) -> tuple[float, float]:  # pragma: no cover - jit
+def _gl(a: float, b: float, sc: _Script) -> tuple[float, float]:  # pragma: no cover - jit
     """``int_a^b v cos psi``, ``int_a^b v sin psi``: 4-point Gauss-Legendre on one panel
     (no pulse edge inside; ``datasets.cutin_model._gl``, the same arithmetic)."""
     mid = 0.5 * (a + b)
@@ -149,16 +210,16 @@ def _gl(a: float, b: float, amp: float, p_t: float, p_a1: float, p_a2: float, p_
     sy = 0.0
     for q in range(4):
         s = mid + half * _GL_NODES[q]
-        v = _speed(s, p_a1, p_a2, p_a3, p_v0)
-        psi = amp * (1.0 - math.cos(math.pi * s / p_t))
+        v = _v(s, sc)
+        psi = _psi(s, sc)
         sx = sx + _GL_WEIGHTS[q] * (v * math.cos(psi))
         sy = sy + _GL_WEIGHTS[q] * (v * math.sin(psi))
     return half * sx, half * sy
 
 
 @numba.njit(cache=True)
-def _root(a: float, b: float, y_a: float, y_b: float, offset: float, amp: float, p_t: float,
-          p_a1: float, p_a2: float, p_a3: float, p_v0: float) -> float:  # pragma: no cover
+def _root(a: float, b: float, y_a: float, y_b: float, offset: float,
+          sc: _Script) -> float:  # pragma: no cover - jit
     """``datasets.cutin_model.crossing_root``: |y(t)| = offset inside the panel [a, b]."""
     lo = a
     hi = b
@@ -166,7 +227,7 @@ def _root(a: float, b: float, y_a: float, y_b: float, offset: float, amp: float,
     yb = abs(y_b)
     tau = a + (b - a) * (offset - ya) / (yb - ya)
     for _ in range(60):
-        dy = _gl(a, tau, amp, p_t, p_a1, p_a2, p_a3, p_v0)[1]
+        dy = _gl(a, tau, sc)[1]
         g = abs(y_a + dy) - offset
         if g == 0.0:
             break
@@ -174,8 +235,7 @@ def _root(a: float, b: float, y_a: float, y_b: float, offset: float, amp: float,
             lo = tau
         else:
             hi = tau
-        d = abs(_speed(tau, p_a1, p_a2, p_a3, p_v0)
-                * math.sin(amp * (1.0 - math.cos(math.pi * tau / p_t))))
+        d = abs(_v(tau, sc) * math.sin(_psi(tau, sc)))
         nt = tau - g / d if d > 0.0 else math.nan
         if not lo < nt < hi:
             nt = 0.5 * (lo + hi)
@@ -187,19 +247,18 @@ def _root(a: float, b: float, y_a: float, y_b: float, offset: float, amp: float,
 
 
 @numba.njit(cache=True)
-def _trapezoid(grid: FloatArray, amp: float, p_t: float, p_a1: float, p_a2: float,
-               p_a3: float, p_v0: float, xs: FloatArray,
+def _trapezoid(grid: FloatArray, sc: _Script, xs: FloatArray,
                ys: FloatArray) -> None:  # pragma: no cover - jit
     """The previous rule: x, y at the points of ``grid`` by the composite trapezoid."""
-    v_prev = _speed(grid[0], p_a1, p_a2, p_a3, p_v0)
-    psi_prev = amp * (1.0 - math.cos(math.pi * grid[0] / p_t))
+    v_prev = _v(grid[0], sc)
+    psi_prev = _psi(grid[0], sc)
     vc_prev = v_prev * math.cos(psi_prev)
     vs_prev = v_prev * math.sin(psi_prev)
     ax = 0.0
     ay = 0.0
     for i in range(1, grid.shape[0]):
-        v = _speed(grid[i], p_a1, p_a2, p_a3, p_v0)
-        psi = amp * (1.0 - math.cos(math.pi * grid[i] / p_t))
+        v = _v(grid[i], sc)
+        psi = _psi(grid[i], sc)
         vc = v * math.cos(psi)
         vs = v * math.sin(psi)
         h = grid[i] - grid[i - 1]
@@ -212,47 +271,59 @@ def _trapezoid(grid: FloatArray, amp: float, p_t: float, p_a1: float, p_a2: floa
 
 
 @numba.njit(cache=True)
-def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
-         ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
-         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray, method: int
-         ) -> tuple[int, float, float, float, float]:  # pragma: no cover - jit
-    """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end).
-    ``method`` 1: the previous rule (the composite trapezoid on a 1 ms grid, the pulse
-    edges inserted, linear interpolation between its points and for the crossing)."""
-    nan = math.nan
+def _check(row: FloatArray, lead_in: float) -> tuple[int, float]:  # pragma: no cover
+    """The builder's refusals before any integration: (status, t_settle), t_settle the
+    end of the cutter's script on the scenario's clock."""
     for j in range(8):
         if not math.isfinite(row[j]):
-            return _NOT_FINITE, nan, nan, nan, nan
-    p_y1, p_t, p_a1, p_a2, p_a3, p_v0, dv, gap = (row[0], row[1], row[2], row[3], row[4],
-                                                  row[5], row[6], row[7])
+            return _NOT_FINITE, math.nan
+    p_y1, p_t, p_a2, p_a3 = row[0], row[1], row[3], row[4]
     if p_t <= 0.0:
-        return _BAD_PT, nan, nan, nan, nan
+        return _BAD_PT, math.nan
     if p_a3 < 0.0:
-        return _BAD_A3, nan, nan, nan, nan
+        return _BAD_A3, math.nan
     if p_y1 == 0.0:
-        return _NO_YAW, nan, nan, nan, nan
+        return _NO_YAW, math.nan
     pulse_end = p_a2 + p_a3 if p_a3 > 0 else 0.0
     t_settle = lead_in + max(2.0 * p_t, pulse_end, 0.0)
     if t_settle > MAX_DURATION:
-        return _TOO_LONG, nan, nan, nan, nan
-    # the quadrature's panel edges: a uniform grid of panels of at most panel_width, plus
-    # the pulse edges (datasets.cutin_model.CutInTrajectory, the same arithmetic)
-    end = 2.0 * p_t
-    width = SUBSTEP if method == 1 else min(PANEL, p_t / 8.0, 0.25 / abs(p_y1))
-    n_sub = max(math.ceil(end / width), 1)
-    step = end / n_sub
+        return _TOO_LONG, math.nan
+    return _OK, t_settle
+
+
+@numba.njit(cache=True)
+def _script(row: FloatArray) -> _Script:  # pragma: no cover - jit
+    """The lateral and longitudinal script of a row :func:`_check` accepts."""
+    p_y1, p_t = row[0], row[1]
+    return _Script(p_y1, p_t, row[2], row[3], row[4], row[5], p_y1 * p_t / math.pi,
+                   2.0 * p_t)
+
+
+@numba.njit(cache=True)
+def _uniform_edges(sc: _Script, method: int) -> FloatArray:  # pragma: no cover - jit
+    """A uniform grid over [0, end] of panels at most ``PANEL`` wide (narrower for short
+    or sharp lane changes; ``SUBSTEP`` for ``method`` 1), its last point exactly end."""
+    width = SUBSTEP if method == 1 else min(PANEL, sc.p_t / 8.0, 0.25 / abs(sc.p_y1))
+    n_sub = max(math.ceil(sc.end / width), 1)
+    step = sc.end / n_sub
     base = np.empty(n_sub + 1)
     for i in range(n_sub + 1):
         base[i] = i * step
-    base[n_sub] = end
-    e1 = p_a2
-    e2 = p_a2 + p_a3
+    base[n_sub] = sc.end
+    return base
+
+
+@numba.njit(cache=True)
+def _pulse_edges(base: FloatArray, sc: _Script) -> FloatArray:  # pragma: no cover - jit
+    """The pulse's edges strictly inside (0, end) that ``base`` lacks, ascending, once."""
+    e1 = sc.p_a2
+    e2 = sc.p_a2 + sc.p_a3
     lo_e = min(e1, e2)
     hi_e = max(e1, e2)
     extra = np.empty(2)
     m = 0
     for e in (lo_e, hi_e):
-        if not (0.0 < e < end):
+        if not (0.0 < e < sc.end):
             continue
         if m > 0 and extra[m - 1] == e:
             continue
@@ -261,10 +332,20 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
             continue
         extra[m] = e
         m += 1
-    grid = np.empty(n_sub + 1 + m)
+    return extra[:m]
+
+
+@numba.njit(cache=True)
+def _panel_edges(sc: _Script, method: int) -> FloatArray:  # pragma: no cover - jit
+    """The quadrature's panel edges: :func:`_uniform_edges` merged with
+    :func:`_pulse_edges` (``datasets.cutin_model.CutInTrajectory``, the same arithmetic)."""
+    base = _uniform_edges(sc, method)
+    extra = _pulse_edges(base, sc)
+    m = extra.shape[0]
+    grid = np.empty(base.shape[0] + m)
     gi = 0
     ei = 0
-    for i in range(n_sub + 1):
+    for i in range(base.shape[0]):
         while ei < m and extra[ei] < base[i]:
             grid[gi] = extra[ei]
             gi += 1
@@ -275,103 +356,144 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
         grid[gi] = extra[ei]
         gi += 1
         ei += 1
+    return grid
+
+
+@numba.njit(cache=True)
+def _integrate(grid: FloatArray, sc: _Script, method: int) -> _Path:  # pragma: no cover
+    """The lateral motion integrated panel by panel (Gauss-Legendre; ``method`` 1: the
+    composite trapezoid) from (0, 0) at tau = 0."""
     ng = grid.shape[0]
     xs = np.empty(ng)
     ys = np.empty(ng)
     xs[0] = 0.0
     ys[0] = 0.0
-    amp = p_y1 * p_t / math.pi
     if method == 1:
-        _trapezoid(grid, amp, p_t, p_a1, p_a2, p_a3, p_v0, xs, ys)
+        _trapezoid(grid, sc, xs, ys)
     else:
         for i in range(1, ng):
-            dx, dy = _gl(grid[i - 1], grid[i], amp, p_t, p_a1, p_a2, p_a3, p_v0)
+            dx, dy = _gl(grid[i - 1], grid[i], sc)
             xs[i] = xs[i - 1] + dx
             ys[i] = ys[i - 1] + dy
-    s_end = _pulse_integral(end, p_a1, p_a2, p_a3, p_v0)
-    # the crossing: first |y| >= lane_width / 2, then the root inside that panel
-    offset = lane_width / 2.0
-    tau_c = nan
+    return _Path(grid, xs, ys)
+
+
+@numba.njit(cache=True)
+def _crossing(path: _Path, offset: float, sc: _Script,
+              method: int) -> tuple[bool, float, float]:  # pragma: no cover - jit
+    """(found, tau_c, x there): the first edge with |y| >= offset, then the root inside
+    that panel (``method`` 1: linear between the edges)."""
+    grid, xs, ys = path
     ic = -1
-    for i in range(ng):
+    for i in range(grid.shape[0]):
         if abs(ys[i]) >= offset:
             ic = i
             break
     if ic < 0:
-        return _NO_CROSS, nan, nan, nan, nan
+        return False, math.nan, math.nan
     if ic == 0:
-        tau_c = 0.0
-        x_rel_c = 0.0
-    elif method == 1:
+        return True, 0.0, 0.0
+    if method == 1:
         y0 = abs(ys[ic - 1])
         frac = (offset - y0) / (abs(ys[ic]) - y0)
         tau_c = grid[ic - 1] + frac * (grid[ic] - grid[ic - 1])
-        x_rel_c = _interp(tau_c, grid, xs)
-    else:
-        tau_c = _root(grid[ic - 1], grid[ic], ys[ic - 1], ys[ic], offset, amp, p_t, p_a1,
-                      p_a2, p_a3, p_v0)
-        x_rel_c = xs[ic - 1] + _gl(grid[ic - 1], tau_c, amp, p_t, p_a1, p_a2, p_a3, p_v0)[0]
-    v_ego = _speed(tau_c, p_a1, p_a2, p_a3, p_v0) + dv
-    if not v_ego > 0:
-        return _EGO_SPEED, nan, nan, nan, nan
-    t_c = lead_in + tau_c
-    x_cut0 = gap + 0.5 * (cut_len + ego_len) + v_ego * t_c - x_rel_c
-    y_start = -lane_width if p_y1 > 0 else lane_width
-    nt = t.shape[0]
-    jg = 0  # the grid's interval of tau (t increases: found by walking, not searching)
-    for k in range(nt):
-        tau = t[k] - lead_in
-        if tau < 0.0:
-            xr = _pulse_integral(tau, p_a1, p_a2, p_a3, p_v0)
-            yr = ys[0]
-        elif tau > end:
-            xr = xs[ng - 1] + (_pulse_integral(tau, p_a1, p_a2, p_a3, p_v0) - s_end)
-            yr = ys[ng - 1]
-        elif tau >= grid[ng - 1]:
-            xr = xs[ng - 1]
-            yr = ys[ng - 1]
-        elif tau <= grid[0]:
-            xr = xs[0]
-            yr = ys[0]
-        else:
-            while grid[jg + 1] <= tau:
-                jg += 1
-            if method == 1:
-                xr = _interp_at(tau, grid, xs, jg)
-                yr = _interp_at(tau, grid, ys, jg)
-            else:
-                dx, dy = _gl(grid[jg], tau, amp, p_t, p_a1, p_a2, p_a3, p_v0)
-                xr = xs[jg] + dx
-                yr = ys[jg] + dy
-        v = _speed(tau, p_a1, p_a2, p_a3, p_v0)
+        return True, tau_c, _interp(tau_c, grid, xs)
+    tau_c = _root(grid[ic - 1], grid[ic], ys[ic - 1], ys[ic], offset, sc)
+    return True, tau_c, xs[ic - 1] + _gl(grid[ic - 1], tau_c, sc)[0]
+
+
+@numba.njit(cache=True)
+def _relative(tau: float, path: _Path, sc: _Script, jg: int,
+              method: int) -> tuple[float, float, int]:  # pragma: no cover - jit
+    """The displacement (x, y) at tau and the grid's interval of tau, the search for it
+    walking on from ``jg`` (tau increases call by call). Before the script: straight;
+    after the lane change: straight on from its end."""
+    grid, xs, ys = path
+    ng = grid.shape[0]
+    if tau < 0.0:
+        return _s(tau, sc), ys[0], jg
+    if tau > sc.end:
+        return xs[ng - 1] + (_s(tau, sc) - _s(sc.end, sc)), ys[ng - 1], jg
+    if tau >= grid[ng - 1]:
+        return xs[ng - 1], ys[ng - 1], jg
+    if tau <= grid[0]:
+        return xs[0], ys[0], jg
+    while grid[jg + 1] <= tau:
+        jg += 1
+    if method == 1:
+        return _interp_at(tau, grid, xs, jg), _interp_at(tau, grid, ys, jg), jg
+    dx, dy = _gl(grid[jg], tau, sc)
+    return xs[jg] + dx, ys[jg] + dy, jg
+
+
+@numba.njit(cache=True)
+def _fill(t: FloatArray, path: _Path, sc: _Script, place: _Placement, track: _Track,
+          method: int) -> bool:  # pragma: no cover - jit
+    """The cutter's track at the times ``t``; False (the track cut short) when its speed
+    becomes negative within them."""
+    jg = 0
+    for k in range(t.shape[0]):
+        tau = t[k] - place.lead_in
+        xr, yr, jg = _relative(tau, path, sc, jg, method)
+        v = _v(tau, sc)
         if v < 0.0:
-            return _NEG_SPEED, nan, nan, nan, nan
-        cx[k] = x_cut0 + xr
-        cy[k] = y_start + yr
-        if 0.0 <= tau <= end:
-            cpsi[k] = amp * (1.0 - math.cos(math.pi * tau / p_t))
-            cw[k] = p_y1 * math.sin(math.pi * tau / p_t)
+            return False
+        track.cx[k] = place.x0 + xr
+        track.cy[k] = place.y0 + yr
+        if 0.0 <= tau <= sc.end:
+            track.cpsi[k] = _psi(tau, sc)
+            track.cw[k] = sc.p_y1 * math.sin(math.pi * tau / sc.p_t)
         else:
-            cpsi[k] = 0.0
-            cw[k] = 0.0
-        cv[k] = v
-        ca[k] = p_a1 if (p_a2 <= tau < p_a2 + p_a3) else 0.0
-    # t_p: the centre has moved wz towards the ego (riskcore.criticality's rule, on the
-    # samples, linear between them)
+            track.cpsi[k] = 0.0
+            track.cw[k] = 0.0
+        track.cv[k] = v
+        track.ca[k] = sc.p_a1 if (sc.p_a2 <= tau < sc.p_a2 + sc.p_a3) else 0.0
+    return True
+
+
+@numba.njit(cache=True)
+def _perception(t: FloatArray, cy: FloatArray, wz: float) -> float:  # pragma: no cover
+    """t_p: the centre has moved wz towards the ego (riskcore.criticality's rule, on the
+    samples, linear between them); NaN if it never does within ``t``."""
     toward = 1.0 if (0.0 - cy[0]) >= 0.0 else -1.0
-    t_p = nan
     prev = 0.0
-    for k in range(nt):
+    for k in range(t.shape[0]):
         mv = (cy[k] - cy[0]) * toward
         if mv >= wz:
             if k == 0:
-                t_p = t[0]
-            else:
-                f = (wz - prev) / (mv - prev)
-                t_p = t[k - 1] + f * (t[k] - t[k - 1])
-            break
+                return t[0]
+            f = (wz - prev) / (mv - prev)
+            return t[k - 1] + f * (t[k] - t[k - 1])
         prev = mv
-    return _OK, v_ego, t_c, t_p, t_settle
+    return math.nan
+
+
+@numba.njit(cache=True)
+def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
+         lengths: tuple[float, float], wz: float, track: _Track, method: int
+         ) -> tuple[int, float, float, float, float]:  # pragma: no cover - jit
+    """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end).
+    ``lengths``: the ego's and the cutter's. ``method`` 1: the previous rule (the
+    composite trapezoid on a 1 ms grid, the pulse edges inserted, linear interpolation
+    between its points and for the crossing)."""
+    nan = math.nan
+    status, t_settle = _check(row, lead_in)
+    if status != _OK:
+        return status, nan, nan, nan, nan
+    sc = _script(row)
+    path = _integrate(_panel_edges(sc, method), sc, method)
+    found, tau_c, x_rel_c = _crossing(path, lane_width / 2.0, sc, method)
+    if not found:
+        return _NO_CROSS, nan, nan, nan, nan
+    v_ego = _v(tau_c, sc) + row[6]
+    if not v_ego > 0:
+        return _EGO_SPEED, nan, nan, nan, nan
+    t_c = lead_in + tau_c
+    x_cut0 = row[7] + 0.5 * (lengths[1] + lengths[0]) + v_ego * t_c - x_rel_c
+    y_start = -lane_width if sc.p_y1 > 0 else lane_width
+    if not _fill(t, path, sc, _Placement(lead_in, x_cut0, y_start), track, method):
+        return _NEG_SPEED, nan, nan, nan, nan
+    return _OK, v_ego, t_c, _perception(t, track.cy, wz), t_settle
 
 
 @numba.njit(cache=True)
@@ -386,9 +508,9 @@ def _all(params: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
     j = 0
     for i in range(params.shape[0]):
         r = j if compact else i
-        s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width, ego_len,
-                                         cut_len, wz, cx[r], cy[r], cpsi[r], cv[r], ca[r],
-                                         cw[r], method)
+        track = _Track(cx[r], cy[r], cpsi[r], cv[r], ca[r], cw[r])
+        s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width,
+                                         (ego_len, cut_len), wz, track, method)
         status[i] = s
         out[i, 0] = v_ego
         out[i, 1] = t_c
