@@ -123,6 +123,17 @@ class _Track(NamedTuple):
     cw: FloatArray
 
 
+class _Scene(NamedTuple):
+    """What every row of a batch shares: the script's start on the scenario's clock (s),
+    the lane width, the ego's and the cutter's lengths and the wandering zone (m)."""
+
+    lead_in: float
+    lane_width: float
+    ego_len: float
+    cut_len: float
+    wz: float
+
+
 class _Placement(NamedTuple):
     """Where the script sits in the scenario: its start on the scenario's clock and the
     cutter's start (x at tau = 0, y of its own lane's centre)."""
@@ -469,14 +480,13 @@ def _perception(t: FloatArray, cy: FloatArray, wz: float) -> float:  # pragma: n
 
 
 @numba.njit(cache=True)
-def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
-         lengths: tuple[float, float], wz: float, track: _Track, method: int
+def _one(row: FloatArray, t: FloatArray, scene: _Scene, track: _Track, method: int
          ) -> tuple[int, float, float, float, float]:  # pragma: no cover - jit
     """One vector: fills the cutter's row; returns (status, v_ego, t_cross, t_p, t_end).
-    ``lengths``: the ego's and the cutter's. ``method`` 1: the previous rule (the
-    composite trapezoid on a 1 ms grid, the pulse edges inserted, linear interpolation
-    between its points and for the crossing)."""
+    ``method`` 1: the previous rule (the composite trapezoid on a 1 ms grid, the pulse
+    edges inserted, linear interpolation between its points and for the crossing)."""
     nan = math.nan
+    lead_in, lane_width = scene.lead_in, scene.lane_width
     status, t_settle = _check(row, lead_in)
     if status != _OK:
         return status, nan, nan, nan, nan
@@ -489,28 +499,26 @@ def _one(row: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
     if not v_ego > 0:
         return _EGO_SPEED, nan, nan, nan, nan
     t_c = lead_in + tau_c
-    x_cut0 = row[7] + 0.5 * (lengths[1] + lengths[0]) + v_ego * t_c - x_rel_c
+    x_cut0 = row[7] + 0.5 * (scene.cut_len + scene.ego_len) + v_ego * t_c - x_rel_c
     y_start = -lane_width if sc.p_y1 > 0 else lane_width
     if not _fill(t, path, sc, _Placement(lead_in, x_cut0, y_start), track, method):
         return _NEG_SPEED, nan, nan, nan, nan
-    return _OK, v_ego, t_c, _perception(t, track.cy, wz), t_settle
+    return _OK, v_ego, t_c, _perception(t, track.cy, scene.wz), t_settle
 
 
 @numba.njit(cache=True)
-def _all(params: FloatArray, t: FloatArray, lead_in: float, lane_width: float,
-         ego_len: float, cut_len: float, wz: float, cx: FloatArray, cy: FloatArray,
-         cpsi: FloatArray, cv: FloatArray, ca: FloatArray, cw: FloatArray,
+def _all(params: FloatArray, t: FloatArray, scene: _Scene, tracks: _Track,
          status: NDArray[np.int64], out: FloatArray,
          compact: bool, method: int) -> None:  # pragma: no cover - jit
-    """Every row; the tracks of row i in row i of the track arrays or, ``compact``, those
-    of the buildable rows one after another (a refused row's slot is reused). ``method``
-    1: the previous rule (:func:`_one`)."""
+    """Every row; the tracks of row i in row i of the (N, T) ``tracks`` or, ``compact``,
+    those of the buildable rows one after another (a refused row's slot is reused).
+    ``method`` 1: the previous rule (:func:`_one`)."""
+    cx, cy, cpsi, cv, ca, cw = tracks
     j = 0
     for i in range(params.shape[0]):
         r = j if compact else i
         track = _Track(cx[r], cy[r], cpsi[r], cv[r], ca[r], cw[r])
-        s, v_ego, t_c, t_p, t_end = _one(params[i], t, lead_in, lane_width,
-                                         (ego_len, cut_len), wz, track, method)
+        s, v_ego, t_c, t_p, t_end = _one(params[i], t, scene, track, method)
         status[i] = s
         out[i, 0] = v_ego
         out[i, 1] = t_c
@@ -625,8 +633,10 @@ def _build(params: Any, lane_width: float, ego_length: float, cutter_length: flo
     cx, cy, cpsi, cv, ca, cw = (alloc(shape) for _ in range(6))
     status = np.zeros(n, dtype=np.int64)
     out = np.full((n, 4), np.nan)
-    _all(x, t, float(lead_in), lane_width, ego_length, cutter_length, float(wandering_zone),
-         cx, cy, cpsi, cv, ca, cw, status, out, compact, _QUADRATURES[quadrature])
+    scene = _Scene(float(lead_in), lane_width, ego_length, cutter_length,
+                   float(wandering_zone))
+    _all(x, t, scene, _Track(cx, cy, cpsi, cv, ca, cw), status, out, compact,
+         _QUADRATURES[quadrature])
     return x, t, status, out, (cx, cy, cpsi, cv, ca, cw)
 
 
