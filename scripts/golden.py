@@ -20,9 +20,12 @@ import json
 import sys
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from anywhere
 
 from datasets import PARAM_NAMES
 from datasets.embedded import default_parameter_table
