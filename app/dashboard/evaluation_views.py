@@ -34,14 +34,40 @@ CAREFUL = "r157_cc"
 SCATTER_RUNS = 400
 #: rows of the failures list
 FAILURES = 25
+#: below this many collisions, or this effective sample size, the interval and the
+#: acceleration of an evaluation are shown flagged as unreliable (docs/dashboard.md)
+MIN_COLLISIONS = 10
+MIN_ESS = 10.0
+
+
+def reliability(collisions: Any, ess: Any) -> str | None:
+    """Why an evaluation's intervals and acceleration vs naive Monte Carlo are not to be
+    trusted (too few collisions or too small an effective sample size), or None. Without
+    any collision the page shows the upper bound instead: not flagged here."""
+    k = int(collisions or 0)
+    if k == 0:
+        return None
+    e = float("nan") if ess is None else float(ess)
+    why = []
+    if k < MIN_COLLISIONS:
+        why.append(f"only {k} collision{'s' if k != 1 else ''}")
+    if not math.isfinite(e) or e < MIN_ESS:
+        why.append("ESS " + (f"{e:.3g}" if math.isfinite(e) else "undefined"))
+    if not why:
+        return None
+    return ("unreliable: " + " and ".join(why) + " (fewer than "
+            f"{MIN_COLLISIONS} collisions or ESS below {MIN_ESS:g}) — run more "
+            "(a larger n or the rhw stop rule)")
 
 
 def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
     if not summary:
         return None
-    keys = ("p_collision", "rate_per_hour", "p_violation", "runs", "sut_runs", "collisions",
-            "ess", "acceleration", "stop_reason")
-    return {k: summary.get(k) for k in keys}
+    keys = ("p_collision", "rate_per_hour", "p_violation", "runs", "sut_runs", "pilot_runs",
+            "collisions", "ess", "acceleration", "stop_reason")
+    out = {k: summary.get(k) for k in keys}
+    out["unreliable"] = reliability(summary.get("collisions"), summary.get("ess"))
+    return out
 
 
 def _sim_key(settings: dict[str, Any] | None) -> dict[str, Any]:

@@ -17,6 +17,12 @@
     return v === null || v === undefined || Number.isNaN(v) ? "not computed" : S.fmt(v);
   }
   const $ = (id) => document.getElementById(id);
+  const VS_CAREFUL = "worse, same or better than UN R157's careful driver on the same " +
+    "cut-in (worse: collides where it does not, or at a higher relative impact speed)";
+  const WEIGHT = "the run's importance weight p/q in P(collision)";
+  const RISK_HINT = "not computed: start the evaluation with risk: true (--risk, or tick " +
+    "'score the drive with TTR risk') to " +
+    "compute Wagner's r_dep of the SUT's drive; it costs several times the simulation";
   const SUT = "#c62828";
   const CAREFUL = "#2e7d32";
   let poll = null;
@@ -34,23 +40,41 @@
     return "[" + sci(ci[0]) + ", " + sci(ci[1]) + "]";
   }
 
+  // how many draws were cut-ins the SUT drove: the others (outside the physical bounds or
+  // the region) count as no collision
+  function countCell(f) {
+    const pilot = f.pilot_runs ? "; the estimate counts the " + (f.runs - f.pilot_runs) +
+      " draws after the " + f.pilot_runs + " pilot draws" : "";
+    return f.collisions + " collisions in " + f.runs + " draws (" + f.sut_runs +
+      " simulated cut-ins; the rest fall outside the physical bounds or the region and " +
+      "count as no collision" + pilot + ")";
+  }
+
   function figureRows(label, f) {
     if (!f) return [[label, "–", "–", "–", "–"]];
     const r = f.rate_per_hour || {};
     const p = f.p_collision || {};
     const rows = [[label + " · collisions per hour", sci(r.estimate), interval(r.ci),
-                   interval(r.model_ci), f.collisions + " in " + f.runs + " runs"]];
+                   interval(r.model_ci), countCell(f)]];
     rows.push([label + " · P(collision) per cut-in", sci(p.estimate), interval(p.ci),
                interval(p.model_ci), p.upper_bound !== null && p.upper_bound !== undefined
                  ? "no collision: ≤ " + sci(p.upper_bound) + " (95 %)"
-                 : "ESS " + S.fmt(f.ess, 3) + ", ×" + S.fmt(f.acceleration, 3) + " vs naive MC"]);
+                 : f.unreliable ||
+                   "ESS " + S.fmt(f.ess, 3) + ", ×" + S.fmt(f.acceleration, 3) + " vs naive MC"]);
+    // too few collisions or too small an ESS (the view's rule): the intervals greyed, the
+    // speed-up replaced by the warning
+    if (f.unreliable) {
+      rows[0].cls = "unreliable";
+      rows[1].cls = "unreliable flagged";
+    }
     return rows;
   }
 
   function grid(head, rows) {
     return "<table><tr>" + head.map((h) => "<th>" + S.esc(h) + "</th>").join("") + "</tr>" +
-      rows.map((r) => "<tr>" + r.map((v, i) => (i === 0 ? "<th>" : "<td>") + S.esc(v) +
-                                       (i === 0 ? "</th>" : "</td>")).join("") + "</tr>")
+      rows.map((r) => "<tr" + (r.cls ? " class=\"" + r.cls + "\"" : "") + ">" +
+                 r.map((v, i) => (i === 0 ? "<th>" : "<td>") + S.esc(v) +
+                                 (i === 0 ? "</th>" : "</td>")).join("") + "</tr>")
         .join("") + "</table>";
   }
 
@@ -138,7 +162,8 @@
     }
     const region = ev.constraints.length ? ev.constraints.join(" and ") : "all cut-ins of the model";
     note.textContent = "Evaluation " + ev.id + ": " + ev.sut + " driven through " +
-      view.figures.runs + " importance-sampled cut-ins (" + region + ", seed " + ev.seed +
+      view.figures.sut_runs + " importance-sampled cut-ins of " + view.figures.runs +
+      " draws (" + region + ", seed " + ev.seed +
       "); rates with the Monte Carlo interval and the model interval (the data's " +
       "uncertainty, from the bootstrap refits).";
     drawTable(view);
@@ -224,6 +249,12 @@
     }
     const head = ["run", "impact speed (relative) [m/s]", "peak r_dep", "vs careful",
                   "cutter v0 [m/s]", "dv [m/s]", "gap [m]", "weight"];
+    const tips = {
+      "impact speed (relative) [m/s]": "the ego's speed minus the cutter's at contact",
+      "peak r_dep": "the highest Wagner r_dep of the SUT's drive",
+      "vs careful": VS_CAREFUL,
+      "weight": WEIGHT,
+    };
     const body = view.failures.map((r) => "<tr data-run=\"" + r.run + "\"><td><a href=\"#\">" +
       r.run + "</a></td><td>" + S.esc(S.fmt(r.impact_speed)) + "</td><td>" +
       S.esc(riskCell(r.r_dep_peak)) + "</td><td>" + S.esc(r.vs_careful || "–") + "</td><td>" +
@@ -235,7 +266,11 @@
     box.innerHTML = "<p class=\"note\">" + view.failures_total + " failing runs, " + shown +
       " (click one to drive it again beside the careful driver in " +
       "view 4 · Scenario):</p><table><tr>" +
-      head.map((h) => "<th>" + S.esc(h) + "</th>").join("") + "</tr>" + body + "</table>";
+      head.map((h) => "<th" + (tips[h] ? " title=\"" + S.esc(tips[h]) + "\"" : "") + ">" +
+               S.esc(h) + "</th>").join("") + "</tr>" + body + "</table>" +
+      "<p class=\"note\" id=\"sut-failures-legend\">vs careful: " + S.esc(VS_CAREFUL) +
+      ". weight: " + S.esc(WEIGHT) + "." + (view.scatter.note || view.failures.some((r) =>
+        riskCell(r.r_dep_peak) === "not computed") ? " peak r_dep " + S.esc(RISK_HINT) + "." : "") + "</p>";
     box.querySelectorAll("tr[data-run]").forEach((tr) => tr.addEventListener("click", (e) => {
       e.preventDefault();
       openRun(view.evaluation.id, parseInt(tr.dataset.run, 10), true);

@@ -519,3 +519,34 @@ def test_the_careful_drivers_rate_is_one_under_the_same_simulator_settings(
     _done(eval_client, eid2)
     assert eval_client.get(f"/dashboard/api/evaluations/{eid2}").json()[
         "careful"]["id"] == other.id
+
+
+@pytest.mark.parametrize(("collisions", "ess", "flagged"), [
+    (0, 0.0, None),                      # no collision: the page shows the upper bound
+    (82, 30.5, None),                    # enough of both
+    (10, 10.0, None),                    # on the thresholds: trusted
+    (9, 40.0, "only 9 collisions"),
+    (1, 1.0, "only 1 collision and ESS 1"),
+    (300, 1.56, "ESS 1.56"),             # many collisions, two weights dominate
+    (50, None, "ESS undefined"),
+])
+def test_small_evaluations_are_flagged_unreliable(collisions: int, ess: float | None,
+                                                  flagged: str | None) -> None:
+    from app.dashboard.evaluation_views import reliability
+
+    got = reliability(collisions, ess)
+    if flagged is None:
+        assert got is None
+    else:
+        assert got is not None and got.startswith("unreliable: " + flagged + " (")
+        assert "run more" in got
+
+
+def test_the_dashboard_view_carries_the_reliability_flag(eval_client: Any) -> None:
+    eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 300,
+                                                 "seed": 5}).json()["id"]
+    st = _done(eval_client, eid)["summary"]
+    fig = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()["figures"]
+    assert fig["sut_runs"] == st["sut_runs"] and fig["runs"] == 300
+    few = 0 < st["collisions"] < 10 or (st["collisions"] > 0 and st["ess"] < 10)
+    assert (fig["unreliable"] is not None) == few

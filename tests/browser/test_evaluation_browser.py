@@ -110,6 +110,28 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
             assert rows.count() == len(view["failures"])
             # an evaluation without `risk` has no r_dep: the table says so, not "NaN"
             assert "NaN" not in page.locator("#sut-failures").inner_text()
+            fig = view["figures"]
+            # the draws and the simulated cut-ins among them, from the summary
+            assert (f"{fig['collisions']} collisions in {fig['runs']} draws "
+                    f"({fig['sut_runs']} simulated cut-ins;") in table
+            # too few collisions or a tiny ESS: the warning replaces the speed-up, greyed
+            acc_rows = page.locator("#sut-table tr", has_text="acc · ")
+            if fig["unreliable"]:
+                assert fig["unreliable"] in table
+                assert acc_rows.nth(1).get_attribute("class") == "unreliable flagged"
+                assert "vs naive MC" not in acc_rows.nth(1).inner_text()
+            else:
+                assert acc_rows.nth(1).get_attribute("class") is None
+            if view["failures"]:
+                # the columns explained: tooltips and a legend under the table
+                for col in ("vs careful", "weight"):
+                    tip = page.locator("#sut-failures th", has_text=col).get_attribute("title")
+                    assert tip and len(tip) > 20
+                legend = page.locator("#sut-failures-legend").inner_text()
+                assert "vs careful: worse, same or better than UN R157" in legend
+                assert "importance weight p/q" in legend
+                if sc["note"]:  # no risk asked: how to get it
+                    assert "risk: true (--risk" in legend
             # every value of the failures list on one line (a weight like 8.25e-4 was
             # broken after its "e-", seen at 1400 px)
             lines = page.evaluate("""() => [...document.querySelectorAll(
@@ -258,7 +280,7 @@ def test_a_failing_run_opens_in_the_scenario_view(served: tuple[str, dict[str, s
     # a collision by seconds)
     assert page.evaluate("""() => document.getElementById('sut-run-plot').data.every(
         (t) => t.y.length > 0 && t.y[t.y.length - 1] !== null)""")
-    note = page.locator("#sut-failures p.note").inner_text()
+    note = page.locator("#sut-failures p.note:not(#sut-failures-legend)").inner_text()
     if len(failures) < view["failures_total"]:
         assert f"the {len(failures)} with the highest impact speed" in note
     # section 7 no longer holds the profile; it says where it is
