@@ -63,6 +63,44 @@ def naive(model: CutInGMM, runner, n_draws: int, seed: int, block: int = 1 << 20
     return hits, inside, time.perf_counter() - t0
 
 
+_NAIVE_JOB: tuple = ()
+
+
+def _naive_block(job: tuple[int, np.random.SeedSequence]) -> tuple[int, int]:
+    model, runner, region, sim_block = _NAIVE_JOB
+    b, ss = job
+    rng = np.random.default_rng(ss)
+    x = model.params_matrix(model.from_z(model.sample_z(b, rng)))
+    ok = region.in_bounds(x)
+    xs = x[ok]
+    seeds = rng.integers(0, 2**63, size=xs.shape[0], dtype=np.uint64)
+    hits = 0
+    for i in range(0, xs.shape[0], sim_block):
+        hits += int(np.asarray(runner(xs[i:i + sim_block], seeds[i:i + sim_block]).collided).sum())
+    return hits, int(ok.sum())
+
+
+def naive_blocks(model: CutInGMM, runner, n_draws: int, seed: int, workers: int = 1,
+                 block: int = 1 << 16, sim_block: int = 1024) -> tuple[int, int, float]:
+    """``naive`` in blocks of ``block`` draws, block i with the i-th child of
+    ``SeedSequence(seed)``: the same figures for any number of ``workers`` (forked
+    processes, each running whole blocks)."""
+    global _NAIVE_JOB
+    import multiprocessing as mp
+
+    region = Region.from_constraints((), lane_width=model.lane_width_).bind(model)
+    sizes = [block] * (n_draws // block) + ([n_draws % block] if n_draws % block else [])
+    jobs = list(zip(sizes, np.random.SeedSequence(seed).spawn(len(sizes)), strict=True))
+    _NAIVE_JOB = (model, runner, region, sim_block)
+    t0 = time.perf_counter()
+    if workers <= 1:
+        out = [_naive_block(j) for j in jobs]
+    else:
+        with mp.get_context("fork").Pool(workers) as pool:
+            out = pool.map(_naive_block, jobs, chunksize=1)
+    return sum(h for h, _ in out), sum(n for _, n in out), time.perf_counter() - t0
+
+
 def envelope_reference(model: CutInGMM, runner, reaction: float, decel: float,
                        n_draws: int, seed: int, dv_max: float = 20.0
                        ) -> tuple[float, float, float, float]:
@@ -108,23 +146,44 @@ def cp(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
     return lo, hi
 
 
-def campaigns(model: CutInGMM, runner, seeds: range, **kw) -> list[dict]:
-    # the model-level figures (P(B), each replicate's P_b(B)) are memoised on the model
-    # once: not part of a campaign's cost
+_CAMPAIGN_JOB: tuple = ()
+
+
+def _campaign(s: int) -> dict:
+    model, runner, kw = _CAMPAIGN_JOB
+    t0 = time.perf_counter()
+    summ = evaluate(model, runner, seed=s, **kw).summary()
+    summ["wall_s"] = time.perf_counter() - t0
+    return summ
+
+
+def campaigns(model: CutInGMM, runner, seeds: range, workers: int = 1, **kw) -> list[dict]:
+    """One campaign per seed; ``workers`` > 1: forked processes, each running whole
+    campaigns (the same figures; each campaign's wall clock is then its own process's)."""
+    global _CAMPAIGN_JOB
+    import multiprocessing as mp
+
+    # the model-level figures (P(B), each replicate's P_b(B)) and the proposal's fixed
+    # parts are memoised on the model once: not part of a campaign's cost
     evaluate(model, runner, seed=10**6, n=1, batch_size=1).summary()
-    out = []
-    for s in seeds:
-        t0 = time.perf_counter()
-        r = evaluate(model, runner, seed=s, **kw)
-        summ = r.summary()
-        summ["wall_s"] = time.perf_counter() - t0
-        out.append(summ)
-        p = summ["p_collision"]
-        print(f"  seed {s:3d}: P {p['estimate']:.3e} CI [{p['ci'][0]:.2e}, {p['ci'][1]:.2e}] "
-              f"rhw {p['rhw']:.2f} sut runs {summ['sut_runs']:6d} collisions "
-              f"{summ['collisions']:4d} accel {summ['acceleration'] or 0:8.0f} "
-              f"{summ['wall_s']:6.1f} s ({summ['stop_reason']})", flush=True)
-    return out
+    if kw.get("adapt") == "ce":
+        from sampler.campaign.proposal import build_proposal
+        build_proposal(model, region=None, lane_width=model.lane_width_)
+    _CAMPAIGN_JOB = (model, runner, kw)
+    if workers > 1:
+        with mp.get_context("fork").Pool(workers) as pool:
+            res = pool.imap(_campaign, seeds, chunksize=1)
+            return [_show(s, summ) for s, summ in zip(seeds, res, strict=True)]
+    return [_show(s, _campaign(s)) for s in seeds]
+
+
+def _show(s: int, summ: dict) -> dict:
+    p = summ["p_collision"]
+    print(f"  seed {s:3d}: P {p['estimate']:.3e} CI [{p['ci'][0]:.2e}, {p['ci'][1]:.2e}] "
+          f"rhw {p['rhw']:.2f} sut runs {summ['sut_runs']:6d} collisions "
+          f"{summ['collisions']:4d} accel {summ['acceleration'] or 0:8.0f} "
+          f"{summ['wall_s']:6.1f} s ({summ['stop_reason']})", flush=True)
+    return summ
 
 
 def report(name: str, res: list[dict], p_ref: float | None, ref_ci: tuple[float, float],
@@ -175,6 +234,11 @@ def main() -> None:
     ap.add_argument("--sut-param", action="append", default=[])
     ap.add_argument("--sut-seeds", type=int, default=1)
     ap.add_argument("--naive-sut", type=float, default=0)
+    ap.add_argument("--sut-workers", type=int, default=1,
+                    help="processes for the SUT campaigns (whole campaigns each)")
+    ap.add_argument("--naive-workers", type=int, default=1,
+                    help="processes for the SUT's naive Monte Carlo (blocks of 2^16 draws "
+                         "with their own seeds: the same figures for any number)")
     ap.add_argument("--no-sut", action="store_true")
     ap.add_argument("--no-standin", action="store_true")
     ap.add_argument("--batch", type=int, default=2000)
@@ -223,8 +287,8 @@ def main() -> None:
 
         runner_s = sut_runner(factory, careful=False, settings=settings, name=a.sut)
         print(f"  campaigns: adapt={a.adapt}, chunks of {a.sut_batch} runs")
-        res = campaigns(model, runner_s, range(a.sut_seeds), batch_size=a.sut_batch,
-                        adapt=a.adapt)
+        res = campaigns(model, runner_s, range(a.sut_seeds), workers=a.sut_workers,
+                        batch_size=a.sut_batch, adapt=a.adapt)
         parts = sorted({re.sub(r"(@.*|x\d+$)", "", p["part"]) for r in res
                         for p in r["proposal"]})
         print(f"  proposal parts of the final chunks: {', '.join(parts)}; pilot runs per "
@@ -238,13 +302,14 @@ def main() -> None:
         if a.naive_sut > 0:
             # runner calls of 1024 rows: 512-4096 run equally fast, 128 and 16384 slower
             # (bench_sut.py --only-runner --runner-blocks 128 512 1024 2048 4096 16384)
-            k, n_in, secs_n = naive(model, runner_s, int(a.naive_sut), seed=777,
-                                    block=1 << 16, sim_block=1024)
+            k, n_in, secs_n = naive_blocks(model, runner_s, int(a.naive_sut), seed=777,
+                                           workers=a.naive_workers)
             p_ref = k / n_in if k else None
             ci = cp(k, n_in)
-            per_run = secs_n / n_in
+            per_run = secs_n * a.naive_workers / n_in  # per core
             print(f"  naive: {n_in} runs, {k} collisions -> P {k / n_in:.3e} [{ci[0]:.2e}, "
-                  f"{ci[1]:.2e}] ({secs_n:.0f} s, {n_in / secs_n:.0f} runs/s)", flush=True)
+                  f"{ci[1]:.2e}] ({secs_n:.0f} s with {a.naive_workers} process(es), "
+                  f"{n_in / secs_n:.0f} runs/s)", flush=True)
         report(a.sut, res, p_ref, ci, per_run)
 
 

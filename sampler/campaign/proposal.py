@@ -44,12 +44,20 @@ from sampler.model.memo import memoised
 from sampler.region.constraints import Region
 
 __all__ = ["DEFAULT_ENVELOPES", "GaussianMixture", "MixturePart", "Proposal", "build_ce_proposal",
-           "build_proposal", "fit_ce_mixture", "fit_weighted_gmm", "widened_model"]
+           "build_proposal", "fit_ce_mixture", "fit_weighted_gmm", "region_mixture",
+           "widened_model"]
 
 FloatArray = NDArray[np.float64]
 
-#: critical half-spaces the proposal keeps a share on (a constraint each)
-DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "dv>4")
+#: critical sets the proposal keeps a share on (a constraint each): a half-space
+#: envelope where ``find_envelope`` has one, else a mixture fitted to the model's draws
+#: inside the set (``v_cut_min<3``: a cutter that slows to a crawl or a stop; its speed
+#: is a product of the pulse's acceleration and length, no half-space in z)
+DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "dv>4",
+                                      "v_cut_min<3")
+
+#: the cross-entropy stage's share of the parts fitted to a set without a half-space
+SET_SHARE = 0.1
 
 
 class MixturePart(Protocol):
@@ -158,9 +166,38 @@ def _wide_part(model: CutInGMM, widen: float) -> _ModelPart:
     return _ModelPart(f"wide:x{widen:g}", wide)
 
 
+def region_mixture(model: CutInGMM, region: Region, *, seed: int = 0, block: int = 1 << 18,
+                   max_blocks: int = 32, min_rows: int = 400, max_k: int = 3,
+                   inflate: float = 1.2, nu: float = 5.0) -> GaussianMixture | None:
+    """A Student-t mixture in z-space fitted to the model's draws inside ``region`` (for
+    a set with no half-space envelope). Model draws in blocks of ``block`` (from
+    ``default_rng(seed)``: deterministic) until ``min_rows`` fall inside or
+    ``max_blocks`` were drawn (or none fell inside the first block); ``fit_ce_mixture`` on them (equal weights, fitted
+    covariances times ``inflate^2``, ``nu`` degrees of freedom). None with fewer than
+    2 (d + 1) rows inside. The mixture's density is its own, exact: as a proposal part
+    it keeps the estimate unbiased however well it fits the set."""
+    reg = region.bind(model)
+    rng = np.random.default_rng(seed)
+    rows: list[FloatArray] = []
+    n_in = 0
+    for _ in range(max_blocks):
+        z = np.asarray(model.sample_z(block, rng), dtype=np.float64)
+        z_in = z[np.asarray(reg.contains(model.params_matrix(model.from_z(z))), dtype=bool)]
+        rows.append(z_in)
+        n_in += z_in.shape[0]
+        if n_in >= min_rows or n_in == 0:  # none in the first block: too rare to fit
+            break
+    d = rows[0].shape[1]
+    if n_in < 2 * (d + 1):
+        return None
+    z_all = np.concatenate(rows)
+    return fit_ce_mixture(z_all, np.ones(n_in), rng, max_k=max_k, inflate=inflate, nu=nu,
+                          shape="fitted")
+
+
 def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: float,
-                    region: Region | None) -> list[_EnvelopePart]:
-    out: list[_EnvelopePart] = []
+                    region: Region | None) -> list[MixturePart]:
+    out: list[MixturePart] = []
     seen: set[tuple[float, ...]] = set()
     todo: list[tuple[str, Region]] = []
     if region is not None and region.constraints:
@@ -173,6 +210,15 @@ def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: flo
 
         hs = memoised(model, ("campaign_envelope", reg), find)
         if hs is None:
+            if name == "region":
+                continue
+
+            def fit(r: Region = reg) -> GaussianMixture | None:
+                return region_mixture(model, r)
+
+            gm = memoised(model, ("campaign_region_mixture", reg), fit)
+            if gm is not None:
+                out.append(_MixturePart(f"set:{name}", gm))
             continue
         key = (*np.round(hs.a, 12).tolist(), round(hs.b, 12))
         if key in seen:
@@ -444,7 +490,7 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
                       wide_share: float = 0.05, envelope_share: float = 0.1,
                       kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3,
                       history: Sequence[GaussianMixture] = (), history_share: float = 0.1,
-                      inflate: float = 1.2) -> Proposal:
+                      inflate: float = 1.2, set_share: float | None = None) -> Proposal:
     """The proposal of one chunk of an adaptive cross-entropy campaign: the model
     (``alpha``: weights stay below ``1 / alpha``), the wide part, the envelopes
     (``envelope_share`` together) and, with ``elite`` (z rows and their weights ``p/q``
@@ -455,14 +501,19 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     failure family found once (by an envelope, say) is drawn again in the next chunk
     even when the mixture fit has no component there. Without elite: as
     :func:`build_proposal` before any collision."""
+    if set_share is None:
+        set_share = SET_SHARE
     if elite is None or elite[0].shape[0] == 0:
         return build_proposal(model, region=region, lane_width=lane_width,
                               envelopes=envelopes, alpha=0.15)
     parts: list[MixturePart] = [_ModelPart("model", model), _wide_part(model, widen)]
     shares = [alpha, wide_share]
-    env = _envelope_parts(model, envelopes, lane_width, region)
+    env_all = _envelope_parts(model, envelopes, lane_width, region)
+    env = [e for e in env_all if not e.name.startswith("set:")]
+    sets = [e for e in env_all if e.name.startswith("set:")]
     gm = fit_ce_mixture(elite[0], elite[1], rng, max_k=max_k, model=model, inflate=inflate)
-    rest = 1.0 - alpha - wide_share - (envelope_share if env else 0.0)
+    rest = (1.0 - alpha - wide_share - (envelope_share if env else 0.0)
+            - (set_share if sets else 0.0))
     if level <= 0:
         parts.append(_fitted_part(elite[0], elite[1], rng, model, 300, 1.3, 5.0))
         shares.append(kernel_share)
@@ -477,6 +528,9 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     if env:
         parts.extend(env)
         shares.extend([envelope_share / len(env)] * len(env))
+    if sets:
+        parts.extend(sets)
+        shares.extend([set_share / len(sets)] * len(sets))
     out = Proposal(parts, shares)
     out.fitted = gm
     return out

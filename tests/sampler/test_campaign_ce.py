@@ -18,8 +18,16 @@ from scipy import stats
 from sampler import CutInGMM
 from sampler.campaign import evaluate, halfspace_runner, union_probability, union_runner
 from sampler.campaign.evaluate import performance_score
-from sampler.campaign.proposal import GaussianMixture, fit_ce_mixture, fit_weighted_gmm
+from sampler.campaign.proposal import (
+    DEFAULT_ENVELOPES,
+    GaussianMixture,
+    build_ce_proposal,
+    fit_ce_mixture,
+    fit_weighted_gmm,
+    region_mixture,
+)
 from sampler.errors import SamplerError
+from sampler.region import Region
 from tests.sampler.factories import synthetic_parameter_table
 from tests.sampler.test_campaign import (
     _assert_unbiased_and_covering,
@@ -223,3 +231,65 @@ def test_ce_campaign_keeps_two_failure_families(model: CutInGMM) -> None:
     assert abs(e.mean() / p_true - 1) < 0.1
     assert covered >= 27
     assert hits_b >= 30 * 10  # the smaller family is drawn in the final stage
+
+
+#: a set with no half-space envelope that holds ~0.15 % of the synthetic model's draws
+_SET = "v_cut_min<15"
+
+
+def test_set_part_density_is_normalised_and_sits_on_its_set(model: CutInGMM) -> None:
+    """The part fitted to a set without a half-space (``region_mixture``) has an exact
+    normaliser: with r = (p + q) / 2 drawn half from the model p and half from the part
+    q, the mean of q / r over draws of r is the integral of q, 1 (q / r <= 2: a tight
+    standard error); likewise p / r. And its draws fall in the set far more often than
+    the model's."""
+    reg = Region.from_constraints([_SET], lane_width=model.lane_width_)
+    gm = region_mixture(model, reg)
+    assert gm is not None and np.isfinite(gm.nu)
+    rng = np.random.default_rng(11)
+    n = 100_000
+    z = np.concatenate([model.sample_z(n, rng), gm.draw(n, rng)])
+    log_p = model.log_density_z(z)
+    log_q = gm.log_q(z)
+    log_r = np.logaddexp(log_p, log_q) - math.log(2)
+    for ratio in (np.exp(log_q - log_r), np.exp(log_p - log_r)):
+        se = ratio.std(ddof=1) / math.sqrt(ratio.size)
+        assert abs(ratio.mean() - 1.0) <= 4 * se
+        assert se < 0.005
+    inside = reg.bind(model)
+    frac_q = inside.contains(model.params_matrix(model.from_z(z[n:]))).mean()
+    frac_p = inside.contains(model.params_matrix(model.from_z(z[:n]))).mean()
+    assert frac_p < 0.01 and frac_q > 20 * frac_p
+    # deterministic: the same mixture again
+    again = region_mixture(model, reg)
+    assert again is not None and np.array_equal(again.means, gm.means)
+    # a set the model never reaches in the first block: no part
+    none = Region.from_constraints(["v_cut_min<3"], lane_width=model.lane_width_)
+    assert region_mixture(model, none) is None
+
+
+def test_ce_proposal_with_a_set_part_keeps_the_weights_unbiased(model: CutInGMM) -> None:
+    """E_q[p / q] = 1 for the whole mixture with the set part (weights <= 1 / alpha);
+    the set part has its own share."""
+    z_e = model.sample_z(400, np.random.default_rng(2))
+    envs = (*DEFAULT_ENVELOPES[:-1], _SET)
+    prop = build_ce_proposal(model, region=None, lane_width=model.lane_width_,
+                             elite=(z_e[:60], np.ones(60)), level=1.0,
+                             rng=np.random.default_rng(3), envelopes=envs, set_share=0.1)
+    shares = {d["part"]: d["share"] for d in prop.describe()}
+    assert math.isclose(shares[f"set:{_SET}"], 0.1, rel_tol=1e-12)
+    z, _ = prop.draw(200_000, np.random.default_rng(4))
+    w = np.exp(model.log_density_z(z) - prop.log_q(z))
+    assert w.max() <= 1 / 0.1 + 1e-9
+    se = w.std(ddof=1) / math.sqrt(w.size)
+    assert abs(w.mean() - 1.0) <= 4 * se
+
+
+@pytest.mark.slow
+def test_ce_campaign_with_a_set_part_is_unbiased_and_covers(model: CutInGMM) -> None:
+    a, b, p_true = _rare_halfspace(model, 3e-5)
+    summaries = _assert_unbiased_and_covering(
+        model, halfspace_runner(model, a, b), p_true, n=1200, batch_size=300, adapt="ce",
+        envelopes=(*DEFAULT_ENVELOPES[:-1], _SET))
+    assert all(any(p["part"] == f"set:{_SET}" for p in summ["proposal"])
+               for summ in summaries)
