@@ -57,7 +57,7 @@ DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "d
                                       "v_cut_min<3")
 
 #: the cross-entropy stage's share of the parts fitted to a set without a half-space
-SET_SHARE = 0.1
+SET_SHARE = 0.2
 
 
 class MixturePart(Protocol):
@@ -172,8 +172,9 @@ def region_mixture(model: CutInGMM, region: Region, *, seed: int = 0, block: int
     """A Student-t mixture in z-space fitted to the model's draws inside ``region`` (for
     a set with no half-space envelope). Model draws in blocks of ``block`` (from
     ``default_rng(seed)``: deterministic) until ``min_rows`` fall inside or
-    ``max_blocks`` were drawn (or none fell inside the first block); ``fit_ce_mixture`` on them (equal weights, fitted
-    covariances times ``inflate^2``, ``nu`` degrees of freedom). None with fewer than
+    ``max_blocks`` were drawn (or none fell inside the first block); ``fit_ce_mixture``
+    on them (equal weights, fitted covariances times ``inflate^2``, ``nu`` degrees of
+    freedom). None with fewer than
     2 (d + 1) rows inside. The mixture's density is its own, exact: as a proposal part
     it keeps the estimate unbiased however well it fits the set."""
     reg = region.bind(model)
