@@ -191,12 +191,7 @@ def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no co
         return fp[n - 1]
     if x <= xp[0]:
         return fp[0]
-    j = np.searchsorted(xp, x, side="right") - 1
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    r = slope * (x - xp[j]) + fp[j]
-    if r != r:
-        r = slope * (x - xp[j + 1]) + fp[j + 1]
-    return r
+    return _interp_at(x, xp, fp, np.searchsorted(xp, x, side="right") - 1)
 
 
 @numba.njit(cache=True)
