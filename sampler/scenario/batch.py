@@ -191,7 +191,7 @@ def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no co
         return fp[n - 1]
     if x <= xp[0]:
         return fp[0]
-    return _interp_at(x, xp, fp, np.searchsorted(xp, x, side="right") - 1)
+    return _interp_at(x, xp, fp, int(np.searchsorted(xp, x, side="right") - 1))
 
 
 @numba.njit(cache=True)
