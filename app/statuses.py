@@ -10,15 +10,16 @@ keys in their stored order): :func:`catalogue_status_plain` gives that form.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import ConfigDict, Field
+from pydantic import ConfigDict, Field, with_config
+from typing_extensions import TypedDict  # pydantic reads it on Python 3.11
 
 from app.rates import RegionRates
 from app.schemas import ApiModel, PRegion
 
 __all__ = ["CatalogueStage", "CatalogueStatus", "ChunkProgress", "EvaluationStatus",
-           "catalogue_status_plain"]
+           "EvaluationSummary", "catalogue_status_plain"]
 
 
 class ChunkProgress(ApiModel):
@@ -114,6 +115,22 @@ def catalogue_status_plain(status: CatalogueStatus) -> dict[str, Any]:
     return {k: fields[k] for k in _PLAIN_ORDER if k in fields}
 
 
+@with_config(ConfigDict(extra="allow"))
+class EvaluationSummary(TypedDict):
+    """A finished evaluation's summary (``CampaignResult.summary()``, docs/evaluation.md):
+    the campaign's figures (``p_collision``, ``rate_per_hour``, ``runs``, ``collisions``,
+    ``ess``, ``acceleration``, ...) and the verdict on them. A plain dict at run time.
+    The verdict is recomputed from the stored figures when read
+    (``sampler.campaign.reliability``), so evaluations stored before it have it too."""
+
+    warnings: Annotated[list[str], Field(
+        description="why the figures are not to be trusted, one plain-English sentence "
+        "each (too few collisions, a small effective sample size, no collision at all, "
+        "stopped at max_runs before the stop rule, a cross-entropy campaign without its "
+        "final stage); empty when reliable")]
+    reliable: Annotated[bool, Field(description="true when warnings is empty")]
+
+
 class EvaluationStatus(ApiModel):
     """An evaluation's status; ``spec`` and ``summary`` in the service's JSON form
     (non-finite floats as strings: ``app.jsonconv.decode`` gives the numbers back)."""
@@ -135,10 +152,10 @@ class EvaluationStatus(ApiModel):
     collisions_so_far: int
     runs_simulated: int = Field(description="stored runs the SUT drove (draws inside the "
                                 "region and the physical bounds)")
-    summary: dict[str, Any] | None = Field(description="once done: p_collision and "
-                                           "rate_per_hour (estimate, ci, model_ci), runs, "
-                                           "collisions, ess, acceleration, ... "
-                                           "(docs/evaluation.md)")
+    summary: EvaluationSummary | None = Field(description="once done: p_collision and "
+                                              "rate_per_hour (estimate, ci, model_ci), "
+                                              "runs, collisions, ess, acceleration, ..., "
+                                              "warnings and reliable (docs/evaluation.md)")
     error: str | None
     href_runs: str
     created_at: str

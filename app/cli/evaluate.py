@@ -6,7 +6,8 @@
 a campaign in this process (``sampler.campaign.evaluate``; nothing is stored) and prints
 its summary as JSON on stdout: ``p_collision`` and ``rate_per_hour`` (each ``estimate``,
 ``ci`` and the model interval ``model_ci``), ``runs``, ``collisions``, ``ess``,
-``acceleration`` and the rest of ``CampaignResult.summary()``; a progress bar on stderr.
+``acceleration`` and the rest of ``CampaignResult.summary()``; a progress bar on stderr,
+then each of the summary's ``warnings`` as one line ``warning: ...`` on stderr.
 ``--runs FILE`` writes every draw (parameters, weight, outcome; ``simulated`` false for
 draws outside the region or the physical bounds, which were not run) as JSON lines.
 
@@ -173,4 +174,8 @@ def _evaluate(args: argparse.Namespace) -> int:
             for rec in result.records():
                 fh.write(jsonconv.dumps(rec) + "\n")
     print(json.dumps(jsonconv.encode(ordered), indent=1))
+    # the summary's verdict (sampler.campaign.reliability), also with -q: the exit code
+    # stays 0, the JSON on stdout stays parseable
+    for text in summary.get("warnings") or []:
+        print(f"warning: {text}", file=sys.stderr)
     return 0

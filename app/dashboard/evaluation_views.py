@@ -34,25 +34,17 @@ CAREFUL = "r157_cc"
 SCATTER_RUNS = 400
 #: rows of the failures list
 FAILURES = 25
-#: below this many collisions, or this effective sample size, the interval and the
-#: acceleration of an evaluation are shown flagged as unreliable (docs/dashboard.md)
-MIN_COLLISIONS = 10
-MIN_ESS = 10.0
 
 
 def reliability(collisions: Any, ess: Any) -> str | None:
     """Why an evaluation's intervals and acceleration vs naive Monte Carlo are not to be
-    trusted (too few collisions or too small an effective sample size), or None. Without
-    any collision the page shows the upper bound instead: not flagged here."""
-    k = int(collisions or 0)
-    if k == 0:
-        return None
-    e = float("nan") if ess is None else float(ess)
-    why = []
-    if k < MIN_COLLISIONS:
-        why.append(f"only {k} collision{'s' if k != 1 else ''}")
-    if not math.isfinite(e) or e < MIN_ESS:
-        why.append("ESS " + (f"{e:.3g}" if math.isfinite(e) else "undefined"))
+    trusted (too few collisions or too small an effective sample size), or None: the
+    findings ``few_collisions`` and ``low_ess`` of the campaign's own rule
+    (``sampler.campaign.reliability``, which also gives the summary's ``warnings``).
+    Without any collision the page shows the upper bound instead: not flagged here."""
+    from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons
+
+    why = interval_reasons(collisions, ess)
     if not why:
         return None
     return ("unreliable: " + " and ".join(why) + " (fewer than "
@@ -61,12 +53,16 @@ def reliability(collisions: Any, ess: Any) -> str | None:
 
 
 def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
+    from sampler.campaign.reliability import warnings
+
     if not summary:
         return None
     keys = ("p_collision", "rate_per_hour", "p_violation", "runs", "sut_runs", "pilot_runs",
             "collisions", "ess", "acceleration", "stop_reason")
     out = {k: summary.get(k) for k in keys}
     out["unreliable"] = reliability(summary.get("collisions"), summary.get("ess"))
+    # every warning of the rule (the page shows only the flag above)
+    out["warnings"] = warnings(summary)
     return out
 
 

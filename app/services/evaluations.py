@@ -480,6 +480,17 @@ def _p_bounds(row: EvaluationRow) -> float | None:
     return float(pb) if isinstance(pb, int | float) and pb > 0 else None
 
 
+def stored_summary(row: EvaluationRow) -> dict[str, Any] | None:
+    """The row's summary (numbers decoded) with its verdict, ``warnings`` and
+    ``reliable``, recomputed from its own figures (``sampler.campaign.reliability``): the
+    same as a new campaign's, and there for an evaluation stored before the fields."""
+    if not row.summary:
+        return None
+    from sampler.campaign.reliability import with_verdict
+
+    return with_verdict(jsonconv.decode(row.summary))
+
+
 def describe(ctx: ServiceContext, evaluation_id: str) -> EvaluationStatus:
     """Status, progress, the spec and (once done) the campaign's summary (``spec`` and
     ``summary`` in the service's JSON form: ``jsonconv.decode`` gives the numbers)."""
@@ -494,7 +505,7 @@ def describe(ctx: ServiceContext, evaluation_id: str) -> EvaluationStatus:
             .where(EvaluationChunkRow.evaluation_id == evaluation_id)).one()
     spec = jsonconv.decode(row.spec)
     done = row.status == "done"
-    summary = jsonconv.decode(row.summary) if row.summary else None
+    summary = stored_summary(row)
     return EvaluationStatus(
         id=row.id, status=row.status, sut=row.sut, model=row.model_id,
         seed=row.seed, constraints=spec.get("constraints", []), spec=jsonconv.encode(spec),
@@ -628,7 +639,7 @@ def export(ctx: ServiceContext, evaluation_id: str, fmt: str, out: Path,
         raise Conflict(f"evaluation {evaluation_id} is {row.status}; export needs a "
                        "finished evaluation", field="path.evaluation_id")
     lane_width = domain.model_lane_width(ctx.model(row.model_id))
-    summary = jsonconv.decode(row.summary) if row.summary else {}
+    summary = stored_summary(row) or {}
 
     def items() -> Iterator[tuple[ConcreteScenario, dict[str, Any]]]:
         for rec in failing_runs(ctx, evaluation_id, FAILING if flt is None else flt):

@@ -36,6 +36,7 @@ from sampler.campaign.proposal import (
     build_ce_proposal,
     build_proposal,
 )
+from sampler.campaign.reliability import verdict
 from sampler.campaign.runners import Runner
 from sampler.errors import SamplerError
 from sampler.model.bootstrap import log_density_z_boot, pooled_model
@@ -447,6 +448,7 @@ class CampaignResult:
             "rhw_target": self.rhw_target,
             "exposure": None if self.exposure is None else self.exposure.to_dict(),
         }
+        self._summary.update(verdict(self._summary))  # warnings, reliable: reliability.py
         return self._summary
 
     def records(self) -> list[dict[str, Any]]:

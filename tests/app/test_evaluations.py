@@ -550,3 +550,86 @@ def test_the_dashboard_view_carries_the_reliability_flag(eval_client: Any) -> No
     assert fig["sut_runs"] == st["sut_runs"] and fig["runs"] == 300
     few = 0 < st["collisions"] < 10 or (st["collisions"] > 0 and st["ess"] < 10)
     assert (fig["unreliable"] is not None) == few
+
+
+# --------------------------------------------------------------------------- warnings
+def test_the_api_summary_carries_the_warnings(eval_client: Any) -> None:
+    """A campaign without any collision (a runner that never collides) stopped at
+    max_runs: the summary says it is not reliable, and why, in the HTTP answer; an
+    evaluation stored before the fields existed gets them when read."""
+    from app.db.models import EvaluationRow
+
+    ctx = eval_client.app.state.ctx
+    before = ctx.campaign_runner
+    ctx.campaign_runner = lambda factory, settings: CountingRunner(dv_hit=1e9)
+    try:
+        eid = eval_client.post("/evaluations", json={
+            "sut": "acc", "rhw": 0.3, "max_runs": 400, "batch_size": 200,
+            "seed": 7}).json()["id"]
+        st = _done(eval_client, eid)
+    finally:
+        ctx.campaign_runner = before
+    assert st["status"] == "done", st["error"]
+    summary = st["summary"]
+    assert summary["collisions"] == 0 and summary["stop_reason"] == "max_runs"
+    assert summary["reliable"] is False
+    assert len(summary["warnings"]) == 2
+    assert summary["warnings"][0].startswith("no collision in 400 draws")
+    assert summary["warnings"][1].startswith("stopped at max_runs (400 draws)")
+    # the dashboard's figures carry the same list (its flag stays for 1-9 collisions)
+    fig = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()["figures"]
+    assert fig["warnings"] == summary["warnings"] and fig["unreliable"] is None
+    # stored before the change: no warnings, no reliable in the row
+    with ctx.db.session() as s:
+        row = s.get(EvaluationRow, eid)
+        row.summary = {k: v for k, v in row.summary.items()
+                       if k not in ("warnings", "reliable")}
+    with ctx.db.read_session() as s:
+        assert "warnings" not in s.get(EvaluationRow, eid).summary
+    again = eval_client.get(f"/evaluations/{eid}")
+    assert again.status_code == 200
+    assert again.json()["summary"] == summary
+    export = eval_client.get(f"/evaluations/{eid}/export", params={"format": "json"})
+    assert export.status_code == 200 and export.json()["summary"]["reliable"] is False
+
+
+def test_openapi_declares_the_summarys_verdict(eval_client: Any) -> None:
+    schemas = eval_client.get("/openapi.json").json()["components"]["schemas"]
+    summary = schemas["EvaluationStatus"]["properties"]["summary"]
+    assert {"$ref": "#/components/schemas/EvaluationSummary"} in summary["anyOf"]
+    props = schemas["EvaluationSummary"]["properties"]
+    assert props["warnings"]["type"] == "array"
+    assert props["warnings"]["items"] == {"type": "string"}
+    assert props["reliable"]["type"] == "boolean"
+    assert schemas["EvaluationSummary"]["additionalProperties"] is True
+
+
+@pytest.mark.slow  # >= 3 s: the CLI loads the model
+def test_cli_evaluate_prints_each_warning_on_stderr(store: Path, cli_runner: CountingRunner,
+                                                   capsys: pytest.CaptureFixture[str]
+                                                   ) -> None:
+    """A tiny campaign whose stand-in never collides: the JSON as before on stdout (with
+    warnings and reliable), one "warning: ..." line per warning on stderr after it, exit
+    code 0 (also with -q)."""
+    from app.cli import main
+
+    cli_runner.dv_hit = 1e9
+    assert main(["evaluate", "--sut", "acc", "--max-runs", "60", "--batch-size", "30",
+                 "--seed", "1", "-q"]) == 0
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
+    assert summary["runs"] == 60 and summary["collisions"] == 0
+    assert summary["reliable"] is False
+    lines = out.err.strip().splitlines()
+    assert lines == [f"warning: {w}" for w in summary["warnings"]]
+    assert lines[0].startswith("warning: no collision in 60 draws: P(collision) is not "
+                               "estimated")
+    assert lines[1].startswith("warning: stopped at max_runs (60 draws)")
+    # a reliable campaign prints no warning line: the stand-in collides often
+    cli_runner.dv_hit = 0.0
+    assert main(["evaluate", "--sut", "acc", "-n", "600", "--seed", "1", "-q"]) == 0
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
+    assert summary["collisions"] >= 10 and summary["ess"] >= 10
+    assert summary["warnings"] == [] and summary["reliable"] is True
+    assert "warning:" not in out.err
