@@ -27,20 +27,22 @@ import argparse
 import math
 import re
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.stats import beta, norm
 
 from datasets.embedded import default_parameter_table
-from riskcore.sut import SimSettings, make_sut
+from riskcore.sut import SimSettings, SystemUnderTest, make_sut
 from sampler import CutInGMM
-from sampler.campaign import evaluate, late_brake_runner, sut_runner
+from sampler.campaign import Runner, evaluate, late_brake_runner, sut_runner
 from sampler.model import bootstrap_fit
 from sampler.rates import tno_exposure
 from sampler.region import Region
 
 
-def naive(model: CutInGMM, runner, n_draws: int, seed: int, block: int = 1 << 20,
+def naive(model: CutInGMM, runner: Runner, n_draws: int, seed: int, block: int = 1 << 20,
           sim_block: int | None = None) -> tuple[int, int, float]:
     """(collisions, physical cut-ins, seconds) of plain model draws."""
     rng = np.random.default_rng(seed)
@@ -54,7 +56,8 @@ def naive(model: CutInGMM, runner, n_draws: int, seed: int, block: int = 1 << 20
         x = model.params_matrix(model.from_z(z))
         ok = region.in_bounds(x)
         xs = x[ok]
-        seeds = rng.integers(0, 2**63, size=xs.shape[0], dtype=np.uint64)
+        seeds: NDArray[np.uint64] = np.asarray(
+            rng.integers(0, 2**63, size=xs.shape[0], dtype=np.uint64))
         step = sim_block or max(xs.shape[0], 1)
         for i in range(0, xs.shape[0], step):
             hits += int(np.asarray(runner(xs[i:i + step], seeds[i:i + step]).collided).sum())
@@ -63,7 +66,7 @@ def naive(model: CutInGMM, runner, n_draws: int, seed: int, block: int = 1 << 20
     return hits, inside, time.perf_counter() - t0
 
 
-_NAIVE_JOB: tuple = ()
+_NAIVE_JOB: tuple[Any, ...] = ()
 
 
 def _naive_block(job: tuple[int, np.random.SeedSequence]) -> tuple[int, int]:
@@ -73,14 +76,15 @@ def _naive_block(job: tuple[int, np.random.SeedSequence]) -> tuple[int, int]:
     x = model.params_matrix(model.from_z(model.sample_z(b, rng)))
     ok = region.in_bounds(x)
     xs = x[ok]
-    seeds = rng.integers(0, 2**63, size=xs.shape[0], dtype=np.uint64)
+    seeds: NDArray[np.uint64] = np.asarray(
+        rng.integers(0, 2**63, size=xs.shape[0], dtype=np.uint64))
     hits = 0
     for i in range(0, xs.shape[0], sim_block):
         hits += int(np.asarray(runner(xs[i:i + sim_block], seeds[i:i + sim_block]).collided).sum())
     return hits, int(ok.sum())
 
 
-def naive_blocks(model: CutInGMM, runner, n_draws: int, seed: int, workers: int = 1,
+def naive_blocks(model: CutInGMM, runner: Runner, n_draws: int, seed: int, workers: int = 1,
                  block: int = 1 << 16, sim_block: int = 1024) -> tuple[int, int, float]:
     """``naive`` in blocks of ``block`` draws, block i with the i-th child of
     ``SeedSequence(seed)``: the same figures for any number of ``workers`` (forked
@@ -101,7 +105,7 @@ def naive_blocks(model: CutInGMM, runner, n_draws: int, seed: int, workers: int 
     return sum(h for h, _ in out), sum(n for _, n in out), time.perf_counter() - t0
 
 
-def envelope_reference(model: CutInGMM, runner, reaction: float, decel: float,
+def envelope_reference(model: CutInGMM, runner: Runner, reaction: float, decel: float,
                        n_draws: int, seed: int, dv_max: float = 20.0
                        ) -> tuple[float, float, float, float]:
     """P(C | B) of the late-braking stand-in without the campaign's machinery: C needs
@@ -117,6 +121,8 @@ def envelope_reference(model: CutInGMM, runner, reaction: float, decel: float,
     lane = model.lane_width_
     c = reaction + dv_max / (2 * decel)
     hs = find_envelope(model, Region.from_constraints([f"ttc<{c}"], lane_width=lane))
+    if hs is None:  # a ttc constraint always has one (sampler.methods.envelope)
+        raise SystemExit(f"no half-space envelope of ttc<{c}")
     region = Region.from_constraints((), lane_width=lane).bind(model)
     rng = np.random.default_rng(seed)
     hits = 0
@@ -146,10 +152,10 @@ def cp(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
     return lo, hi
 
 
-_CAMPAIGN_JOB: tuple = ()
+_CAMPAIGN_JOB: tuple[Any, ...] = ()
 
 
-def _campaign(s: int) -> dict:
+def _campaign(s: int) -> dict[str, Any]:
     model, runner, kw = _CAMPAIGN_JOB
     t0 = time.perf_counter()
     summ = evaluate(model, runner, seed=s, **kw).summary()
@@ -157,7 +163,8 @@ def _campaign(s: int) -> dict:
     return summ
 
 
-def campaigns(model: CutInGMM, runner, seeds: range, workers: int = 1, **kw) -> list[dict]:
+def campaigns(model: CutInGMM, runner: Runner, seeds: range, workers: int = 1,
+              **kw: Any) -> list[dict[str, Any]]:
     """One campaign per seed; ``workers`` > 1: forked processes, each running whole
     campaigns (the same figures; each campaign's wall clock is then its own process's)."""
     global _CAMPAIGN_JOB
@@ -282,7 +289,7 @@ def main() -> None:
         print(f"\nB. riskcore.sut '{a.sut}' {params} in the closed-loop simulator "
               f"(t_max {settings.t_max} s)")
 
-        def factory() -> object:
+        def factory() -> SystemUnderTest:
             return make_sut(a.sut, **params)
 
         runner_s = sut_runner(factory, careful=False, settings=settings, name=a.sut)

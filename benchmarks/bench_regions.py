@@ -71,7 +71,7 @@ def main() -> None:
     db = Path(tempfile.mkdtemp(prefix="scengen-regions-")) / "regions.db"
     ctx = open_context(Settings(data_dir=args.data_dir, database_url=f"sqlite:///{db}",
                                 local_workers=0, warm_start=False))
-    model = ctx.model(ctx.default_model_id)
+    model = ctx.model(ctx.resolve_model_id(None))  # the default model
     rows: list[dict[str, Any]] = []
     for region in doc_regions():
         gaps: list[float] = []

@@ -16,6 +16,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -108,7 +109,7 @@ def main() -> None:
     for label, sc in (("safe cut-in", cut_in_scenario()),
                       ("cut-in ending in contact", cut_in_scenario(x0=12.0))):
         r = evaluate_scenario(sc, settings)
-        per_scenario = median_time(lambda sc=sc: evaluate_scenario(sc, settings), repeat=7)
+        per_scenario = median_time(partial(evaluate_scenario, sc, settings), repeat=7)
         print(f"scenario 10 s at 10 Hz ({sc.t.size} scenes), {label}, packaged surfaces: "
               f"{per_scenario * 1e3:.1f} ms (target <= 50); risk {r.risk:.3f}, "
               f"min TTR {r.min_ttr:.1f} s")
@@ -117,7 +118,7 @@ def main() -> None:
     for n_obj in (1, 2, 4):
         objs = [ObjectState(f"o{k}", 2.0 * k, 3.5 if k % 2 == 0 else -3.5, 0.0, 14.0, a0=1.0,
                             omega0=-0.1 if k % 2 == 0 else 0.1) for k in range(n_obj)]
-        sec = median_time(lambda objs=objs: evaluate_scene(ego, objs, settings, surf),
+        sec = median_time(partial(evaluate_scene, ego, objs, settings, surf),
                           repeat=15, number=20)
         base = base or sec
         print(f"  {n_obj} object(s): {sec * 1e3:7.3f} ms per scene, "
