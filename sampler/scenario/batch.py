@@ -199,10 +199,16 @@ def _interp_at(x: float, xp: FloatArray, fp: FloatArray, j: int
                ) -> float:  # pragma: no cover - jit
     """:func:`_interp` for ``xp[0] < x < xp[-1]`` given ``j``, the last index with
     ``xp[j] <= x`` (what its binary search finds)."""
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    r = slope * (x - xp[j]) + fp[j]
+    return _lerp(x, xp[j], xp[j + 1], fp[j], fp[j + 1])
+
+
+@numba.njit(cache=True)
+def _lerp(x: float, xa: float, xb: float, fa: float, fb: float) -> float:  # pragma: no cover
+    """numpy.interp's arithmetic between the points (xa, fa) and (xb, fb)."""
+    slope = (fb - fa) / (xb - xa)
+    r = slope * (x - xa) + fa
     if r != r:
-        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        r = slope * (x - xb) + fb
     return r
 
 
@@ -409,51 +415,68 @@ def _crossing(path: _Path, offset: float, sc: _Script,
 
 
 @numba.njit(cache=True)
-def _relative(tau: float, path: _Path, sc: _Script, jg: int,
-              method: int) -> tuple[float, float, int]:  # pragma: no cover - jit
-    """The displacement (x, y) at tau and the grid's interval of tau, the search for it
-    walking on from ``jg`` (tau increases call by call). Before the script: straight;
-    after the lane change: straight on from its end."""
-    grid, xs, ys = path
-    ng = grid.shape[0]
+def _outside(tau: float, sc: _Script, g_first: float, g_last: float, x_first: float,
+             y_first: float, x_last: float, y_last: float
+             ) -> tuple[float, float]:  # pragma: no cover - jit
+    """The displacement (x, y) at a tau outside the path's open interval (``g_first``,
+    ``g_last``) (:func:`_inside`): before the script straight, after the lane change
+    straight on from its end, at an end of the path its value there."""
     if tau < 0.0:
-        return _s(tau, sc), ys[0], jg
+        return _s(tau, sc), y_first
     if tau > sc.end:
-        return xs[ng - 1] + (_s(tau, sc) - _s(sc.end, sc)), ys[ng - 1], jg
-    if tau >= grid[ng - 1]:
-        return xs[ng - 1], ys[ng - 1], jg
-    if tau <= grid[0]:
-        return xs[0], ys[0], jg
-    while grid[jg + 1] <= tau:
-        jg += 1
+        return x_last + (_s(tau, sc) - _s(sc.end, sc)), y_last
+    if tau >= g_last:
+        return x_last, y_last
+    return x_first, y_first
+
+
+@numba.njit(cache=True)
+def _within(tau: float, sc: _Script, g0: float, g1: float, x0: float, x1: float, y0: float,
+            y1: float, method: int) -> tuple[float, float]:  # pragma: no cover - jit
+    """The displacement (x, y) at tau inside the panel [g0, g1] whose edges are at (x0,
+    y0) and (x1, y1): from g0 by Gauss-Legendre (``method`` 1: linear)."""
     if method == 1:
-        return _interp_at(tau, grid, xs, jg), _interp_at(tau, grid, ys, jg), jg
-    dx, dy = _gl(grid[jg], tau, sc)
-    return xs[jg] + dx, ys[jg] + dy, jg
+        return _lerp(tau, g0, g1, x0, x1), _lerp(tau, g0, g1, y0, y1)
+    dx, dy = _gl(g0, tau, sc)
+    return x0 + dx, y0 + dy
 
 
 @numba.njit(cache=True)
 def _fill(t: FloatArray, path: _Path, sc: _Script, place: _Placement, track: _Track,
           method: int) -> bool:  # pragma: no cover - jit
     """The cutter's track at the times ``t``; False (the track cut short) when its speed
-    becomes negative within them."""
+    becomes negative within them. The path's panel of each time is found walking on from
+    the previous one (the times increase). Only scalars go to the helpers inside the
+    loop: a compiled call taking an array increments and decrements its reference count
+    (two atomic operations), which cost a fifth of the builder's time when the path's
+    arrays went to a helper at every time."""
+    grid, xs, ys = path
+    cx, cy, cpsi, cv, ca, cw = track
+    last = grid.shape[0] - 1
     jg = 0
     for k in range(t.shape[0]):
         tau = t[k] - place.lead_in
-        xr, yr, jg = _relative(tau, path, sc, jg, method)
+        if tau < 0.0 or tau > sc.end or tau >= grid[last] or tau <= grid[0]:
+            xr, yr = _outside(tau, sc, grid[0], grid[last], xs[0], ys[0], xs[last],
+                              ys[last])
+        else:
+            while grid[jg + 1] <= tau:
+                jg += 1
+            xr, yr = _within(tau, sc, grid[jg], grid[jg + 1], xs[jg], xs[jg + 1], ys[jg],
+                             ys[jg + 1], method)
         v = _v(tau, sc)
         if v < 0.0:
             return False
-        track.cx[k] = place.x0 + xr
-        track.cy[k] = place.y0 + yr
+        cx[k] = place.x0 + xr
+        cy[k] = place.y0 + yr
         if 0.0 <= tau <= sc.end:
-            track.cpsi[k] = _psi(tau, sc)
-            track.cw[k] = sc.p_y1 * math.sin(math.pi * tau / sc.p_t)
+            cpsi[k] = _psi(tau, sc)
+            cw[k] = sc.p_y1 * math.sin(math.pi * tau / sc.p_t)
         else:
-            track.cpsi[k] = 0.0
-            track.cw[k] = 0.0
-        track.cv[k] = v
-        track.ca[k] = sc.p_a1 if (sc.p_a2 <= tau < sc.p_a2 + sc.p_a3) else 0.0
+            cpsi[k] = 0.0
+            cw[k] = 0.0
+        cv[k] = v
+        ca[k] = sc.p_a1 if (sc.p_a2 <= tau < sc.p_a2 + sc.p_a3) else 0.0
     return True
 
 
