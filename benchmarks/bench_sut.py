@@ -21,12 +21,15 @@ its previous path (the same with the builder's previous rule: the lateral motion
 trapezoid on 1 ms steps instead of Gauss-Legendre on 0.1 s panels) on the same blocks,
 with the share of the track builder (and of the previous rule's) and the share of runs
 equal field for field and the largest relative difference (the rules differ in the
-positions' low bits, about 5e-6 m at most).
+positions' low bits, about 5e-6 m at most). It also splits the runner's CPU time per run
+into the tracks (``buildable_batches``), the simulation (``simulate`` on the same batches
+built beforehand) and the rest (assembling the outcomes, Python between the calls), each
+the least of ``--runner-repeats`` interleaved passes.
 
 Usage (from the repository root): ``PYTHONPATH=. .venv/bin/python benchmarks/bench_sut.py
 [--runs 20000] [--scenarios 400] [--model-draws 5000] [--baseline 200] [--seed 7]
 [--dt 0.01 0.05] [--runner-draws 16384] [--runner-blocks 256 1024 4096 16384]
-[--only-runner]``
+[--runner-repeats 3] [--only-runner]``
 """
 
 from __future__ import annotations
@@ -202,10 +205,12 @@ def runner_previous(x: np.ndarray, seeds: np.ndarray, st: SimSettings,
     return collided, rows[order], runs
 
 
-def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
+def bench_runner(n: int, seed: int, blocks: list[int], repeats: int = 3) -> None:
     """(c) ``sampler.campaign.sut_runner`` end to end (acc k2=0.5, careful=False, t_max
     40 s, collisions only) on model draws, in blocks of each size, against the previous
-    path on the same blocks; all fields compared (``_agreement``)."""
+    path on the same blocks; all fields compared (``_agreement``). The runner and its
+    stages are timed ``repeats`` times, interleaved, and the least CPU time of each is
+    reported (the machine is shared: the least is the one least disturbed)."""
     from sampler.campaign import sut_runner
     from sampler.scenario.batch import buildable_batches
 
@@ -218,25 +223,19 @@ def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
     runner_previous(x[:64], seeds[:64], st, lane)
     print(f"(c) campaign runner end to end, acc k2=0.5, t_max {st.t_max} s, careful=False: "
           f"{x.shape[0]} in-bounds model draws (drawing them: {draw * 1e6:.1f} us CPU per "
-          "draw, not in the figures below)")
+          f"draw, not in the figures below); least CPU time of {repeats} passes")
+    m = x.shape[0]
     for b in blocks:
-        c = time.process_time()
-        new = [runner(x[i:i + b], seeds[i:i + b]) for i in range(0, x.shape[0], b)]
-        t_new = time.process_time() - c
+        new, t_new, t_build, t_sim = _runner_stages(runner, x, seeds, b, st, lane, repeats)
         c = time.process_time()
         old = [runner_previous(x[i:i + b], seeds[i:i + b], st, lane)
                for i in range(0, x.shape[0], b)]
         t_old = time.process_time() - c
         c = time.process_time()
         for i in range(0, x.shape[0], b):
-            buildable_batches(x[i:i + b], lane_width=lane)
-        t_build = time.process_time() - c
-        c = time.process_time()
-        for i in range(0, x.shape[0], b):
             buildable_batches(x[i:i + b], lane_width=lane, quadrature="trapezoid")
         t_build_old = time.process_time() - c
         agree, worst = _agreement(new, old)
-        m = x.shape[0]
         print(f"  blocks of {b:6d}: runner {m / t_new:8,.0f} runs/s per core (CPU); previous "
               f"path {m / t_old:8,.0f} runs/s -> {t_old / t_new:.2f}x; of the runner's time "
               f"{t_build / t_new:.0%} builds the tracks ({m / t_build:,.0f} rows/s; "
@@ -245,6 +244,40 @@ def bench_runner(n: int, seed: int, blocks: list[int]) -> None:
               f"{sum(int(r.collided.sum()) for r in new)} collisions; runs with every "
               f"field bit-identical to the previous path: {agree:.1%}, largest difference "
               f"of a float field {worst:.1e} (relative)")
+        print(f"    per run (CPU): {t_new / m * 1e6:.1f} us = tracks (buildable_batches) "
+              f"{t_build / m * 1e6:.1f} us + simulation (simulate on the built batches) "
+              f"{t_sim / m * 1e6:.1f} us + the rest (assembling the outcomes, Python "
+              f"between the calls) {(t_new - t_build - t_sim) / m * 1e6:.1f} us; 20,000 "
+              f"runs/s per core {'met' if m / t_new >= 20_000 else 'NOT met'}")
+
+
+def _runner_stages(runner: object, x: np.ndarray, seeds: np.ndarray, b: int,
+                   st: SimSettings, lane: float, repeats: int
+                   ) -> tuple[list, float, float, float]:
+    """(the runner's outcomes per block, and the least CPU seconds over ``repeats``
+    interleaved passes of: the runner, its tracks alone (``buildable_batches``), its
+    simulation alone (``simulate`` on batches built beforehand))."""
+    from sampler.scenario.batch import buildable_batches
+
+    starts = range(0, x.shape[0], b)
+    built = [(i, buildable_batches(x[i:i + b], lane_width=lane)[1]) for i in starts]
+    t_new = t_build = t_sim = math.inf
+    new: list = []
+    for _ in range(max(repeats, 1)):
+        c = time.process_time()
+        new = [runner(x[i:i + b], seeds[i:i + b]) for i in starts]  # type: ignore[operator]
+        t_new = min(t_new, time.process_time() - c)
+        c = time.process_time()
+        for i in starts:
+            buildable_batches(x[i:i + b], lane_width=lane)
+        t_build = min(t_build, time.process_time() - c)
+        c = time.process_time()
+        for i, groups in built:
+            for rows, batch in groups:
+                simulate(make_sut("acc", k2=0.5), batch, seeds=seeds[i:i + b][rows],
+                         settings=st)
+        t_sim = min(t_sim, time.process_time() - c)
+    return new, t_new, t_build, t_sim
 
 
 def _agreement(new: list, old: list) -> tuple[float, float]:
@@ -290,11 +323,13 @@ def main() -> None:
                     help="model draws of the campaign runner's end-to-end figure (c)")
     ap.add_argument("--runner-blocks", type=int, nargs="+", default=[256, 1024, 4096, 16384],
                     help="rows per runner call in (c)")
+    ap.add_argument("--runner-repeats", type=int, default=3,
+                    help="passes of (c)'s runner and stages (the least CPU time is shown)")
     ap.add_argument("--only-runner", action="store_true", help="only (c)")
     args = ap.parse_args()
     if args.runner_draws > 0:
         print(f"load average before: {os.getloadavg()[0]:.1f} (2-core machine shared)")
-        bench_runner(args.runner_draws, args.seed, args.runner_blocks)
+        bench_runner(args.runner_draws, args.seed, args.runner_blocks, args.runner_repeats)
         if args.only_runner:
             print(f"load average after: {os.getloadavg()[0]:.1f}")
             return
