@@ -283,11 +283,23 @@ def test_a_sut_that_returns_nonsense_is_named(library: Path) -> None:
 # ------------------------------------------------- 200 cut-ins of the default model
 
 
+@pytest.fixture(scope="module")
+def default_200() -> list[ConcreteScenario]:
+    """The same 200 ttc<3 cut-ins of the default model (seed 7) for the three tests below:
+    fitted and drawn once (each test only reads them; ConcreteScenario is frozen)."""
+    from datasets import default_parameter_table
+    from sampler import CutInGMM, sample
+
+    model = CutInGMM(random_state=0).fit(default_parameter_table())
+    return list(sample(model, ["ttc<3"], n=200, seed=7, method="rejection").scenarios())
+
+
 @pytest.mark.esmini
 @pytest.mark.slow
 @pytest.mark.parametrize(("sut", "beyond"), [("acc", 0), ("r157_cc", 2)])
-def test_200_cut_ins_agree_with_scengens_simulator(library: Path, sut: str,
-                                                   beyond: int) -> None:
+def test_200_cut_ins_agree_with_scengens_simulator(library: Path, sut: str, beyond: int,
+                                                   default_200: list[ConcreteScenario]
+                                                   ) -> None:
     """Issue 24 item 11: the same SUT on the same 200 ttc<3 cut-ins of the default model:
     collision verdicts agree on >= 99 % (measured: all); smallest gaps within 0.1 m except
     ``beyond`` runs (measured: r157_cc's TTC gate in 1 of 197 runs without contact, by
@@ -295,11 +307,7 @@ def test_200_cut_ins_agree_with_scengens_simulator(library: Path, sut: str,
     and every difference is the
     cutter's motion as esmini plays it: scengen's simulator on esmini's world reproduces
     esmini's runs."""
-    from datasets import default_parameter_table
-    from sampler import CutInGMM, sample
-
-    model = CutInGMM(random_state=0).fit(default_parameter_table())
-    scenarios = list(sample(model, ["ttc<3"], n=200, seed=7, method="rejection").scenarios())
+    scenarios = default_200
     batch = CutInBatch.from_scenarios(scenarios)
     ours = simulate(make_sut(sut), batch, seeds=7)
     res = simulate_esmini(make_sut(sut), scenarios, seeds=7, library=library, profiles=True)
@@ -318,18 +326,15 @@ def test_200_cut_ins_agree_with_scengens_simulator(library: Path, sut: str,
 
 @pytest.mark.esmini
 @pytest.mark.slow
-def test_acc_aeb_gap_difference_is_the_ttc_threshold_grazed(library: Path) -> None:
+def test_acc_aeb_gap_difference_is_the_ttc_threshold_grazed(
+        library: Path, default_200: list[ConcreteScenario]) -> None:
     """The largest smallest-gap difference of the 200 cut-ins (acc_aeb, run 65: 2.41 m in
     scengen, 3.79 m in esmini; docs/systems.md): the TTC comes down to the AEB's 1.5 s and
     turns back. With the cutter's speed interpolated (scengen) it stays above 1.5 s and the
     AEB never fires; with esmini's speed, constant along each 0.1 s segment, it dips below
     1.5 s at the end of a segment and the AEB (9 m/s²) fires. Fails if the difference has
     another cause (the AEB firing in both or in neither, or a TTC far from the threshold)."""
-    from datasets import default_parameter_table
-    from sampler import CutInGMM, sample
-
-    model = CutInGMM(random_state=0).fit(default_parameter_table())
-    scenarios = list(sample(model, ["ttc<3"], n=200, seed=7, method="rejection").scenarios())
+    scenarios = default_200
     run = 65
     batch = CutInBatch.from_scenarios(scenarios).subset(np.array([run]))
     ours = simulate(make_sut("acc_aeb"), batch, seeds=7, profiles=True, engine="loop")
