@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import logsumexp
 
+from sampler.campaign.band import BandPart, band_part_for_set, fit_rest_density
 from sampler.methods.envelope import HalfSpace, find_envelope
 from sampler.methods.importance import KernelProposal
 from sampler.model.bootstrap import pooled_model
@@ -58,6 +59,10 @@ DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "d
 
 #: the cross-entropy stage's share of the parts fitted to a set without a half-space
 SET_SHARE = 0.2
+#: ... and in the final stage (level 0), once the band parts' own collisions are fitted
+FINAL_SET_SHARE = 0.1
+#: the final stage's share of each band part refitted to the collided runs on its band
+BAND_HITS_SHARE = 0.2
 
 
 class MixturePart(Protocol):
@@ -213,6 +218,15 @@ def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: flo
         if hs is None:
             if name == "region":
                 continue
+            band_c = _v_cut_min_bound(reg)
+            if band_c is not None:
+                def make_band(c: float = band_c, nm: str = name) -> BandPart | None:
+                    return band_part_for_set(model, c, name=f"band:{nm}")
+
+                bp = memoised(model, ("campaign_band", reg), make_band)
+                if bp is not None:
+                    out.append(bp)
+                    continue
 
             def fit(r: Region = reg) -> GaussianMixture | None:
                 return region_mixture(model, r)
@@ -228,6 +242,14 @@ def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: flo
         out.append(_EnvelopePart(f"envelope:{name if name != 'region' else hs.source}",
                                  model, hs))
     return out
+
+
+def _v_cut_min_bound(region: Region) -> float | None:
+    """``c`` when ``region`` is the single constraint ``v_cut_min < c`` (or ``<=``)."""
+    cons = list(region.constraints)
+    if len(cons) == 1 and cons[0].name == "v_cut_min" and cons[0].op in ("<", "<="):
+        return float(cons[0].value)
+    return None
 
 
 def _fitted_part(z_hits: FloatArray, w_hits: FloatArray, rng: np.random.Generator,
@@ -491,7 +513,8 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
                       wide_share: float = 0.05, envelope_share: float = 0.1,
                       kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3,
                       history: Sequence[GaussianMixture] = (), history_share: float = 0.1,
-                      inflate: float = 1.2, set_share: float | None = None) -> Proposal:
+                      inflate: float = 1.2, set_share: float | None = None,
+                      band_hits_share: float = BAND_HITS_SHARE) -> Proposal:
     """The proposal of one chunk of an adaptive cross-entropy campaign: the model
     (``alpha``: weights stay below ``1 / alpha``), the wide part, the envelopes
     (``envelope_share`` together) and, with ``elite`` (z rows and their weights ``p/q``
@@ -500,18 +523,21 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     collided runs) also the Student-t kernels of :func:`build_proposal` on them
     (``kernel_share``): non-parametric, they keep mass on every collided run, so a
     failure family found once (by an envelope, say) is drawn again in the next chunk
-    even when the mixture fit has no component there. Without elite: as
-    :func:`build_proposal` before any collision."""
+    even when the mixture fit has no component there; and for each band part
+    (``sampler.campaign.band``) the same band refitted to the collided runs on it
+    (``band_hits_share`` each, :func:`_band_hit_parts`). The set and band parts share
+    ``set_share``: ``SET_SHARE`` in the pilot, ``FINAL_SET_SHARE`` at level 0 by
+    default. Without elite: as :func:`build_proposal` before any collision."""
     if set_share is None:
-        set_share = SET_SHARE
+        set_share = SET_SHARE if level > 0 else FINAL_SET_SHARE
     if elite is None or elite[0].shape[0] == 0:
         return build_proposal(model, region=region, lane_width=lane_width,
                               envelopes=envelopes, alpha=0.15)
     parts: list[MixturePart] = [_ModelPart("model", model), _wide_part(model, widen)]
     shares = [alpha, wide_share]
     env_all = _envelope_parts(model, envelopes, lane_width, region)
-    env = [e for e in env_all if not e.name.startswith("set:")]
-    sets = [e for e in env_all if e.name.startswith("set:")]
+    env = [e for e in env_all if not e.name.startswith(("set:", "band:"))]
+    sets = [e for e in env_all if e.name.startswith(("set:", "band:"))]
     gm = fit_ce_mixture(elite[0], elite[1], rng, max_k=max_k, model=model, inflate=inflate)
     rest = (1.0 - alpha - wide_share - (envelope_share if env else 0.0)
             - (set_share if sets else 0.0))
@@ -519,6 +545,10 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
         parts.append(_fitted_part(elite[0], elite[1], rng, model, 300, 1.3, 5.0))
         shares.append(kernel_share)
         rest -= kernel_share
+        for hp in _band_hit_parts(sets, elite, rng):
+            parts.append(hp)
+            shares.append(band_hits_share)
+            rest -= band_hits_share
     if history:
         parts.append(_MixturePart(f"ce:levels{len(history)}", _pooled_mixtures(history)))
         shares.append(history_share)
@@ -534,6 +564,27 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
         shares.extend([set_share / len(sets)] * len(sets))
     out = Proposal(parts, shares)
     out.fitted = gm
+    return out
+
+
+def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatArray],
+                    rng: np.random.Generator) -> list[BandPart]:
+    """For each band part, the same band with ``g`` refitted (weighted by ``p / q``,
+    at most 2 components) to the collided runs on its band, when at least 2 d of them
+    are there: the cross-entropy step inside the band, the band's thin direction still
+    drawn exactly from the model's conditional law (``sampler.campaign.band``)."""
+    z, w = elite
+    out: list[BandPart] = []
+    for b in sets:
+        if not isinstance(b, BandPart):
+            continue
+        lo, hi = b.band(z)
+        zj = z[:, b.law.j]
+        on = (zj >= lo) & (zj <= hi)
+        if int(on.sum()) < 2 * z.shape[1]:
+            continue
+        g = fit_rest_density(z[on], w[on], b.law.rest, rng, max_k=2)
+        out.append(BandPart(f"ce:{b.name}-hits", b.law, b.band, g))
     return out
 
 
