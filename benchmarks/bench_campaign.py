@@ -241,6 +241,10 @@ def main() -> None:
     ap.add_argument("--sut-param", action="append", default=[])
     ap.add_argument("--sut-seeds", type=int, default=1)
     ap.add_argument("--naive-sut", type=float, default=0)
+    ap.add_argument("--ref", default=None, metavar="HITS/RUNS",
+                    help="a larger naive reference of the SUT measured earlier (e.g. "
+                         "102/8392146 for acc k2=0.6, docs/evaluation.md): coverage is "
+                         "also reported against it")
     ap.add_argument("--sut-workers", type=int, default=1,
                     help="processes for the SUT campaigns (whole campaigns each)")
     ap.add_argument("--naive-workers", type=int, default=1,
@@ -318,6 +322,10 @@ def main() -> None:
                   f"{ci[1]:.2e}] ({secs_n:.0f} s with {a.naive_workers} process(es), "
                   f"{n_in / secs_n:.0f} runs/s)", flush=True)
         report(a.sut, res, p_ref, ci, per_run)
+        if a.ref:
+            k_r, n_r = (int(v) for v in a.ref.split("/"))
+            report(f"{a.sut} vs the given reference {a.ref}", res, k_r / n_r, cp(k_r, n_r),
+                   per_run)
 
 
 if __name__ == "__main__":
