@@ -63,6 +63,10 @@ SET_SHARE = 0.2
 FINAL_SET_SHARE = 0.1
 #: the final stage's share of each band part refitted to the collided runs on its band
 BAND_HITS_SHARE = 0.2
+#: the refit's weights are ``(p / q)^BAND_HITS_TEMPER``, its scales times ``BAND_HITS_INFLATE``
+BAND_HITS_TEMPER = 1.0
+BAND_HITS_INFLATE = 1.6
+BAND_HITS_K = 2
 
 
 class MixturePart(Protocol):
@@ -583,7 +587,8 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
         on = (zj >= lo) & (zj <= hi)
         if int(on.sum()) < 2 * z.shape[1]:
             continue
-        g = fit_rest_density(z[on], w[on], b.law.rest, rng, max_k=2)
+        g = fit_rest_density(z[on], w[on] ** BAND_HITS_TEMPER, b.law.rest, rng,
+                             max_k=BAND_HITS_K, inflate=BAND_HITS_INFLATE)
         out.append(BandPart(f"ce:{b.name}-hits", b.law, b.band, g))
     return out
 

@@ -1,0 +1,201 @@
+"""sampler.campaign.band: the proposal part that lives on the band ``0 < v_cut_min < c``.
+
+Checked three ways: a band worked out by hand from the pulse's kinematics; the model's
+conditional law against the model's own joint density (an identity) and against brute
+force (the band's mass); and the part's density integrating to 1 and its weights
+averaging to the band's mass, by importance sampling with a tight standard error.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from sampler import CutInGMM
+from sampler.campaign.band import (
+    BandPart,
+    ConditionalLaw,
+    _truncated_std_normal,
+    band_part_for_set,
+    v_cut_min_band,
+)
+from sampler.campaign.proposal import build_ce_proposal
+from sampler.region.kinematics import plateau_speeds
+from tests.sampler.factories import synthetic_parameter_table
+
+#: ~0.15 % of the synthetic model's draws (as tests/sampler/test_campaign_ce.py)
+C = 15.0
+
+
+@pytest.fixture(scope="module")
+def model() -> CutInGMM:
+    return CutInGMM(k_range=(2, 2), n_init=1, n_report_samples=500).fit(
+        synthetic_parameter_table(300, seed=3))
+
+
+@pytest.fixture(scope="module")
+def part(model: CutInGMM) -> BandPart:
+    bp = band_part_for_set(model, C, seed=5)
+    assert bp is not None
+    return bp
+
+
+def _col(model: CutInGMM, name: str) -> int:
+    return list(model.features_).index(name)
+
+
+def test_band_by_hand(model: CutInGMM) -> None:
+    """A cutter braking at 2 m/s^2 for 10 s from 1 s before t0 (c0 = 1 s):
+    before = v0 + 2, after = v0 + 2 - 20 = v0 - 18, so 0 < v_cut_min < 15 is
+    18 < v0 < 33. A pulse that speeds the cutter up (a1 = +1 for 4 s, from t0):
+    v_cut_min = v0, band 0 < v0 < 15."""
+    x = np.zeros((2, model.n_features))
+    for j, name in enumerate(model.features_):
+        x[:, j] = {"p_y1": 3.0, "p_t": 4.0, "p_v0": 25.0, "dv": 2.0, "gap": 20.0}.get(
+            name, 0.0)
+    x[0, [_col(model, "p_a1"), _col(model, "p_a2"), _col(model, "p_a3")]] = [-2.0, -1.0, 10.0]
+    x[1, [_col(model, "p_a1"), _col(model, "p_a2"), _col(model, "p_a3")]] = [1.0, 0.0, 4.0]
+    z = model.to_z(x)
+    lo, hi = v_cut_min_band(model, C)(z)
+    jv = _col(model, "p_v0")
+    want = np.array([[18.0, 33.0], [0.0, 15.0]])
+    for i in range(2):
+        xi = np.repeat(x[i:i + 1], 2, axis=0)
+        xi[:, jv] = want[i]
+        z_want = model.to_z(xi)[:, jv]
+        if want[i, 0] > 0:
+            assert math.isclose(lo[i], z_want[0], rel_tol=1e-12, abs_tol=1e-12)
+        else:  # v0 > 0 always (log transform): no lower end
+            assert lo[i] == -math.inf
+        assert math.isclose(hi[i], z_want[1], rel_tol=1e-12, abs_tol=1e-12)
+
+
+def test_band_is_the_slow_set(model: CutInGMM) -> None:
+    """On model draws, in the band iff 0 < v_cut_min < c by the kinematics' formula."""
+    z = model.sample_z(200_000, np.random.default_rng(1))
+    x = model.from_z(z)
+    before, after = plateau_speeds(x[:, _col(model, "p_a1")], x[:, _col(model, "p_a2")],
+                                   x[:, _col(model, "p_a3")], x[:, _col(model, "p_v0")])
+    vmin = np.minimum(before, after)
+    slow = (vmin > 0) & (vmin < C)
+    lo, hi = v_cut_min_band(model, C)(z)
+    zj = z[:, _col(model, "p_v0")]
+    on = (zj > lo) & (zj < hi)
+    assert slow.sum() > 50
+    assert np.array_equal(on, slow)
+
+
+def test_conditional_law_is_the_model(model: CutInGMM) -> None:
+    """log p(z) = log p(z_rest) + log p(z_j | z_rest) to rounding, and the band's
+    conditional mass F averaged over model draws is the band's mass (brute force)."""
+    law = ConditionalLaw(model, _col(model, "p_v0"))
+    rng = np.random.default_rng(2)
+    z = model.sample_z(2000, rng)
+    lc = law.log_pdf_j(z)
+    assert np.allclose(model.log_density_z(z), law.last_log_marginal + lc, atol=1e-10)
+    z = model.sample_z(200_000, rng)
+    band = v_cut_min_band(model, C)
+    lo, hi = band(z)
+    log_f, _ = law.log_mass(z, lo, np.maximum(hi, lo))
+    f = np.exp(log_f)
+    zj = z[:, law.j]
+    on = (zj > lo) & (zj < hi)
+    # the same draws: E[1_band - F] = 0 with the variance of the difference
+    d = on - f
+    assert abs(d.mean()) <= 4 * d.std(ddof=1) / math.sqrt(d.size)
+    assert on.mean() > 5e-4
+
+
+@pytest.mark.parametrize("a, b", [(-1.0, 2.0), (3.0, 5.0), (-math.inf, -8.0), (9.0, math.inf),
+                                  (-0.5, -0.4)])
+def test_truncated_normal_follows_scipy(a: float, b: float) -> None:
+    rng = np.random.default_rng(3)
+    n = 20_000
+    x = _truncated_std_normal(np.full(n, a), np.full(n, b), rng.random(n))
+    assert np.all((x >= a) & (x <= b))
+    ks = stats.kstest(x, stats.truncnorm(a, b).cdf)
+    assert ks.pvalue > 1e-3
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(-60, 60), width=st.floats(0.0, 50), u=st.floats(0, 1))
+def test_truncated_normal_stays_inside_any_interval(a: float, width: float, u: float) -> None:
+    """Finite and inside [a, b] for any interval, deep tails included."""
+    x = _truncated_std_normal(np.array([a]), np.array([a + width]), np.array([u]))
+    assert np.isfinite(x).all() and a <= x[0] <= a + width
+
+
+def test_band_part_is_a_density_on_its_band(model: CutInGMM, part: BandPart) -> None:
+    """With r = (p + q) / 2, drawn half from the model and half from the part, the mean
+    of q / r is the integral of q, 1; the part's weights p / q on its own draws average
+    to the band's mass (brute force); its draws all lie on the band,
+    and it is deterministic."""
+    rng = np.random.default_rng(4)
+    n = 100_000
+    zq = part.draw(n, rng)
+    lo, hi = part.band(zq)
+    zj = zq[:, part.law.j]
+    assert np.all((zj >= lo) & (zj <= hi))
+    z = np.concatenate([model.sample_z(n, rng), zq])
+    log_p = model.log_density_z(z)
+    log_q = part.log_q(z)
+    assert np.isfinite(log_q[n:]).all()
+    log_r = np.logaddexp(log_p, log_q) - math.log(2)
+    ratio = np.exp(log_q - log_r)
+    se = ratio.std(ddof=1) / math.sqrt(ratio.size)
+    assert abs(ratio.mean() - 1.0) <= 4 * se and se < 0.005
+    w = np.exp(log_p[n:] - log_q[n:])
+    zb = model.sample_z(400_000, np.random.default_rng(6))
+    lo_b, hi_b = part.band(zb)
+    on_b = (zb[:, part.law.j] > lo_b) & (zb[:, part.law.j] < hi_b)
+    p_band = on_b.mean()
+    se_b = math.sqrt(p_band * (1 - p_band) / on_b.size)
+    se_w = w.std(ddof=1) / math.sqrt(w.size)
+    assert abs(w.mean() - p_band) <= 4 * math.hypot(se_b, se_w)
+    again = band_part_for_set(model, C, seed=5)
+    assert again is not None
+    assert np.array_equal(again.draw(50, np.random.default_rng(9)),
+                          part.draw(50, np.random.default_rng(9)))
+
+
+def test_final_stage_refits_the_band_to_its_collisions(model: CutInGMM) -> None:
+    """At level 0 with enough elite rows on the band, the proposal gains the band part
+    refitted to them (its share ``band_hits_share``), the set share drops to the final
+    one, and the whole mixture's weights still average to 1."""
+    envs = (f"v_cut_min<{C:g}",)
+    band = v_cut_min_band(model, C)
+    z = model.sample_z(200_000, np.random.default_rng(7))
+    lo, hi = band(z)
+    zj = z[:, _col(model, "p_v0")]
+    on = (zj > lo) & (zj < hi)
+    z_e = z[on][:60]
+    assert z_e.shape[0] == 60
+    prop = build_ce_proposal(model, region=None, lane_width=model.lane_width_,
+                             elite=(z_e, np.ones(60)), level=0.0,
+                             rng=np.random.default_rng(8), envelopes=envs)
+    shares = {d["part"]: d["share"] for d in prop.describe()}
+    assert math.isclose(shares[f"band:v_cut_min<{C:g}"], 0.1, rel_tol=1e-12)
+    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-hits"], 0.2, rel_tol=1e-12)
+    zq, _ = prop.draw(100_000, np.random.default_rng(9))
+    w = np.exp(model.log_density_z(zq) - prop.log_q(zq))
+    assert np.isfinite(w).all() and w.max() <= 1 / 0.1 + 1e-9
+    se = w.std(ddof=1) / math.sqrt(w.size)
+    assert abs(w.mean() - 1.0) <= 4 * se
+    # the refitted part puts far more of its draws on the collided rows' neighbourhood
+    hits_part = next(p for p in prop.parts if p.name.endswith("-hits"))
+    assert isinstance(hits_part, BandPart)
+    zh = hits_part.draw(5000, np.random.default_rng(10))
+    lo_h, hi_h = band(zh)
+    assert np.all((zh[:, _col(model, "p_v0")] >= lo_h) & (zh[:, _col(model, "p_v0")] <= hi_h))
+    # its other coordinates sit where the collided rows' do: closer than the base band's
+    base = next(p for p in prop.parts if p.name == f"band:v_cut_min<{C:g}")
+    assert isinstance(base, BandPart)
+    zb = base.draw(5000, np.random.default_rng(11))
+    centre = z_e.mean(axis=0)
+    assert (np.linalg.norm(zh - centre, axis=1).mean()
+            < np.linalg.norm(zb - centre, axis=1).mean())
