@@ -190,7 +190,9 @@ class BandPart:
         mk, sk = m[comp, cols], s[comp, cols]
         a = np.where(empty, -np.inf, (lo - mk) / sk)
         b = np.where(empty, np.inf, (hi - mk) / sk)
-        z[:, law.j] = mk + sk * _truncated_std_normal(a, b, rng.random(n))
+        zj = mk + sk * _truncated_std_normal(a, b, rng.random(n))
+        # m + s ((hi - m) / s) can round past hi: keep the draw on its band
+        z[:, law.j] = np.where(empty, zj, np.clip(zj, lo, hi))
         return z
 
 
