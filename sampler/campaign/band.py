@@ -39,7 +39,7 @@ from scipy.special import log_ndtr, logsumexp, ndtri
 
 from sampler.model.gmm import CutInGMM
 
-__all__ = ["BandPart", "ConditionalLaw", "RestDensity", "band_part_for_set", "fit_rest_density",
+__all__ = ["BandPart", "ConditionalLaw", "RestDensity", "RestFit", "band_part_for_set",
            "v_cut_min_band"]
 
 FloatArray = NDArray[np.float64]
@@ -236,23 +236,16 @@ def v_cut_min_band(model: CutInGMM, c: float) -> BandFn:
     return band
 
 
-def fit_rest_density(z: FloatArray, w: FloatArray, rest: NDArray[np.int64],
-                     rng: np.random.Generator, *, max_k: int = 3, inflate: float = 1.2,
-                     nu: float = 5.0) -> RestDensity:
-    """``g`` for a band part: a Student-t mixture over the ``rest`` coordinates of rows
-    ``z`` weighted by ``w`` (``fit_ce_mixture``, fitted covariances)."""
-    from sampler.campaign.proposal import fit_ce_mixture  # the proposal module imports us
-
-    return fit_ce_mixture(z[:, rest], w, rng, max_k=max_k, inflate=inflate, nu=nu,
-                          shape="fitted")
+#: fits ``g``: (z_rest rows, their weights, generator) -> a density over z_rest
+RestFit = Callable[[FloatArray, FloatArray, np.random.Generator], RestDensity]
 
 
-def band_part_for_set(model: CutInGMM, c: float, *, seed: int = 0, n: int = 1 << 18,
-                      name: str | None = None) -> BandPart | None:
-    """The band part of ``0 < v_cut_min < c`` with ``g`` fitted to the set's law of the
-    other coordinates, ``p(z_rest) F(z_rest) / P``: ``n`` model draws (``default_rng(
-    seed)``: deterministic) weighted by their ``F`` (no draw is thrown away). None when
-    fewer than 2 d effective rows carry weight."""
+def band_part_for_set(model: CutInGMM, c: float, fit: RestFit, *, seed: int = 0,
+                      n: int = 1 << 18, name: str | None = None) -> BandPart | None:
+    """The band part of ``0 < v_cut_min < c`` with ``g = fit(...)`` fitted to the set's
+    law of the other coordinates, ``p(z_rest) F(z_rest) / P``: ``n`` model draws
+    (``default_rng(seed)``: deterministic) weighted by their ``F`` (no draw is thrown
+    away). None when fewer than 2 d effective rows carry weight."""
     j = list(model.features_).index("p_v0")
     law = ConditionalLaw(model, j)
     band = v_cut_min_band(model, c)
@@ -267,5 +260,5 @@ def band_part_for_set(model: CutInGMM, c: float, *, seed: int = 0, n: int = 1 <<
     if not np.isfinite(ess) or ess < 2 * d:
         return None
     keep = f > 1e-12 * f.max()
-    g = fit_rest_density(z[keep], f[keep], law.rest, rng)
+    g = fit(z[keep][:, law.rest], f[keep], rng)
     return BandPart(name or f"band:v_cut_min<{c:g}", law, band, g)

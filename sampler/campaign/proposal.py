@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import logsumexp
 
-from sampler.campaign.band import BandPart, band_part_for_set, fit_rest_density
+from sampler.campaign.band import BandPart, band_part_for_set
 from sampler.methods.envelope import HalfSpace, find_envelope
 from sampler.methods.importance import KernelProposal
 from sampler.model.bootstrap import pooled_model
@@ -44,9 +44,9 @@ from sampler.model.gmm import CutInGMM
 from sampler.model.memo import memoised
 from sampler.region.constraints import Region
 
-__all__ = ["DEFAULT_ENVELOPES", "GaussianMixture", "MixturePart", "Proposal", "build_ce_proposal",
-           "build_proposal", "fit_ce_mixture", "fit_weighted_gmm", "region_mixture",
-           "widened_model"]
+__all__ = ["DEFAULT_ENVELOPES", "GaussianMixture", "MixturePart", "Proposal", "band_part",
+           "build_ce_proposal", "build_proposal", "fit_ce_mixture", "fit_weighted_gmm",
+           "region_mixture", "widened_model"]
 
 FloatArray = NDArray[np.float64]
 
@@ -225,7 +225,7 @@ def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: flo
             band_c = _v_cut_min_bound(reg)
             if band_c is not None:
                 def make_band(c: float = band_c, nm: str = name) -> BandPart | None:
-                    return band_part_for_set(model, c, name=f"band:{nm}")
+                    return band_part(model, c, name=f"band:{nm}")
 
                 bp = memoised(model, ("campaign_band", reg), make_band)
                 if bp is not None:
@@ -246,6 +246,17 @@ def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: flo
         out.append(_EnvelopePart(f"envelope:{name if name != 'region' else hs.source}",
                                  model, hs))
     return out
+
+
+def band_part(model: CutInGMM, c: float, *, seed: int = 0, n: int = 1 << 18,
+              name: str | None = None) -> BandPart | None:
+    """The band part of ``0 < v_cut_min < c`` (``sampler.campaign.band``), its ``g`` a
+    Student-t(5) mixture (K <= 3 by BIC, fitted covariances times 1.2^2) fitted to
+    ``n`` model draws weighted by the band's conditional mass."""
+    def fit(zr: FloatArray, w: FloatArray, rng: np.random.Generator) -> GaussianMixture:
+        return fit_ce_mixture(zr, w, rng, max_k=3, inflate=1.2, nu=5.0, shape="fitted")
+
+    return band_part_for_set(model, c, fit, seed=seed, n=n, name=name)
 
 
 def _v_cut_min_bound(region: Region) -> float | None:
@@ -587,8 +598,9 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
         on = (zj >= lo) & (zj <= hi)
         if int(on.sum()) < 2 * z.shape[1]:
             continue
-        g = fit_rest_density(z[on], w[on] ** BAND_HITS_TEMPER, b.law.rest, rng,
-                             max_k=BAND_HITS_K, inflate=BAND_HITS_INFLATE)
+        g = fit_ce_mixture(z[on][:, b.law.rest], w[on] ** BAND_HITS_TEMPER, rng,
+                           max_k=BAND_HITS_K, inflate=BAND_HITS_INFLATE, nu=5.0,
+                           shape="fitted")
         out.append(BandPart(f"ce:{b.name}-hits", b.law, b.band, g))
     return out
 

@@ -21,10 +21,9 @@ from sampler.campaign.band import (
     BandPart,
     ConditionalLaw,
     _truncated_std_normal,
-    band_part_for_set,
     v_cut_min_band,
 )
-from sampler.campaign.proposal import build_ce_proposal
+from sampler.campaign.proposal import band_part, build_ce_proposal
 from sampler.region.kinematics import plateau_speeds
 from tests.sampler.factories import synthetic_parameter_table
 
@@ -40,7 +39,7 @@ def model() -> CutInGMM:
 
 @pytest.fixture(scope="module")
 def part(model: CutInGMM) -> BandPart:
-    bp = band_part_for_set(model, C, seed=5, n=1 << 16)
+    bp = band_part(model, C, seed=5, n=1 << 16)
     assert bp is not None
     return bp
 
@@ -159,7 +158,7 @@ def test_band_part_is_a_density_on_its_band(model: CutInGMM, part: BandPart) -> 
     se_b = math.sqrt(p_band * (1 - p_band) / on_b.size)
     se_w = w.std(ddof=1) / math.sqrt(w.size)
     assert abs(w.mean() - p_band) <= 4 * math.hypot(se_b, se_w)
-    again = band_part_for_set(model, C, seed=5, n=1 << 16)
+    again = band_part(model, C, seed=5, n=1 << 16)
     assert again is not None
     assert np.array_equal(again.draw(50, np.random.default_rng(9)),
                           part.draw(50, np.random.default_rng(9)))
