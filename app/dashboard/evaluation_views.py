@@ -42,7 +42,7 @@ def reliability(collisions: Any, ess: Any) -> str | None:
     findings ``few_collisions`` and ``low_ess`` of the campaign's own rule
     (``sampler.campaign.reliability``, which also gives the summary's ``warnings``).
     Without any collision the page shows the upper bound instead: not flagged here."""
-    from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons
+    from sampler.campaign import MIN_COLLISIONS, MIN_ESS, interval_reasons
 
     why = interval_reasons(collisions, ess)
     if not why:
@@ -53,7 +53,7 @@ def reliability(collisions: Any, ess: Any) -> str | None:
 
 
 def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
-    from sampler.campaign.reliability import warnings
+    from sampler.campaign import summary_warnings as warnings
 
     if not summary:
         return None

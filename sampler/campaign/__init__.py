@@ -6,11 +6,15 @@ collision probability per cut-in and rate per hour with both intervals (docs/eva
 - :mod:`~sampler.campaign.sut` — ``sut_runner``: a system under test in riskcore's
   closed-loop simulator (and the careful driver beside it);
 - :mod:`~sampler.campaign.proposal` — the defensive mixture the runs are drawn from;
-- :mod:`~sampler.campaign.evaluate` — ``evaluate()``, its chunks and its figures.
+- :mod:`~sampler.campaign.evaluate` — ``evaluate()``, its chunks and its figures;
+- :mod:`~sampler.campaign.reliability` — when a summary is not to be trusted (its
+  ``warnings``).
 """
 
 from sampler.campaign.evaluate import CampaignResult, ChunkResult, evaluate
 from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
+from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons
+from sampler.campaign.reliability import warnings as summary_warnings
 from sampler.campaign.runners import (
     Outcomes,
     Runner,
@@ -25,6 +29,8 @@ from sampler.campaign.sut import SutRunner, SutRuns, sut_runner
 
 __all__ = [
     "DEFAULT_ENVELOPES",
+    "MIN_COLLISIONS",
+    "MIN_ESS",
     "CampaignResult",
     "ChunkResult",
     "Outcomes",
@@ -37,7 +43,9 @@ __all__ = [
     "evaluate",
     "halfspace_probability",
     "halfspace_runner",
+    "interval_reasons",
     "late_brake_runner",
+    "summary_warnings",
     "sut_runner",
     "union_probability",
     "union_runner",
