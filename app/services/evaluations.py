@@ -486,7 +486,7 @@ def stored_summary(row: EvaluationRow) -> dict[str, Any] | None:
     same as a new campaign's, and there for an evaluation stored before the fields."""
     if not row.summary:
         return None
-    from sampler.campaign.reliability import with_verdict
+    from sampler.campaign import with_verdict
 
     return with_verdict(jsonconv.decode(row.summary))
 

@@ -13,7 +13,7 @@ collision probability per cut-in and rate per hour with both intervals (docs/eva
 
 from sampler.campaign.evaluate import CampaignResult, ChunkResult, evaluate
 from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
-from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons
+from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons, with_verdict
 from sampler.campaign.reliability import warnings as summary_warnings
 from sampler.campaign.runners import (
     Outcomes,
@@ -49,4 +49,5 @@ __all__ = [
     "sut_runner",
     "union_probability",
     "union_runner",
+    "with_verdict",
 ]
