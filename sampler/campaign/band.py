@@ -236,6 +236,8 @@ def v_cut_min_band(model: CutInGMM, c: float) -> BandFn:
     return band
 
 
+#: the most model draws ``g`` is fitted to (``band_part_for_set``)
+MAX_FIT_ROWS = 20_000
 #: fits ``g``: (z_rest rows, their weights, generator) -> a density over z_rest
 RestFit = Callable[[FloatArray, FloatArray, np.random.Generator], RestDensity]
 
@@ -259,6 +261,11 @@ def band_part_for_set(model: CutInGMM, c: float, fit: RestFit, *, seed: int = 0,
     d = z.shape[1]
     if not np.isfinite(ess) or ess < 2 * d:
         return None
-    keep = f > 1e-12 * f.max()
+    # the rows that carry the weight: F above 1e-6 of its largest, at most MAX_FIT_ROWS of
+    # them (the largest F; the fit's cost grows with the rows, their weight does not)
+    keep = np.flatnonzero(f > 1e-6)
+    if keep.size > MAX_FIT_ROWS:
+        keep = keep[np.argsort(-f[keep], kind="stable")[:MAX_FIT_ROWS]]
+        keep.sort()
     g = fit(z[keep][:, law.rest], f[keep], rng)
     return BandPart(name or f"band:v_cut_min<{c:g}", law, band, g)
