@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 from scipy.special import log_ndtr, logsumexp, ndtri
 
 from sampler.model.gmm import CutInGMM
+from sampler.region.kinematics import plateau_speeds
 
 __all__ = ["BandPart", "ConditionalLaw", "RestDensity", "RestFit", "band_part_for_set",
            "v_cut_min_band"]
@@ -120,16 +121,20 @@ class ConditionalLaw:
         self.last_log_marginal = np.asarray(tot, dtype=np.float64)
         return lr - tot[None, :], m, s
 
-    def log_mass(self, z: FloatArray, lo: FloatArray, hi: FloatArray
+    def log_mass(self, z: FloatArray, lo: FloatArray, hi: FloatArray,
+                 comps: tuple[FloatArray, FloatArray, FloatArray] | None = None
                  ) -> tuple[FloatArray, FloatArray]:
-        """(n,) ``log F`` = log P(lo < z_j < hi | z_rest) and the (K, n) log terms."""
-        lr, m, s = self.components(z)
+        """(n,) ``log F`` = log P(lo < z_j < hi | z_rest) and the (K, n) log terms
+        (``comps``: ``components(z)`` when the caller has them already)."""
+        lr, m, s = self.components(z) if comps is None else comps
         terms = lr + _log_diff_ndtr((lo[None, :] - m) / s, (hi[None, :] - m) / s)
         return np.asarray(logsumexp(terms, axis=0), dtype=np.float64), terms
 
-    def log_pdf_j(self, z: FloatArray) -> FloatArray:
-        """(n,) log p(z_j | z_rest)."""
-        lr, m, s = self.components(z)
+    def log_pdf_j(self, z: FloatArray,
+                  comps: tuple[FloatArray, FloatArray, FloatArray] | None = None
+                  ) -> FloatArray:
+        """(n,) log p(z_j | z_rest) (``comps`` as in ``log_mass``)."""
+        lr, m, s = self.components(z) if comps is None else comps
         x = (z[:, self.j][None, :] - m) / s
         return np.asarray(logsumexp(lr - 0.5 * x * x - np.log(s)
                                     - 0.5 * math.log(2 * math.pi), axis=0), dtype=np.float64)
@@ -162,8 +167,9 @@ class BandPart:
     def log_q(self, z: FloatArray) -> FloatArray:
         z = np.asarray(z, dtype=np.float64)
         lo, hi = self._bounds(z)
-        log_f, _ = self.law.log_mass(z, lo, hi)
-        log_cond = self.law.log_pdf_j(z)
+        comps = self.law.components(z)
+        log_f, _ = self.law.log_mass(z, lo, hi, comps)
+        log_cond = self.law.log_pdf_j(z, comps)
         zj = z[:, self.law.j]
         inside = (zj >= lo) & (zj <= hi)
         empty = ~np.isfinite(log_f)
@@ -178,8 +184,9 @@ class BandPart:
         z = np.zeros((n, zr.shape[1] + 1))
         z[:, law.rest] = zr
         lo, hi = self._bounds(z)
-        log_f, terms = law.log_mass(z, lo, hi)
-        lr, m, s = law.components(z)
+        comps = law.components(z)
+        log_f, terms = law.log_mass(z, lo, hi, comps)
+        lr, m, s = comps
         empty = ~np.isfinite(log_f)
         # the component: by its share of the band's mass (or of the whole law if empty)
         logits = np.where(empty[None, :], lr, terms - np.where(empty, 0.0, log_f)[None, :])
@@ -224,8 +231,8 @@ def v_cut_min_band(model: CutInGMM, c: float) -> BandFn:
     def band(z: FloatArray) -> tuple[FloatArray, FloatArray]:
         x = model.from_z(z)
         a1, a2, a3 = x[:, ia1], x[:, ia2], x[:, ia3]
-        c0 = np.clip(-a2, 0.0, a3)
-        delta = np.minimum(-a1 * c0, a1 * (a3 - c0))
+        before, after = plateau_speeds(a1, a2, a3, np.zeros_like(a1))
+        delta = np.minimum(before, after)  # the lowest speed minus p_v0
         with np.errstate(invalid="ignore", divide="ignore"):
             lo = np.asarray(tr.forward(np.maximum(-delta, 0.0))[0], dtype=np.float64)
             hi = np.asarray(tr.forward(c - delta)[0], dtype=np.float64)
