@@ -141,8 +141,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     spec = service.CampaignSpec(
         sut=entry.name, sut_params=dict(factory.params), constraints=args.constraints or [],
         n=args.n, rhw=0.3 if args.rhw is None else float(args.rhw),
-        max_runs=args.max_runs or service.DEFAULT_MAX_RUNS, seed=args.seed,
-        batch_size=args.batch_size or service.DEFAULT_BATCH,
+        max_runs=service.DEFAULT_MAX_RUNS if args.max_runs is None else args.max_runs,
+        seed=args.seed,
+        # 0 is refused by check_spec, not taken for "the default"
+        batch_size=service.DEFAULT_BATCH if args.batch_size is None else args.batch_size,
         settings=_pairs(args.settings, "--setting") or None, risk=bool(args.risk),
         adapt=args.adapt)
     service.check_spec(spec, limit=10**9, where="")

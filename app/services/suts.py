@@ -209,13 +209,19 @@ def registry(refresh: bool = False) -> Registry:
         return _cached
 
 
+def _label(field: str) -> str:
+    """How a message names ``field``: ``body.sut`` as ``sut`` (the request's key), a CLI
+    option such as ``--sut-param`` as itself."""
+    return field.removeprefix("body.")
+
+
 def resolve(name: str, *, allow_import: bool, field: str = "body.sut",
             reg: Registry | None = None) -> SutEntry:
     """The registered SUT called ``name``; with ``allow_import`` (the CLI only) also a
     ``module:Object`` reference. Anything else is ``InvalidInput`` naming ``field``."""
     reg = registry() if reg is None else reg
     if not isinstance(name, str) or not name.strip():
-        raise InvalidInput("sut: give the name of a registered system under test "
+        raise InvalidInput(f"{_label(field)}: give the name of a registered system under test "
                            f"({', '.join(reg.names())})", field=field)
     name = name.strip()
     if name in reg.entries:
@@ -223,16 +229,21 @@ def resolve(name: str, *, allow_import: bool, field: str = "body.sut",
     if ":" in name or "/" in name:
         if not allow_import:
             raise InvalidInput(
-                f"sut: {name!r} looks like a module path; a request chooses among the "
+                f"{_label(field)}: {name!r} looks like a module path; a request chooses among the "
                 f"registered SUTs only ({', '.join(reg.names())}); register your own with "
                 f"the entry-point group {ENTRY_POINT_GROUP!r}", field=field)
         try:
             obj = _load_object(name)
         except ValueError as exc:
-            raise InvalidInput(f"sut: {exc}", field=field) from None
+            raise InvalidInput(f"{_label(field)}: {exc}", field=field) from None
+        if not (inspect.isclass(obj) or callable(obj)
+                or callable(getattr(obj, "factory", None))):
+            # a module, a constant...: the reference is wrong, not the parameters
+            raise InvalidInput(f"{_label(field)}: {name!r} is a {type(obj).__name__}, not "
+                               "a SUT class, a factory or a SutSpec", field=field)
         summary = (inspect.getdoc(obj) or "").split("\n\n")[0].replace("\n", " ")
         return SutEntry(name=name, origin="module", summary=summary, ref=name)
-    raise InvalidInput(f"sut: unknown system under test {name!r}; registered: "
+    raise InvalidInput(f"{_label(field)}: unknown system under test {name!r}; registered: "
                        f"{', '.join(reg.names())}"
                        + ("" if not allow_import else " (or give module:Class)"),
                        field=field)
@@ -248,7 +259,7 @@ def make_factory(entry: SutEntry, params: Mapping[str, Any] | None = None,
     except InvalidInput:
         raise
     except (TypeError, ValueError) as exc:
-        raise InvalidInput(f"sut_params: {entry.name} refuses them: {exc}",
+        raise InvalidInput(f"{_label(field)}: {entry.name} refuses them: {exc}",
                            field=field) from None
     return factory
 

@@ -392,7 +392,13 @@ def test_cli_evaluate_takes_a_module_path(store: Path, cli_runner: CountingRunne
     (["--sut", "no_such"], "unknown system under test"),
     (["--sut", "acc", "-n", "0"], "--n"),
     (["--sut", "acc", "--rhw", "-1"], "--rhw"),
-    (["--sut", "acc", "--sut-param", "nope=1"], "sut_params"),
+    # the CLI's option is named, not the request's key (was "sut_params: ...")
+    (["--sut", "acc", "--sut-param", "nope=1"], "--sut-param: acc refuses them"),
+    # a module is not a SUT: the reference is named, not the parameters (was "sut_params")
+    (["--sut", "os:path"], "--sut: 'os:path' is a module"),
+    # 0 is refused, not taken for the default (was silently 2000 / 200000)
+    (["--sut", "acc", "-n", "5", "--batch-size", "0"], "--batch-size"),
+    (["--sut", "acc", "--max-runs", "0"], "--max-runs"),
     (["--sut", "acc", "--sut-param", "novalue"], "KEY=VALUE"),
     (["--sut", "nomodule_xyz:Thing"], "cannot import"),
     (["-n", "5"], "--sut"),
