@@ -148,6 +148,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         settings=_pairs(args.settings, "--setting") or None, risk=bool(args.risk),
         adapt=args.adapt)
     service.check_spec(spec, limit=10**9, where="")
+    service.check_settings(spec.settings, "--setting")
     runner = service.runner_for(None, factory, spec.settings, spec.risk)
     model = _load_model(args.model)
     if args.runs is not None and not Path(args.runs).parent.is_dir():

@@ -124,7 +124,7 @@ def check_settings(settings: Mapping[str, Any] | None, field: str) -> None:
     try:
         rs.SimSettings.from_dict(dict(settings))
     except (TypeError, ValueError, KeyError) as exc:
-        raise InvalidInput(f"settings: {exc}", field=field) from None
+        raise InvalidInput(f"{field.removeprefix('body.')}: {exc}", field=field) from None
 
 
 # --------------------------------------------------------------------------- create

@@ -399,6 +399,7 @@ def test_cli_evaluate_takes_a_module_path(store: Path, cli_runner: CountingRunne
     # 0 is refused, not taken for the default (was silently 2000 / 200000)
     (["--sut", "acc", "-n", "5", "--batch-size", "0"], "--batch-size"),
     (["--sut", "acc", "--max-runs", "0"], "--max-runs"),
+    (["--sut", "acc", "--setting", "dt=0"], "--setting: dt"),
     (["--sut", "acc", "--sut-param", "novalue"], "KEY=VALUE"),
     (["--sut", "nomodule_xyz:Thing"], "cannot import"),
     (["-n", "5"], "--sut"),
