@@ -148,8 +148,8 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
         if all(v is None or (isinstance(v, float) and math.isnan(v))
                for v in scatter["r_dep_peak"]):
             # the page then plots the impact speed against btn instead, and says why
-            scatter["note"] = ("r_dep of the SUT's drive not computed by the runner: impact "
-                               "speed shown instead")
+            scatter["note"] = ("r_dep of the SUT's drive not computed (the evaluation was "
+                               "made without risk: true): impact speed shown instead")
     return EvaluationOverview(
         evaluation=EvaluationBrief(**{k: getattr(st, k) for k in EvaluationBrief.model_fields}),
         figures=_figures(None if st.summary is None else jsonconv.decode(st.summary)),

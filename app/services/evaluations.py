@@ -553,8 +553,17 @@ def _column(name: str) -> Any:
     return EvaluationRunRow.weight_raw if name == "weight" else getattr(EvaluationRunRow, name)
 
 
+#: a run's TTR-risk fields: NaN in the simulator's arrays when the evaluation was made
+#: without ``risk``; null ("no value", docs/api.md) in what the service gives out
+RISK_FIELDS = ("r_dep_peak", "r_ind_peak", "r_dep_time_above")
+
+
 def run_record(r: EvaluationRunRow, pb: float | None) -> dict[str, Any]:
     rec: dict[str, Any] = dict(jsonconv.decode(r.record))
+    for name in RISK_FIELDS:  # also for runs stored before (they hold NaN)
+        v = rec.get(name)
+        if isinstance(v, float) and math.isnan(v):
+            rec[name] = None
     rec["weight"] = None if pb is None else rec.get("weight_raw", r.weight_raw) / pb
     return rec
 

@@ -246,6 +246,36 @@ def test_openapi_declares_the_run_filters(eval_client: Any) -> None:
         assert items["enum"] == ["worse", "same", "better"]
 
 
+class NoRiskRunner(CountingRunner):
+    """The simulator's outcome without ``risk``: the TTR-risk fields are NaN."""
+
+    def __call__(self, params: np.ndarray, seeds: np.ndarray) -> Outcomes:
+        out = super().__call__(params, seeds)
+        out.r_dep_peak = np.full(len(out.collided), np.nan)
+        return out
+
+
+def test_risk_fields_not_computed_are_null(eval_client: Any) -> None:
+    """docs/api.md: null means "no value"; without ``risk`` the runs said "NaN" (seen by
+    a new user in /runs and the JSON export), though the docs promise null."""
+    ctx = eval_client.app.state.ctx
+    before = ctx.campaign_runner
+    ctx.campaign_runner = lambda factory, settings: NoRiskRunner()
+    try:
+        eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 200,
+                                                     "seed": 3}).json()["id"]
+        st = _done(eval_client, eid)
+    finally:
+        ctx.campaign_runner = before
+    assert st["status"] == "done", st["error"]
+    runs = eval_client.get(f"/evaluations/{eid}/runs", params={"limit": 50}).json()["runs"]
+    assert runs and all(r["r_dep_peak"] is None for r in runs)
+    assert "NaN" not in json.dumps([r["r_dep_peak"] for r in runs])
+    doc = json.loads(eval_client.get(f"/evaluations/{eid}/export",
+                                     params={"format": "json"}).content)
+    assert doc["runs"] and all(x["run"]["r_dep_peak"] is None for x in doc["runs"])
+
+
 def test_delete_cancels_and_removes(eval_client: Any) -> None:
     eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 500}).json()["id"]
     assert eval_client.delete(f"/evaluations/{eid}").status_code == 204
