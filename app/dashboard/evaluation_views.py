@@ -47,8 +47,10 @@ def reliability(collisions: Any, ess: Any) -> str | None:
     why = interval_reasons(collisions, ess)
     if not why:
         return None
-    return ("unreliable: " + " and ".join(why) + " (fewer than "
-            f"{MIN_COLLISIONS} collisions or ESS below {MIN_ESS:g}) — run more "
+    # the rule, not a guess at which part failed: "ESS 5.31 (fewer than 10 collisions or
+    # ESS below 10)" read as if 20 collisions were fewer than 10
+    return ("unreliable: " + " and ".join(why) + f" (the intervals need at least "
+            f"{MIN_COLLISIONS} collisions and an ESS of at least {MIN_ESS:g}) — run more "
             "(a larger n or the rhw stop rule)")
 
 
@@ -148,8 +150,8 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
         if all(v is None or (isinstance(v, float) and math.isnan(v))
                for v in scatter["r_dep_peak"]):
             # the page then plots the impact speed against btn instead, and says why
-            scatter["note"] = ("r_dep of the SUT's drive not computed (the evaluation was "
-                               "made without risk: true): impact speed shown instead")
+            scatter["note"] = ("r_dep of the SUT's drive not computed, the evaluation "
+                               "was made without risk: true")
     return EvaluationOverview(
         evaluation=EvaluationBrief(**{k: getattr(st, k) for k in EvaluationBrief.model_fields}),
         figures=_figures(None if st.summary is None else jsonconv.decode(st.summary)),

@@ -131,6 +131,7 @@
     if (poll) { clearTimeout(poll); poll = null; }
     if (carefulPoll) { clearTimeout(carefulPoll); carefulPoll = null; }
     $("sut-careful").textContent = "";
+    drawWarnings([]);
     if (!id) {
       note.textContent = "No evaluation yet: pick a system under test and press Evaluate " +
         "(or run 'scengen evaluate', POST /evaluations).";
@@ -213,7 +214,25 @@
       box.append(btn, " (or POST /evaluations " + JSON.stringify(req) + ").");
       box.dataset.state = "none";
     }
-    $("sut-table").innerHTML = grid(["", "estimate", "95 % interval", "model 95 %", ""], rows);
+    $("sut-table").innerHTML = grid(["", "estimate", "Monte Carlo 95 %", "model 95 %", ""],
+                                    rows);
+    drawWarnings([[ev.sut, view.figures], ["r157_cc", c && c.figures]]);
+  }
+
+  // every warning of the summaries (no collision, few collisions, a small ESS, stopped at
+  // max_runs, a ce campaign without its final stage), one line each: the flag in the
+  // table covers only the first three
+  function drawWarnings(pairs) {
+    const list = $("sut-warnings");
+    list.textContent = "";
+    for (const [who, f] of pairs) {
+      for (const text of (f && f.warnings) || []) {
+        const li = document.createElement("li");
+        li.textContent = who + ": " + text;
+        list.appendChild(li);
+      }
+    }
+    list.hidden = !list.childElementCount;
   }
 
   async function refreshCareful(id) {
@@ -298,8 +317,10 @@
     });
     await S.draw(div, [trace(pick(false), "no collision", "#8a94a3"),
                        trace(pick(true), "collided", SUT)], {
-      title: { text: s.note ? "Impact speed against btn (" + s.note + ")"
+      // the note on a line of its own: one line of both overflowed the plot at 1400 px
+      title: { text: s.note ? "Impact speed against btn<br>(" + S.esc(s.note) + ")"
                             : "SUT's peak r_dep against btn", font: { size: 11 } },
+      margin: { l: 48, r: 12, t: s.note ? 46 : 30, b: 42 },
       xaxis: { title: { text: "btn (braking needed ÷ available)" } },
       yaxis: { title: { text: yName } },
       legend: { orientation: "h", x: 0, y: -0.25, font: { size: 10 } },

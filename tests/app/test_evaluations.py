@@ -576,6 +576,8 @@ def test_small_evaluations_are_flagged_unreliable(collisions: int, ess: float | 
         assert got is None
     else:
         assert got is not None and got.startswith("unreliable: " + flagged + " (")
+        # the rule as it is, not "fewer than 10 collisions or ..." beside 300 collisions
+        assert "(the intervals need at least 10 collisions and an ESS of at least 10)" in got
         assert "run more" in got
 
 

@@ -31,8 +31,10 @@ TIMEOUT_MS = 180_000
 
 
 def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str, ...],
-           n: int) -> Iterator[tuple[str, dict[str, str]]]:
-    """A service over a data dir holding finished evaluations of ``suts`` (n draws each)."""
+           n: int, stopped: bool = False) -> Iterator[tuple[str, dict[str, str]]]:
+    """A service over a data dir holding finished evaluations of ``suts`` (n draws each);
+    with ``stopped`` first (so not the newest) one of ``acc`` that the stop rule's
+    ``max_runs`` ended (ids["stopped"]: its summary warns)."""
     from app.services import evaluations as service
     from app.services.store import open_context
 
@@ -40,6 +42,11 @@ def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str,
     ctx = open_context(make_settings(data_dir))
     ids = {}
     try:
+        if stopped:
+            row = service.create(ctx, sut="acc", rhw=0.3, max_runs=200, seed=2,
+                                 batch_size=200)
+            assert service.run_job(ctx, row.id) == "done"
+            ids["stopped"] = row.id
         for sut in suts:
             row = service.create(ctx, sut=sut, n=n, seed=1, batch_size=200)
             assert service.run_job(ctx, row.id) == "done"
@@ -56,7 +63,7 @@ def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str,
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, dict[str, str]]]:
-    yield from _serve(tmp_path_factory, "sut-browser", ("r157_cc", "acc"), 400)
+    yield from _serve(tmp_path_factory, "sut-browser", ("r157_cc", "acc"), 400, stopped=True)
 
 
 @pytest.fixture(scope="module")
@@ -307,4 +314,58 @@ def test_a_failing_run_opens_in_the_scenario_view(served: tuple[str, dict[str, s
     assert info.locator("a[href='#view-sut']").count() == 1
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     page.locator("#scenario-run").screenshot(path=str(ARTIFACTS / "4-evaluation-run.png"))
+    assert errors == []
+
+
+def test_every_warning_is_shown_and_intervals_stay_on_one_line(
+        served: tuple[str, dict[str, str]], context: BrowserContext) -> None:
+    """A campaign the stop rule's max_runs ended warns in its summary ("stopped at
+    max_runs ...") but the section showed only the few-collisions / ESS flag: the warning
+    was nowhere on the page. Now every warning of the SUT's and the careful driver's
+    summaries is listed under the table. And an interval was broken over two lines
+    ("[1.49e-3," / "2.74e-3]") at 1400 px. Screenshot: ``sut-warnings.png``."""
+    base, ids = served
+    view = httpx.get(f"{base}/dashboard/api/evaluations/{ids['stopped']}", timeout=120).json()
+    warnings = view["figures"]["warnings"]
+    assert any(w.startswith("stopped at max_runs") for w in warnings), warnings
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"{base}/dashboard#view-sut")
+    page.wait_for_selector("#sut-note[data-state=done]", timeout=TIMEOUT_MS)
+    page.select_option("#eval-select", ids["stopped"])
+    page.wait_for_selector(f"#sut-note[data-state=done]:has-text('{ids['stopped']}')",
+                           timeout=TIMEOUT_MS)
+    listed = page.locator("#sut-warnings")
+    assert listed.is_visible()
+    items = listed.locator("li").all_inner_texts()
+    careful = (view["careful"] or {}).get("figures") or {}
+    assert items == ([f"acc: {w}" for w in warnings]
+                     + [f"r157_cc: {w}" for w in careful.get("warnings") or []])
+    # each cell of the rates table but the last (a sentence) on one line
+    lines = page.evaluate("""() => [...document.querySelectorAll('#sut-table tr')].slice(1)
+        .flatMap((tr) => [...tr.querySelectorAll('td')].slice(0, -1)).map((td) => {
+          const r = document.createRange(); r.selectNodeContents(td);
+          return [td.innerText, new Set([...r.getClientRects()].map(
+            (q) => Math.round(q.top))).size]; })""")
+    assert lines and all(n == 1 for _, n in lines), [t for t, n in lines if n != 1]
+    # the scatter's title (with the note why r_dep is missing) inside its plot: it ran
+    # past both edges
+    page.wait_for_selector("#sut-scatter[data-rendered='1']", timeout=TIMEOUT_MS)
+    inside = page.evaluate("""() => { const d = document.getElementById('sut-scatter')
+        .getBoundingClientRect(); const t = document.querySelector('#sut-scatter .gtitle')
+        .getBoundingClientRect(); return [t.width > 0, t.left >= d.left, t.right <= d.right,
+        t.top >= d.top]; }""")
+    assert inside == [True, True, True, True], inside
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.locator("#view-sut").screenshot(path=str(ARTIFACTS / "sut-warnings.png"))
+    # an evaluation without warnings: no list
+    page.select_option("#eval-select", ids["acc"])
+    page.wait_for_selector(f"#sut-note[data-state=done]:has-text('{ids['acc']}')",
+                           timeout=TIMEOUT_MS)
+    acc = httpx.get(f"{base}/dashboard/api/evaluations/{ids['acc']}", timeout=120).json()
+    shown = page.locator("#sut-warnings li").count()
+    assert shown == len(acc["figures"]["warnings"]) + len(
+        ((acc["careful"] or {}).get("figures") or {}).get("warnings") or [])
+    assert page.locator("#sut-warnings").is_visible() == (shown > 0)
     assert errors == []
