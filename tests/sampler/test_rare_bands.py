@@ -44,7 +44,8 @@ def _band_brute_force(tno: CutInGMM, cons: list[str], n_ref: int, seed: int
                       ) -> tuple[float, int]:
     """(P(A and B), hits) of a ``2.9 < ttc < 3`` band region from ``n_ref`` exact draws of
     the model restricted to the ``ttc<3`` envelope (in blocks of 10^6), only the band's
-    rows simulated."""
+    rows simulated. The physical bounds (row by row, and costly: their kinematic checks)
+    are asked of the band's rows only, ~6 % of the draws: the same rows as asking all."""
     from sampler.region.constraints import derive
 
     region = Region.from_constraints(cons, lane_width=tno.lane_width_)
@@ -55,7 +56,8 @@ def _band_brute_force(tno: CutInGMM, cons: list[str], n_ref: int, seed: int
     for _ in range(n_ref // 1_000_000):
         x = problem.params(problem.draw_z(1_000_000, rng))
         ttc = derive(x, ["ttc"], lane_width=tno.lane_width_)["ttc"]
-        band = x[(ttc > 2.9) & (ttc < 3) & region.in_bounds(x)]
+        band = x[(ttc > 2.9) & (ttc < 3)]
+        band = band[region.in_bounds(band)]
         hits += int(region.contains(band).sum())
     return problem.envelope.mass * hits / n_ref, hits
 
