@@ -54,8 +54,10 @@ class ClientQuotas:
             mine = [t for t in self._held.values() if t.client == client]
         return len(mine), sum(t.cost for t in mine)
 
-    def admit(self, client: str, cost: int, settings: Settings) -> QuotaToken:
-        """Hold ``cost`` scenarios and one job for ``client``, or raise 429."""
+    def admit(self, client: str, cost: int, settings: Settings, *, field: str = "body.n",
+              hint: str = "ask for fewer") -> QuotaToken:
+        """Hold ``cost`` scenarios and one job for ``client``, or raise 429 naming ``field``
+        (what the cost came from) and ending with ``hint``."""
         with self._lock:
             mine = [t for t in self._held.values() if t.client == client]
             jobs, queued = len(mine), sum(t.cost for t in mine)
@@ -70,15 +72,16 @@ class ClientQuotas:
                     f"{cost} more scenarios would make {queued + cost} queued or running for "
                     "you, over SCENGEN_CLIENT_QUEUED_SCENARIOS_LIMIT = "
                     f"{settings.client_queued_scenarios_limit}; try again when your jobs "
-                    "have progressed, or ask for fewer", retry_after=wait, field="body.n")
+                    f"have progressed, or {hint}", retry_after=wait, field=field)
             token = QuotaToken(next(self._ids), client, int(cost))
             self._held[token.id] = token
             return token
 
     @contextmanager
-    def hold(self, client: str, cost: int, settings: Settings) -> Iterator[QuotaToken]:
+    def hold(self, client: str, cost: int, settings: Settings, *, field: str = "body.n",
+             hint: str = "ask for fewer") -> Iterator[QuotaToken]:
         """``admit``, released again if the block raises (the job was not stored)."""
-        token = self.admit(client, cost, settings)
+        token = self.admit(client, cost, settings, field=field, hint=hint)
         try:
             yield token
         except BaseException:

@@ -117,16 +117,24 @@ def list_suts() -> SutList:
              summary="Start an evaluation of a system under test; answers with its id")
 def create_evaluation(body: EvaluationRequest, request: Request, ctx: ContextDep,
                       jobs: JobsDep) -> EvaluationCreated:
-    # the client's quota counts the runs it may have queued (app.quotas)
-    cost = body.n if body.n is not None else (body.max_runs or service.DEFAULT_MAX_RUNS)
-    if cost > ctx.settings.catalogue_n_limit:  # the size limit answers first (422)
-        cost = ctx.settings.catalogue_n_limit
-    with jobs.quotas.hold(client_of(request), cost, ctx.settings) as quota:
-        row = service.create(ctx, sut=body.sut, sut_params=body.sut_params, model=body.model,
+    # the request checked first: a bad one is told what is wrong (422), not to wait (429)
+    valid = service.validate(ctx, sut=body.sut, sut_params=body.sut_params, model=body.model,
                              constraints=body.constraints, n=body.n, rhw=body.rhw,
                              max_runs=body.max_runs, seed=body.seed,
                              batch_size=body.batch_size, settings=body.settings,
                              risk=body.risk, adapt=body.adapt)
+    # the client's quota counts the runs it may have queued (app.quotas): n, else max_runs
+    # (a stop-rule evaluation holds its max_runs until it ends)
+    spec = valid.spec
+    if spec.n is not None:
+        cost, field, hint = spec.n, "body.n", "ask for fewer"
+    else:
+        cost, field = spec.max_runs, "body.max_runs"
+        hint = (f"give a smaller max_runs (without n an evaluation counts its max_runs, "
+                f"{spec.max_runs}) or n")
+    with jobs.quotas.hold(client_of(request), cost, ctx.settings, field=field,
+                          hint=hint) as quota:
+        row = service.store(ctx, valid)
     jobs.submit(row.id, quota=quota)
     return EvaluationCreated(id=row.id, status=row.status, href=f"/evaluations/{row.id}")
 

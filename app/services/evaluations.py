@@ -205,6 +205,29 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
            adapt: str = "kernels") -> EvaluationRow:
     """Validate and store a queued evaluation job; the caller submits it. ``sut`` must be a
     registered name (a request never names a module)."""
+    return store(ctx, validate(ctx, sut=sut, sut_params=sut_params, model=model,
+                               constraints=constraints, n=n, rhw=rhw, max_runs=max_runs,
+                               seed=seed, batch_size=batch_size, settings=settings,
+                               risk=risk, adapt=adapt))
+
+
+@dataclass(frozen=True)
+class ValidEvaluation:
+    """A request that passed ``validate``: what ``store`` writes."""
+
+    model_id: str
+    sut: str
+    spec: CampaignSpec
+
+
+def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | None = None,
+             model: str | None = None, constraints: Sequence[str] = (), n: int | None = None,
+             rhw: float = 0.3, max_runs: int | None = None, seed: int = 0,
+             batch_size: int | None = None, settings: Mapping[str, Any] | None = None,
+             risk: bool = False, adapt: str = "kernels") -> ValidEvaluation:
+    """Every check of ``create`` (``InvalidInput`` naming the field, 404 for an unknown
+    model), nothing stored: the route asks for the client's quota only after it, so that a
+    bad request is told what is wrong (422), not to wait (429)."""
     entry = suts.resolve(sut, allow_import=False, field="body.sut")
     spec = CampaignSpec(sut=entry.name, sut_params=dict(sut_params or {}),
                         constraints=list(constraints), n=n, rhw=float(rhw),
@@ -223,8 +246,14 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
         budget.precheck(lambda: domain.estimate_region(fitted, parsed, spec.seed))
     suts.make_factory(entry, spec.sut_params, field="body.sut_params")
     check_settings(spec.settings, "body.settings")
+    return ValidEvaluation(model_id=model_id, sut=entry.name, spec=spec)
+
+
+def store(ctx: ServiceContext, valid: ValidEvaluation) -> EvaluationRow:
+    """Store a validated evaluation as a queued job (the caller submits it)."""
+    spec = valid.spec
     with ctx.db.session() as s:
-        row = EvaluationRow(id=repo.new_id("eval"), model_id=model_id, sut=entry.name,
+        row = EvaluationRow(id=repo.new_id("eval"), model_id=valid.model_id, sut=valid.sut,
                             status="queued", seed=spec.seed, spec=jsonconv.encode(
                                 spec.to_dict()), runs_planned=spec.planned, runs_done=0)
         s.add(row)

@@ -112,6 +112,31 @@ def test_bad_numbers_name_their_field(eval_client: Any) -> None:
         assert r.json()["error"]["field"] == field, (body, r.json())
 
 
+def test_a_bad_request_is_422_even_over_the_quota(eval_client: Any) -> None:
+    """A client with a job queued sent a request with a bad constraint and was told to
+    wait (429 naming body.n, which it had not given) instead of what was wrong; a request
+    without n counts its max_runs, and the 429 now says so and names body.max_runs."""
+    settings = eval_client.app.state.ctx.settings
+    quotas = eval_client.app.state.jobs.quotas
+    token = quotas.admit("testclient", settings.client_queued_scenarios_limit - 100, settings)
+    try:
+        r = eval_client.post("/evaluations", json={"sut": "acc", "n": 500,
+                                                   "constraints": ["foo<3"]})
+        assert r.status_code == 422 and r.json()["error"]["field"] == "body.constraints.0"
+        r = eval_client.post("/evaluations", json={"sut": "acc", "n": 500,
+                                                   "sut_params": {"nope": 1}})
+        assert r.status_code == 422 and r.json()["error"]["field"] == "body.sut_params"
+        r = eval_client.post("/evaluations", json={"sut": "acc"})  # the stop rule
+        assert r.status_code == 429
+        err = r.json()["error"]
+        assert err["field"] == "body.max_runs"
+        assert "without n an evaluation counts its max_runs" in err["message"]
+        r = eval_client.post("/evaluations", json={"sut": "acc", "n": 500})
+        assert r.status_code == 429 and r.json()["error"]["field"] == "body.n"
+    finally:
+        quotas.release(token)
+
+
 def test_suts_route_lists_what_the_registry_holds(eval_client: Any) -> None:
     body = eval_client.get("/suts").json()
     names = [s["name"] for s in body["suts"]]
