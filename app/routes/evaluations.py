@@ -158,8 +158,11 @@ _RANGE_DOCS = {"impact_speed": "impact speed (m/s, 0 without a collision)",
                "r_dep_peak": "peak r_dep of the SUT (0..1)",
                "min_gap": "smallest gap to the cutter (m)",
                "min_ttc": "smallest time to collision (s)"}
-_FLAG_DOCS = {"collided": "the SUT hit the cutter", "must_avoid": "the cut-in is one the "
-              "R157 careful driver avoids", "violation": "the SUT did worse than R157 allows"}
+_FLAG_DOCS = {"collided": "the SUT hit the cutter",
+              "must_avoid": "the regulation says the cut-in must be avoided (UN R157 "
+              "5.2.5.2: the TTC when the cutter is 0.3 m into the lane exceeds the value "
+              "for its closing speed; docs/systems.md)",
+              "violation": "must_avoid and the SUT collided"}
 #: the filter parameters of ``/runs`` and ``/export`` (declared in ``run_filter_params``)
 FILTER_PARAMS = frozenset([f"{f}_{b}" for f in service.RANGE_FIELDS for b in ("min", "max")]
                           + list(service.FLAG_FIELDS) + ["vs_careful"])

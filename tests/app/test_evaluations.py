@@ -269,6 +269,11 @@ def test_openapi_declares_the_run_filters(eval_client: Any) -> None:
         assert declared["collided"]["schema"]["anyOf"][0]["type"] == "boolean"
         items = declared["vs_careful"]["schema"]["anyOf"][0]["items"]
         assert items["enum"] == ["worse", "same", "better"]
+        # must_avoid is the regulation's TTC formula (docs/systems.md), not what the
+        # careful driver does (the description said "the cut-in is one the R157 careful
+        # driver avoids")
+        text = declared["must_avoid"].get("description", "")
+        assert "5.2.5.2" in text and "careful" not in text, text
 
 
 class NoRiskRunner(CountingRunner):
