@@ -242,7 +242,10 @@ def resolve(name: str, *, allow_import: bool, field: str = "body.sut",
             raise InvalidInput(f"{_label(field)}: {name!r} is a {type(obj).__name__}, not "
                                "a SUT class, a factory or a SutSpec", field=field)
         summary = (inspect.getdoc(obj) or "").split("\n\n")[0].replace("\n", " ")
-        return SutEntry(name=name, origin="module", summary=summary, ref=name)
+        declared = getattr(obj, "parameters", None)
+        return SutEntry(name=name, origin="module", summary=summary, ref=name,
+                        parameters=dict(declared) if isinstance(declared, Mapping) else {},
+                        source=str(getattr(obj, "source", "") or ""))
     raise InvalidInput(f"{_label(field)}: unknown system under test {name!r}; registered: "
                        f"{', '.join(reg.names())}"
                        + ("" if not allow_import else " (or give module:Class)"),
@@ -253,6 +256,7 @@ def make_factory(entry: SutEntry, params: Mapping[str, Any] | None = None,
                  field: str = "body.sut_params") -> SutFactory:
     """The entry's factory with ``params``, tried once here so that bad parameters are an
     ``InvalidInput`` naming ``field`` now rather than a failed job later."""
+    _check_declared(entry, params or {}, field)
     factory = entry.factory(params)
     try:
         factory()
@@ -262,6 +266,20 @@ def make_factory(entry: SutEntry, params: Mapping[str, Any] | None = None,
         raise InvalidInput(f"{_label(field)}: {entry.name} refuses them: {exc}",
                            field=field) from None
     return factory
+
+
+def _check_declared(entry: SutEntry, params: Mapping[str, Any], field: str) -> None:
+    """A parameter the SUT declares with a number as its default must be given a number
+    (``time_gap=abc`` reached the user's class as a string and failed there as "'>' not
+    supported between instances of 'str' and 'int'"). Undeclared names are left to the
+    class: its constructor may take more than it lists."""
+    for key, value in params.items():
+        spec = entry.parameters.get(key)
+        default = spec[0] if isinstance(spec, tuple | list) and spec else None
+        numeric = isinstance(default, int | float) and not isinstance(default, bool)
+        if numeric and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise InvalidInput(f"{_label(field)}: {entry.name}.{key}: expected a number, "
+                               f"got {value!r}", field=field)
 
 
 def list_suts() -> list[SutInfo]:

@@ -13,7 +13,7 @@ import re
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
@@ -378,6 +378,18 @@ class OneRunBrake:
         return -3.0
 
 
+class DeclaredGap(OneRunBrake):
+    """A user's class that declares its parameters and compares them as numbers (as
+    examples/sut-package's GapKeeper does)."""
+
+    parameters: ClassVar[dict[str, tuple[float, str, str]]] = {
+        "time_gap": (1.0, "s", "the gap it keeps")}
+
+    def __init__(self, time_gap: float = 1.0) -> None:
+        if not time_gap > 0:
+            raise ValueError("time_gap > 0 please")
+
+
 @pytest.fixture
 def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
     runner = CountingRunner()
@@ -460,6 +472,11 @@ def test_cli_evaluate_takes_a_module_path(store: Path, cli_runner: CountingRunne
     (["--sut", "acc", "-n", "5", "--batch-size", "0"], "--batch-size"),
     (["--sut", "acc", "--max-runs", "0"], "--max-runs"),
     (["--sut", "acc", "--setting", "dt=0"], "--setting: dt"),
+    # a declared numeric parameter given a word: said so, not the class's TypeError
+    # ("'>' not supported between instances of 'str' and 'int'")
+    (["--sut", "tests.app.test_evaluations:DeclaredGap", "--sut-param", "time_gap=abc"],
+     "--sut-param: tests.app.test_evaluations:DeclaredGap.time_gap: expected a number, "
+     "got 'abc'"),
     (["--sut", "acc", "--sut-param", "novalue"], "KEY=VALUE"),
     (["--sut", "nomodule_xyz:Thing"], "cannot import"),
     (["-n", "5"], "--sut"),
