@@ -50,13 +50,20 @@
       "count as no collision" + pilot + ")";
   }
 
+  // without any collision there is no interval, only the 95 % upper bound (for the rate
+  // too: "0 [–, –]" read as "never collides")
+  function mcCell(x) {
+    return x.upper_bound !== null && x.upper_bound !== undefined
+      ? "≤ " + sci(x.upper_bound) + " (95 % bound)" : interval(x.ci);
+  }
+
   function figureRows(label, f) {
     if (!f) return [[label, "–", "–", "–", "–"]];
     const r = f.rate_per_hour || {};
     const p = f.p_collision || {};
-    const rows = [[label + " · collisions per hour", sci(r.estimate), interval(r.ci),
+    const rows = [[label + " · collisions per hour", sci(r.estimate), mcCell(r),
                    interval(r.model_ci), countCell(f)]];
-    rows.push([label + " · P(collision) per cut-in", sci(p.estimate), interval(p.ci),
+    rows.push([label + " · P(collision) per cut-in", sci(p.estimate), mcCell(p),
                interval(p.model_ci), p.upper_bound !== null && p.upper_bound !== undefined
                  ? "no collision: ≤ " + sci(p.upper_bound) + " (95 %)"
                  : f.unreliable ||

@@ -34,7 +34,8 @@ def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str,
            n: int, stopped: bool = False) -> Iterator[tuple[str, dict[str, str]]]:
     """A service over a data dir holding finished evaluations of ``suts`` (n draws each);
     with ``stopped`` first (so not the newest) one of ``acc`` that the stop rule's
-    ``max_runs`` ended (ids["stopped"]: its summary warns)."""
+    ``max_runs`` ended (ids["stopped"]: its summary warns) and one of ``idm`` without any
+    collision (ids["quiet"])."""
     from app.services import evaluations as service
     from app.services.store import open_context
 
@@ -47,6 +48,10 @@ def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str,
                                  batch_size=200)
             assert service.run_job(ctx, row.id) == "done"
             ids["stopped"] = row.id
+            # and one without any collision: idm, 100 draws
+            row = service.create(ctx, sut="idm", n=100, seed=1, batch_size=100)
+            assert service.run_job(ctx, row.id) == "done"
+            ids["quiet"] = row.id
         for sut in suts:
             row = service.create(ctx, sut=sut, n=n, seed=1, batch_size=200)
             assert service.run_job(ctx, row.id) == "done"
@@ -369,3 +374,28 @@ def test_every_warning_is_shown_and_intervals_stay_on_one_line(
         ((acc["careful"] or {}).get("figures") or {}).get("warnings") or [])
     assert page.locator("#sut-warnings").is_visible() == (shown > 0)
     assert errors == []
+
+
+def test_without_a_collision_both_rows_give_the_upper_bound(
+        served: tuple[str, dict[str, str]], context: BrowserContext) -> None:
+    """No run collided: the rate per hour read "0 [–, –]" (as if it never collides) while
+    only the P row gave the 95 % upper bound; both give their bound now."""
+    base, ids = served
+    view = httpx.get(f"{base}/dashboard/api/evaluations/{ids['quiet']}", timeout=120).json()
+    fig = view["figures"]
+    assert fig["collisions"] == 0
+    page = context.new_page()
+    page.goto(f"{base}/dashboard#view-sut")
+    page.wait_for_selector("#sut-note[data-state=done]", timeout=TIMEOUT_MS)
+    page.select_option("#eval-select", ids["quiet"])
+    page.wait_for_selector(f"#sut-note[data-state=done]:has-text('{ids['quiet']}')",
+                           timeout=TIMEOUT_MS)
+    rows = page.locator("#sut-table tr", has_text="idm · ")
+    for k, key in enumerate(("rate_per_hour", "p_collision")):
+        bound = fig[key]["upper_bound"]
+        assert bound is not None and bound > 0
+        cells = rows.nth(k).locator("td").all_inner_texts()
+        # JavaScript's toExponential(2): 7.13e-2, 1.16e+0 (Python: 7.13e-02, 1.16e+00)
+        text = re.sub(r"e([+-])0(\d)", r"e\1\2", f"{bound:.2e}")
+        assert cells[1] == f"≤ {text} (95 % bound)", cells
+    assert "no collision in 100 draws" in page.locator("#sut-warnings").inner_text()
