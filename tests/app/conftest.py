@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from app.settings import get_settings
-from tests.app.factories import TEST_MODEL_OPTIONS, copy_model_cache, pg_available, pg_database
+from tests.app.factories import cli_store, pg_available, pg_database
 
 
 @pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
@@ -62,15 +60,5 @@ def store(tmp_path: Path, model_cache_dir: Path,
     """A private CLI store (SCENGEN_DATA_DIR) with the session's cached default model;
     yields its data directory."""
     data_dir = tmp_path / "data"
-    copy_model_cache(model_cache_dir, data_dir)
-    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
-    monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
-    monkeypatch.setenv("SCENGEN_WARM_START", "0")
-    # as make_settings: a loaded test machine must not hit the CLI's time budget
-    monkeypatch.setenv("SCENGEN_SYNC_BUDGET_SECONDS", "600")
-    monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
-    monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
-    monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
-    get_settings.cache_clear()
-    yield data_dir
-    get_settings.cache_clear()
+    with cli_store(data_dir, model_cache_dir, monkeypatch):
+        yield data_dir

@@ -18,11 +18,12 @@ from typing import Any
 
 import httpx
 import psycopg
+import pytest
 from fastapi import FastAPI
 from sqlalchemy.engine import make_url
 
 from app.main import create_app
-from app.settings import Settings
+from app.settings import Settings, get_settings
 
 PG_ADMIN_URL = os.environ.get("SCENGEN_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test")
 
@@ -172,3 +173,24 @@ def uvicorn_service(env: dict[str, str], log: Path, *args: str) -> Iterator[str]
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=30)
+
+
+@contextmanager
+def cli_store(data_dir: Path, model_cache_dir: Path,
+              monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """The environment of ``store`` on ``data_dir`` (also for module-scoped fixtures, with
+    a ``pytest.MonkeyPatch.context()``)."""
+    copy_model_cache(model_cache_dir, data_dir)
+    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
+    monkeypatch.setenv("SCENGEN_LOCAL_WORKERS", "0")
+    monkeypatch.setenv("SCENGEN_WARM_START", "0")
+    # as make_settings: a loaded test machine must not hit the CLI's time budget
+    monkeypatch.setenv("SCENGEN_SYNC_BUDGET_SECONDS", "600")
+    monkeypatch.setenv("SCENGEN_DEFAULT_MODEL_OPTIONS", json.dumps(TEST_MODEL_OPTIONS))
+    monkeypatch.delenv("SCENGEN_DATABASE_URL", raising=False)
+    monkeypatch.delenv("SCENGEN_DASK_SCHEDULER", raising=False)
+    get_settings.cache_clear()
+    try:
+        yield
+    finally:
+        get_settings.cache_clear()

@@ -8,10 +8,13 @@ simulator end to end."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import re
 import threading
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -390,8 +393,7 @@ class DeclaredGap(OneRunBrake):
             raise ValueError("time_gap > 0 please")
 
 
-@pytest.fixture
-def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
+def _cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
     runner = CountingRunner()
     made: list[Any] = []
 
@@ -404,23 +406,51 @@ def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
     return runner
 
 
-@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
-def test_cli_evaluate_prints_the_summary_and_writes_every_run(
-        store: Path, tmp_path: Path, cli_runner: CountingRunner,
-        capsys: pytest.CaptureFixture[str]) -> None:
-    from app.cli import main
+@pytest.fixture
+def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
+    return _cli_runner(monkeypatch)
 
-    runs = tmp_path / "runs.jsonl"
-    assert main(["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4",
-                 "--batch-size", "500", "--runs", str(runs)]) == 0
-    out = capsys.readouterr()
-    summary = json.loads(out.out)
+
+#: the CLI campaign that three tests below read (made once: each costs seconds)
+ACC_ARGV = ["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4", "--batch-size", "500"]
+
+
+@dataclass(frozen=True)
+class CliRun:
+    code: int
+    out: str
+    err: str
+    runs: str  # the --runs file's text
+
+
+@pytest.fixture(scope="module")
+def acc_cli_run(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> CliRun:
+    """``scengen evaluate`` ``ACC_ARGV --runs FILE`` on a private store with the stand-in
+    runner (as the fixtures ``store`` and ``cli_runner``): its exit code, stdout, stderr
+    and runs file."""
+    from app.cli import main
+    from tests.app.factories import cli_store
+
+    tmp = tmp_path_factory.mktemp("cli-evaluate")
+    runs = tmp / "runs.jsonl"
+    out, err = io.StringIO(), io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, cli_store(tmp / "data", model_cache_dir, mp):
+        _cli_runner(mp)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main([*ACC_ARGV, "--runs", str(runs)])
+    return CliRun(code, out.getvalue(), err.getvalue(), runs.read_text())
+
+
+@pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
+def test_cli_evaluate_prints_the_summary_and_writes_every_run(acc_cli_run: CliRun) -> None:
+    assert acc_cli_run.code == 0
+    summary = json.loads(acc_cli_run.out)
     assert list(summary)[:7] == ["sut", "p_collision", "rate_per_hour", "runs",
                                  "collisions", "ess", "acceleration"]
     assert summary["sut"] == "acc" and summary["runs"] == 1500
     for key in ("estimate", "ci", "model_ci"):
         assert key in summary["p_collision"] and key in summary["rate_per_hour"]
-    lines = [json.loads(x) for x in runs.read_text().splitlines()]
+    lines = [json.loads(x) for x in acc_cli_run.runs.splitlines()]
     assert len(lines) == 1500
     hits = [x for x in lines if x["collided"]]
     assert len(hits) == summary["collisions"] > 0
@@ -428,23 +458,27 @@ def test_cli_evaluate_prints_the_summary_and_writes_every_run(
         assert x["dv"] > 6.0 and x["simulated"] is True
     est = sum(x["weight"] for x in hits) / len(lines)
     assert est == pytest.approx(summary["p_collision"]["estimate"], rel=1e-9)
-    assert "draws" in out.err  # the progress bar
+    assert "draws" in acc_cli_run.err  # the progress bar
     # it starts before any draw is simulated, so its rate is draws per second of the
     # campaign: it once appeared only when done and said "171196081.63run/s"
-    rates = [float(r) for r in re.findall(r"([0-9.]+)run/s", out.err)]
+    rates = [float(r) for r in re.findall(r"([0-9.]+)run/s", acc_cli_run.err)]
     assert rates and max(rates) < 1e7
 
 
 @pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
-def test_cli_evaluate_is_deterministic(store: Path, cli_runner: CountingRunner,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_evaluate_is_deterministic(store: Path, tmp_path: Path, cli_runner: CountingRunner,
+                                       capsys: pytest.CaptureFixture[str],
+                                       acc_cli_run: CliRun) -> None:
+    """The shared campaign again, on another store with the same model and quiet: the
+    same stdout and the same runs file, byte for byte."""
     from app.cli import main
 
-    argv = ["evaluate", "--sut", "idm", "-n", "800", "--seed", "9", "-q"]
-    assert main(argv) == 0
-    first = capsys.readouterr().out
-    assert main(argv) == 0
-    assert capsys.readouterr().out == first
+    runs = tmp_path / "again.jsonl"
+    assert main([*ACC_ARGV, "-q", "--runs", str(runs)]) == 0
+    out = capsys.readouterr()
+    assert out.out == acc_cli_run.out
+    assert runs.read_text() == acc_cli_run.runs
+    assert out.err == ""  # -q: no progress bar
 
 
 @pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
@@ -692,8 +726,8 @@ def test_openapi_declares_the_summarys_verdict(eval_client: Any) -> None:
 
 @pytest.mark.slow  # >= 3 s: the CLI loads the model
 def test_cli_evaluate_prints_each_warning_on_stderr(store: Path, cli_runner: CountingRunner,
-                                                   capsys: pytest.CaptureFixture[str]
-                                                   ) -> None:
+                                                   capsys: pytest.CaptureFixture[str],
+                                                   acc_cli_run: CliRun) -> None:
     """A tiny campaign whose stand-in never collides: the JSON as before on stdout (with
     warnings and reliable), one "warning: ..." line per warning on stderr after it, exit
     code 0 (also with -q)."""
@@ -711,11 +745,9 @@ def test_cli_evaluate_prints_each_warning_on_stderr(store: Path, cli_runner: Cou
     assert lines[0].startswith("warning: no collision in 60 draws: P(collision) is not "
                                "estimated")
     assert lines[1].startswith("warning: stopped at max_runs (60 draws)")
-    # a reliable campaign prints no warning line: the stand-in collides often
-    cli_runner.dv_hit = 0.0
-    assert main(["evaluate", "--sut", "acc", "-n", "600", "--seed", "1", "-q"]) == 0
-    out = capsys.readouterr()
-    summary = json.loads(out.out)
+    # a reliable campaign prints no warning line: the shared one (1,500 draws, the stand-in
+    # collides often)
+    summary = json.loads(acc_cli_run.out)
     assert summary["collisions"] >= 10 and summary["ess"] >= 10
     assert summary["warnings"] == [] and summary["reliable"] is True
-    assert "warning:" not in out.err
+    assert "warning:" not in acc_cli_run.err
