@@ -98,10 +98,15 @@ def _pairs(items: list[str], option: str) -> dict[str, Any]:
 
 
 class _Bar:
-    """One tqdm bar of draws on stderr (its total: n, or max_runs with the stop rule)."""
+    """One tqdm bar of draws on stderr (its total: n, or max_runs with the stop rule).
 
-    def __init__(self, quiet: bool) -> None:
+    With the stop rule the bar shows no time remaining: the campaign usually stops long
+    before max_runs, and an estimate to max_runs ("1:07:35" for a campaign that ended
+    after 2.5 minutes) only alarmed."""
+
+    def __init__(self, quiet: bool, stop_rule: str | None = None) -> None:
         self.quiet = quiet
+        self.stop_rule = stop_rule
         self.bar: Any = None
 
     def __call__(self, stage: str, done: int, total: int) -> None:
@@ -110,8 +115,11 @@ class _Bar:
         if self.bar is None:
             from tqdm import tqdm
 
+            fmt = None if self.stop_rule is None else (
+                "{desc}: {n_fmt} of at most {total_fmt} [{elapsed}, {rate_fmt}] until "
+                + self.stop_rule)
             self.bar = tqdm(total=total, desc="draws", unit="run", file=sys.stderr,
-                            leave=False, smoothing=0)
+                            leave=False, smoothing=0, bar_format=fmt)
         self.bar.n = min(done, total)
         self.bar.refresh()
 
@@ -158,7 +166,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         from app.jobs.executors import LocalPoolExecutor
 
         pool = LocalPoolExecutor(args.workers)
-    bar = _Bar(args.quiet)
+    bar = _Bar(args.quiet, None if spec.n is not None else
+               f"the 95 % interval is within ±{spec.rhw:g} (relative), 10 collisions at least")
     # the bar starts now, at 0 of the planned draws, so its rate is draws per second of
     # simulation (it advances after each chunk of --batch-size draws)
     bar("runs", 0, spec.planned)

@@ -465,6 +465,19 @@ def test_cli_evaluate_prints_the_summary_and_writes_every_run(acc_cli_run: CliRu
     assert rates and max(rates) < 1e7
 
 
+def test_cli_evaluate_stop_rule_bar_shows_no_time_to_max_runs(
+        store: Path, cli_runner: CountingRunner, capsys: pytest.CaptureFixture[str]) -> None:
+    """With the stop rule the bar's total is max_runs; tqdm's time remaining to it (an
+    hour for a campaign that stopped after minutes) is left out, the rule is said."""
+    from app.cli import main
+
+    assert main(["evaluate", "--sut", "acc", "--rhw", "0.3", "--max-runs", "400",
+                 "--batch-size", "200", "--seed", "3"]) == 0
+    err = capsys.readouterr().err
+    assert "of at most 400" in err and "until the 95 % interval is within ±0.3" in err
+    assert not re.search(r"<\d+:\d+", err), err  # tqdm's "[elapsed<remaining, rate]"
+
+
 @pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_cli_evaluate_is_deterministic(store: Path, tmp_path: Path, cli_runner: CountingRunner,
                                        capsys: pytest.CaptureFixture[str],
