@@ -184,6 +184,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.runs is not None:
         with open(args.runs, "w", encoding="utf-8") as fh:
             for rec in result.records():
+                # a uint64 as a string, as GET /evaluations/{id}/runs gives it: jq 1.6 and
+                # JavaScript round a number this large (17923096090236241182 read back as
+                # ...242000), and the seed is what reproduces the run
+                rec["seed"] = str(rec["seed"])
                 fh.write(jsonconv.dumps(rec) + "\n")
     print(json.dumps(jsonconv.encode(ordered), indent=1))
     # the summary's verdict (sampler.campaign.reliability), also with -q: the exit code

@@ -452,6 +452,9 @@ def test_cli_evaluate_prints_the_summary_and_writes_every_run(acc_cli_run: CliRu
         assert key in summary["p_collision"] and key in summary["rate_per_hour"]
     lines = [json.loads(x) for x in acc_cli_run.runs.splitlines()]
     assert len(lines) == 1500
+    # seeds as strings (as /runs gives them): a uint64 does not survive jq 1.6 or JS
+    assert all(isinstance(x["seed"], str) and 0 <= int(x["seed"]) < 2**64 for x in lines)
+    assert any(int(x["seed"]) > 2**53 for x in lines)
     hits = [x for x in lines if x["collided"]]
     assert len(hits) == summary["collisions"] > 0
     for x in hits:  # the stand-in's rule, by hand
