@@ -329,7 +329,9 @@
                             : "SUT's peak r_dep against btn", font: { size: 11 } },
       margin: { l: 48, r: 12, t: s.note ? 46 : 30, b: 42 },
       xaxis: { title: { text: "btn (braking needed ÷ available)" } },
-      yaxis: { title: { text: yName } },
+      // impact speed and r_dep are never negative (without a collision the axis ran
+      // from -1 to 1 around the zeros)
+      yaxis: { title: { text: yName }, rangemode: "nonnegative" },
       legend: { orientation: "h", x: 0, y: -0.25, font: { size: 10 } },
     }, view.evaluation.id);
     div.on("plotly_click", (ev) => {

@@ -399,3 +399,8 @@ def test_without_a_collision_both_rows_give_the_upper_bound(
         text = re.sub(r"e([+-])0(\d)", r"e\1\2", f"{bound:.2e}")
         assert cells[1] == f"≤ {text} (95 % bound)", cells
     assert "no collision in 100 draws" in page.locator("#sut-warnings").inner_text()
+    # the scatter's impact speeds (all 0) on an axis that starts at 0 (it ran from -1)
+    page.wait_for_selector("#sut-scatter[data-rendered='1']", timeout=TIMEOUT_MS)
+    low = page.evaluate("() => document.getElementById('sut-scatter')._fullLayout"
+                        ".yaxis.range[0]")
+    assert low >= 0, low
