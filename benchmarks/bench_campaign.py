@@ -194,7 +194,7 @@ def _show(s: int, summ: dict) -> dict:
 
 
 def report(name: str, res: list[dict], p_ref: float | None, ref_ci: tuple[float, float],
-           naive_s_per_run: float) -> None:
+           naive_s_per_run: float, rhw: float = 0.3) -> None:
     est = np.array([r["p_collision"]["estimate"] for r in res])
     runs = np.array([r["sut_runs"] for r in res], dtype=float)
     wall = np.array([r["wall_s"] for r in res])
@@ -202,7 +202,7 @@ def report(name: str, res: list[dict], p_ref: float | None, ref_ci: tuple[float,
     p = float(est.mean())
     z = float(norm.ppf(0.975))
     need_se = p * (1 - p) / se ** 2  # naive runs for each campaign's standard error
-    need_rhw = z * z * (1 - p) / (p * 0.3 * 0.3)  # naive runs for rhw 0.3
+    need_rhw = z * z * (1 - p) / (p * rhw * rhw)  # naive runs for the campaigns' rhw
     print(f"\n[{name}] {len(res)} campaign(s)")
     print(f"  mean estimate {p:.3e} (sd of estimates {est.std(ddof=1) if est.size > 1 else 0:.2e})"
           f"; mean reported rhw {np.mean([r['p_collision']['rhw'] for r in res]):.2f}")
@@ -222,7 +222,12 @@ def report(name: str, res: list[dict], p_ref: float | None, ref_ci: tuple[float,
     print(f"  naive runs for the same SE: {np.mean(need_se):.3e} -> "
           f"{np.mean(need_se / runs):.0f}x fewer SUT runs (acceleration reported: "
           f"{np.mean([r['acceleration'] for r in res]):.0f})")
-    print(f"  naive runs for rhw 0.3 at P: {need_rhw:.3e} -> {need_rhw / runs.mean():.0f}x "
+    if est.size > 1:  # the estimates' actual spread, not what each campaign reported
+        sd = float(est.std(ddof=1))
+        print(f"  naive runs for the estimates' actual spread (sd {sd:.2e}): "
+              f"{p * (1 - p) / sd ** 2:.3e} -> {p * (1 - p) / sd ** 2 / runs.mean():.0f}x "
+              "fewer SUT runs")
+    print(f"  naive runs for rhw {rhw:g} at P: {need_rhw:.3e} -> {need_rhw / runs.mean():.0f}x "
           "fewer SUT runs")
     naive_wall = need_rhw * naive_s_per_run
     print(f"  wall: naive {naive_wall:.0f} s ({naive_s_per_run * 1e6:.1f} us per run) vs "
@@ -255,6 +260,9 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=2000)
     ap.add_argument("--sut-batch", type=int, default=500,
                     help="chunk size of the SUT campaigns (Part B)")
+    ap.add_argument("--sut-rhw", type=float, default=0.3,
+                    help="the SUT campaigns' stop rule: relative half-width of the 95 %% "
+                         "interval (Part B)")
     ap.add_argument("--adapt", default="ce", choices=("ce", "kernels"),
                     help="proposal adaptation of the SUT campaigns (Part B)")
     a = ap.parse_args()
@@ -299,7 +307,7 @@ def main() -> None:
         runner_s = sut_runner(factory, careful=False, settings=settings, name=a.sut)
         print(f"  campaigns: adapt={a.adapt}, chunks of {a.sut_batch} runs")
         res = campaigns(model, runner_s, range(a.sut_seeds), workers=a.sut_workers,
-                        batch_size=a.sut_batch, adapt=a.adapt)
+                        batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw)
         parts = sorted({re.sub(r"(@.*|x\d+$)", "", p["part"]) for r in res
                         for p in r["proposal"]})
         print(f"  proposal parts of the final chunks: {', '.join(parts)}; pilot runs per "
@@ -321,11 +329,11 @@ def main() -> None:
             print(f"  naive: {n_in} runs, {k} collisions -> P {k / n_in:.3e} [{ci[0]:.2e}, "
                   f"{ci[1]:.2e}] ({secs_n:.0f} s with {a.naive_workers} process(es), "
                   f"{n_in / secs_n:.0f} runs/s)", flush=True)
-        report(a.sut, res, p_ref, ci, per_run)
+        report(a.sut, res, p_ref, ci, per_run, a.sut_rhw)
         if a.ref:
             k_r, n_r = (int(v) for v in a.ref.split("/"))
             report(f"{a.sut} vs the given reference {a.ref}", res, k_r / n_r, cp(k_r, n_r),
-                   per_run)
+                   per_run, a.sut_rhw)
 
 
 if __name__ == "__main__":
