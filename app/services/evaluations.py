@@ -146,9 +146,10 @@ class CampaignSpec:
     batch_size: int
     settings: dict[str, Any] | None
     risk: bool = False  # r_dep / r_ind of the SUT's drive per run (costly)
-    #: how later chunks adapt their proposal (``sampler.campaign.evaluate``): "kernels"
-    #: or "ce" (cross-entropy); a stored spec without it was a kernels campaign
-    adapt: str = "kernels"
+    #: how later chunks adapt their proposal (``sampler.campaign.evaluate``): "ce"
+    #: (cross-entropy, the default) or "kernels"; a stored spec without it was a kernels
+    #: campaign (``from_dict``)
+    adapt: str = "ce"
 
     def to_dict(self) -> dict[str, Any]:
         return {"sut": self.sut, "sut_params": self.sut_params,
@@ -202,7 +203,7 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
            rhw: float = 0.3, max_runs: int | None = None, seed: int = 0,
            batch_size: int | None = None,
            settings: Mapping[str, Any] | None = None, risk: bool = False,
-           adapt: str = "kernels") -> EvaluationRow:
+           adapt: str = "ce") -> EvaluationRow:
     """Validate and store a queued evaluation job; the caller submits it. ``sut`` must be a
     registered name (a request never names a module)."""
     return store(ctx, validate(ctx, sut=sut, sut_params=sut_params, model=model,

@@ -506,9 +506,11 @@ def _hits(chunks: Sequence[ChunkResult]) -> tuple[FloatArray, FloatArray] | None
 def _counted(chunks: Sequence[ChunkResult]) -> list[ChunkResult]:
     """The chunks the estimate uses: those flagged ``counted``; all of them when none is
     (a cross-entropy campaign stopped at ``max_runs`` before its final stage: every
-    chunk is still an importance sample of p under its own proposal)."""
+    chunk is still an importance sample of p under its own proposal) or when the runner
+    gives no performance score (a cross-entropy campaign that adapted as ``kernels``
+    from its second chunk on: its first chunk counts as a kernels campaign's does)."""
     out = [c for c in chunks if c.counted]
-    return out if out else list(chunks)
+    return out if out and not unscored(chunks) else list(chunks)
 
 
 def performance_score(outcome: Mapping[str, NDArray[Any]], simulated: NDArray[np.bool_]
@@ -533,6 +535,16 @@ def performance_score(outcome: Mapping[str, NDArray[Any]], simulated: NDArray[np
     s = np.where(~collided & (s <= 0), 1e-9, s)  # touching without contact is not <= 0
     s = np.where(simulated & np.isfinite(s), s, np.inf)
     return np.asarray(np.where(collided, np.minimum(s, 0.0), s), dtype=np.float64)
+
+
+def unscored(chunks: Sequence[ChunkResult]) -> bool:
+    """Whether the runner gives no performance score, judged on the first chunk that ran
+    rows (a runner's outcome fields do not change between calls; a cross-entropy campaign
+    then adapts as ``kernels`` does). False before any row ran."""
+    for c in chunks:
+        if bool(np.any(c.simulated)):
+            return performance_score(c.outcome, c.simulated) is None
+    return False
 
 
 def _ce_elite(previous: Sequence[ChunkResult], rho: float, min_hits: int
@@ -618,7 +630,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
     counted = True
     proposal: Proposal
-    if adapt == "ce":
+    if adapt == "ce" and not unscored(previous):
         proposal, counted, rng = _ce_proposal(k, model, region, seed, previous, envelopes,
                                               alpha, rho, ce_min_hits,
                                               {} if ce_fits is None else ce_fits)
@@ -669,7 +681,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
              sut: str | None = None, envelopes: Sequence[str] = DEFAULT_ENVELOPES,
              physical_bounds: bool = True, alpha: float = 0.15, confidence: float = 0.95,
              min_collisions: int = MIN_COLLISIONS, part_size: int = 1024,
-             min_fit_hits: int = 2, adapt: str = "kernels", rho: float = 0.1,
+             min_fit_hits: int = 2, adapt: str = "ce", rho: float = 0.1,
              ce_min_hits: int = 20) -> CampaignResult:
     """Run a campaign: importance-sampled cut-ins driven by ``runner`` until the stop rule.
 
@@ -695,7 +707,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
     on_chunk : called with each new ``ChunkResult`` (the job stores it)
     executor : concurrent.futures Executor, optional: runs parts of ``part_size`` rows
     progress : ``progress("runs", done, planned)`` after each chunk
-    adapt : "kernels" or "ce"
+    adapt : "ce" (default) or "kernels"
         How later chunks adapt their proposal. "kernels": Student-t kernels on the
         collided runs so far (``min_fit_hits`` of them), every chunk counted. "ce":
         adaptive multi-level cross-entropy on the runner's continuous performance score
@@ -703,8 +715,9 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         the ``rho``-quantile of the score so far, until ``ce_min_hits`` collided runs
         are seen; from then on the mixture is fitted to the collided runs and only those
         chunks (decided before their draws) enter the estimate and the stop rule
-        (docs/evaluation.md). A runner without a score falls back to the defensive
-        mixture.
+        (docs/evaluation.md). A runner without a score (no ``margin`` or ``min_gap``)
+        falls back to "kernels" from its second chunk on (the first is the same for
+        both), and the result's ``adapt`` says "kernels".
     """
     model.check_fitted()
     if n is not None and (isinstance(n, bool) or int(n) < 1):
@@ -773,6 +786,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                     break
     else:
         stop = "n" if n is not None else "max_runs"
+    if adapt == "ce" and unscored(chunks):
+        adapt = "kernels"  # the runner gave no score: the kernels' adaptation was used
     return CampaignResult(chunks=chunks, stop_reason=stop, model=model, region=region,
                           seed=seed, sut=sut or getattr(runner, "name", None), exposure=exp,
                           bootstrap=bootstrap, confidence=confidence,

@@ -129,7 +129,8 @@ def assess(summary: Mapping[str, Any]) -> list[Finding]:
             f"enough collisions): {reached}; raise max_runs",
             "stopped at max_runs"))
     pilot = _int(summary.get("pilot_runs"))
-    if summary.get("adapt") == "ce" and pilot == 0 and (runs or 0) > 0:
+    # without any collision the no_collision finding says it all
+    if summary.get("adapt") == "ce" and pilot == 0 and (runs or 0) > 0 and k != 0:
         out.append(Finding(
             "ce_no_final_stage",
             "adapt=ce: the campaign ended before its final stage (no chunk was fitted on "

@@ -1,7 +1,7 @@
 """The campaign's adaptation chosen from the CLI and the API (issue 24 item 7/9):
-``scengen evaluate --adapt {kernels,ce}`` and ``POST /evaluations {"adapt": ...}`` reach
-``sampler.campaign.evaluate(adapt=...)``; a stored spec without the field is a kernels
-campaign and resumes as one.
+``scengen evaluate --adapt {ce,kernels}`` (ce the default) and ``POST /evaluations
+{"adapt": ...}`` reach ``sampler.campaign.evaluate(adapt=...)``; a stored spec without
+the field is a kernels campaign and resumes as one.
 
 The runner is a stand-in whose outcome is known by hand (a collision iff dv > 6 m/s) and
 which reports the ``margin`` the cross-entropy stage scores (6 - dv: <= 0 iff collided)."""
@@ -82,7 +82,7 @@ def test_cli_adapt_ce_runs_a_cross_entropy_campaign(
 
     argv = ["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4", "--batch-size", "500",
             "-q"]
-    assert main([*argv, "--adapt", "ce"]) == 0
+    assert main(argv) == 0  # the default is ce
     ce = json.loads(capsys.readouterr().out)
     assert ce["adapt"] == "ce"
     # chunk 0 is always a pilot chunk (no elite yet); the stand-in collides often enough
@@ -90,7 +90,7 @@ def test_cli_adapt_ce_runs_a_cross_entropy_campaign(
     assert ce["pilot_runs"] == 500 and ce["runs"] == 1500
     assert any(str(p.get("part", "")).startswith("ce:") for p in ce["proposal"]), \
         ce["proposal"]
-    assert main(argv) == 0  # the default is unchanged
+    assert main([*argv, "--adapt", "kernels"]) == 0
     kernels = json.loads(capsys.readouterr().out)
     assert kernels["adapt"] == "kernels" and kernels["pilot_runs"] == 0
     assert kernels["p_collision"] != ce["p_collision"]
@@ -117,7 +117,7 @@ def test_cli_help_names_the_choices(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["evaluate", "--help"])
     out = " ".join(capsys.readouterr().out.split())
-    assert "--adapt {kernels,ce}" in out and "rare failures" in out
+    assert "--adapt {ce,kernels}" in out and "default: adaptive cross-entropy" in out
 
 
 # --------------------------------------------------------------------------- API
@@ -143,9 +143,15 @@ def test_post_adapt_ce_gives_the_direct_campaign_bit_for_bit(client: Any) -> Non
     assert got == want  # every number, bit for bit (JSON floats round-trip exactly)
 
 
-def test_post_default_is_kernels(client: Any) -> None:
+def test_post_default_is_ce_and_kernels_stays_available(client: Any) -> None:
     r = client.post("/evaluations", json={"sut": "acc", "n": 200, "batch_size": 100,
                                           "seed": 2})
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert st["spec"]["adapt"] == "ce"
+    assert st["summary"]["adapt"] == "ce" and st["summary"]["runs"] == 200
+    r = client.post("/evaluations", json={"sut": "acc", "n": 200, "batch_size": 100,
+                                          "seed": 2, "adapt": "kernels"})
     st = _done(client, r.json()["id"])
     assert st["status"] == "done", st["error"]
     assert st["spec"]["adapt"] == "kernels"
@@ -164,7 +170,7 @@ def test_post_bad_adapt_is_422_naming_the_field(client: Any, value: Any) -> None
 def test_openapi_lists_the_adapt_values(client: Any) -> None:
     schema = client.get("/openapi.json").json()["components"]["schemas"]
     prop = schema["EvaluationRequest"]["properties"]["adapt"]
-    assert prop["enum"] == ["kernels", "ce"] and prop["default"] == "kernels"
+    assert prop["enum"] == ["ce", "kernels"] and prop["default"] == "ce"
 
 
 def test_service_refuses_an_unknown_adapt_naming_the_field(client: Any) -> None:

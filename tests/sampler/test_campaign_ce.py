@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pytest
@@ -148,6 +150,39 @@ def test_ce_resume_is_byte_identical_and_deterministic(model: CutInGMM) -> None:
     assert counting.rows == first.sut_runs - sum(int(c.simulated.sum())
                                                  for c in first.chunks[:2])
     assert [c.counted for c in again.chunks] == [c.counted for c in first.chunks]
+
+
+@dataclass(frozen=True)
+class _Unscored:
+    """A runner's result with no performance score (no margin, no min_gap)."""
+    collided: np.ndarray
+    impact_speed: np.ndarray
+
+
+def test_a_runner_without_a_score_adapts_as_kernels(model: CutInGMM) -> None:
+    """The default adaptation (ce) with a runner that gives no score is the kernels'
+    campaign bit for bit: the same draws, the same estimate, every chunk counted, and
+    the summary says kernels (no "no final stage" warning that more draws cannot fix)."""
+    a, b, _ = _rare_halfspace(model, 1e-3)
+    inner = halfspace_runner(model, a, b)
+
+    def runner(params: np.ndarray, seeds: np.ndarray) -> _Unscored:
+        r = inner(params, seeds)
+        return _Unscored(np.asarray(r.collided), np.asarray(r.impact_speed))
+
+    kw: dict[str, Any] = {"n": 900, "seed": 3, "batch_size": 300,
+                          "physical_bounds": False, "bootstrap": False}
+    ce = evaluate(model, runner, **kw)
+    ker = evaluate(model, runner, adapt="kernels", **kw)
+    s_ce, s_k = ce.summary(), ker.summary()
+    assert sum(int(c.collided.sum()) for c in ce.chunks) > 0
+    assert s_ce["adapt"] == "kernels" and s_ce["pilot_runs"] == 0
+    assert s_ce["p_collision"] == s_k["p_collision"]
+    assert all(np.array_equal(c1.z, c2.z) for c1, c2 in zip(ce.chunks, ker.chunks,
+                                                              strict=True))
+    assert s_ce["warnings"] == s_k["warnings"]
+    # a runner with a score keeps the cross-entropy stage
+    assert evaluate(model, inner, **kw).summary()["adapt"] == "ce"
 
 
 @pytest.mark.parametrize(("kwargs", "name"), [({"adapt": "nope"}, "adapt"),

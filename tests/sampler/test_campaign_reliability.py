@@ -104,6 +104,10 @@ def test_a_cross_entropy_campaign_without_its_final_stage() -> None:
     assert _codes(_with(adapt="ce", pilot_runs=2000, runs=3000)) == []
     # the kernels' campaigns have no pilot chunks at all
     assert _codes(_with(adapt="kernels", pilot_runs=0)) == []
+    # without any collision "no collision" says it all (the default adapt is ce)
+    assert _codes(_with(adapt="ce", pilot_runs=0, runs=1500, collisions=0,
+                        p_collision={"rhw": None, "upper_bound": 2e-3, "hits": 0})) == [
+        "no_collision"]
 
 
 def test_every_warning_at_once_in_a_fixed_order() -> None:
