@@ -381,8 +381,8 @@ class CampaignResult:
                                       confidence=self.confidence)
                 model_ci = [_num(lo), _num(hi)]
             upper = None
-            if est.hits == 0 and self.counted_runs > 0:
-                upper = RULE_OF_THREE / (self.alpha * self.counted_runs * pb) / pa
+            if est.hits == 0 and self.counted_runs > 0:  # a probability: at most 1
+                upper = min(RULE_OF_THREE / (self.alpha * self.counted_runs * pb) / pa, 1.0)
             out = {"estimate": _num(p), "ci": _lognormal_ci(p, cv, zq), "model_ci": model_ci,
                    "se": _num(p * cv) if p > 0 else _num(est.se / pa),
                    "rhw": _num(zq * cv) if p > 0 else None,
@@ -410,8 +410,8 @@ class CampaignResult:
                     "estimate": _num(lam * p_joint),
                     "ci": _lognormal_ci(lam * p_joint, cv_joint, zq),
                     "model_ci": None,
-                    "upper_bound": None if col.hits else _num(
-                        RULE_OF_THREE / (self.alpha * self.counted_runs * pb) * lam)
+                    "upper_bound": None if col.hits else _num(min(
+                        RULE_OF_THREE / (self.alpha * self.counted_runs * pb), 1.0) * lam)
                     if self.counted_runs else None}
                 if reps_col is not None and p_joint > 0:
                     r = reps_col * counts / amount

@@ -187,6 +187,13 @@ def test_no_collision_gives_the_weighted_rule_of_three(model: CutInGMM) -> None:
     # weights p/q <= 1/alpha: P <= Q(C) / alpha <= -ln(0.05) / (n alpha)
     assert s["upper_bound"] == pytest.approx(2.995732273553991 / (1000 * 0.2), rel=1e-12)
     assert r.summary()["stop_reason"] == "n"
+    # 10 draws: -ln(0.05) / (10 x 0.2) = 1.5 is no bound on a probability: it is 1, and
+    # the rate's bound is the exposure's cut-ins per hour times 1
+    r = evaluate(model, never, n=10, seed=0, batch_size=10, physical_bounds=False,
+                 bootstrap=False, alpha=0.2, exposure={"n_events": 50.0, "hours": 2.0})
+    s = r.summary()
+    assert s["p_collision"]["upper_bound"] == 1.0
+    assert s["rate_per_hour"]["upper_bound"] == pytest.approx(25.0, rel=1e-12)
 
 
 def test_late_brake_runner_by_hand() -> None:
