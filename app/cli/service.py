@@ -14,6 +14,7 @@ import argparse
 import json
 import logging
 import os
+import socket
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -123,8 +124,6 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from app.settings import get_settings
 
     settings = get_settings()
@@ -141,8 +140,42 @@ def _serve(args: argparse.Namespace) -> int:
               "127.0.0.1", file=sys.stderr, flush=True)
     os.environ["SCENGEN_HOST"] = host  # the app's settings (trusted hosts) see the bind
     get_settings.cache_clear()
-    uvicorn.run("app.main:app", host=host, port=port, log_level=args.log_level)
+    _listen_and_serve(host, port, args.log_level)
     return 0
+
+
+def _listen_and_serve(host: str, port: int, log_level: str) -> None:
+    """Listen on ``host:port`` first, then start the app on that socket. The app's start
+    resumes the store's unfinished jobs: a second service pointed at a port already in
+    use must stop before that (it used to resume them, run them beside the live service
+    for the seconds until uvicorn found the port taken, and only then exit)."""
+    import uvicorn
+
+    sock = _bind(host, port)
+    # uvicorn says where it listens only for sockets it binds itself
+    shown = f"[{host}]" if ":" in host else host
+    print(f"scengen serve: listening on http://{shown}:{port}", file=sys.stderr, flush=True)
+    config = uvicorn.Config("app.main:app", host=host, port=port, log_level=log_level)
+    uvicorn.Server(config).run(sockets=[sock])
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """A socket bound to ``host:port``, or a CliError naming the option."""
+    try:
+        family, kind, proto, _, addr = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)[0]
+        sock = socket.socket(family, kind, proto)
+    except OSError as exc:
+        raise CliError(f"--host: cannot listen on {host}: {exc.strerror or exc}") from None
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does
+        sock.bind(addr)
+    except OSError as exc:
+        sock.close()
+        raise CliError(f"--port: cannot listen on {host}:{port}: {exc.strerror or exc} "
+                       "(another service there? --port or SCENGEN_PORT picks another)"
+                       ) from None
+    return sock
 
 
 def _is_loopback(host: str) -> bool:

@@ -193,9 +193,9 @@ def test_serve_beyond_loopback_without_a_key_warns(
         no_store_env: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str], host: str, key: str | None,
         warned: bool) -> None:
-    import uvicorn
+    import app.cli.service as service_cli
 
-    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: None)
+    monkeypatch.setattr(service_cli, "_listen_and_serve", lambda host, port, level: None)
     monkeypatch.setenv("SCENGEN_HOST", "127.0.0.1")  # recorded, so serve's change is undone
     if key is None:
         monkeypatch.delenv("SCENGEN_API_KEY", raising=False)
@@ -212,10 +212,11 @@ def test_serve_beyond_loopback_without_a_key_warns(
 # --------------------------------------------------------------------------- item 5
 def test_serve_honours_scengen_host_and_port(no_store_env: Path,
                                              monkeypatch: pytest.MonkeyPatch) -> None:
-    import uvicorn
+    import app.cli.service as service_cli
 
     calls: list[dict[str, Any]] = []
-    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: calls.append(kw))
+    monkeypatch.setattr(service_cli, "_listen_and_serve",
+                        lambda host, port, level: calls.append({"host": host, "port": port}))
     monkeypatch.setenv("SCENGEN_HOST", "127.0.0.2")
     monkeypatch.setenv("SCENGEN_PORT", "8123")
     get_settings.cache_clear()
@@ -223,6 +224,33 @@ def test_serve_honours_scengen_host_and_port(no_store_env: Path,
     assert main(["serve", "--port", "9001"]) == 0
     assert [(c["host"], c["port"]) for c in calls] == [("127.0.0.2", 8123),
                                                         ("127.0.0.2", 9001)]
+
+
+def test_serve_on_a_port_in_use_stops_before_the_app_starts(
+        no_store_env: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A second service on a port already listening: one line naming --port, exit 2,
+    and the app (whose start resumes the store's jobs) never starts."""
+    import socket
+
+    import uvicorn
+
+    started: list[object] = []
+    monkeypatch.setattr(uvicorn, "Server", lambda config: started.append(config))
+    busy = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    port = busy.getsockname()[1]
+    try:
+        get_settings.cache_clear()
+        code = main(["serve", "--host", "127.0.0.1", "--port", str(port)])
+    finally:
+        busy.close()
+        get_settings.cache_clear()
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and started == []
+    assert len(err.splitlines()) == 1 and err.startswith("scengen: error: --port:"), err
+    assert f"127.0.0.1:{port}" in err and "in use" in err
 
 
 def test_readme_configuration_table_lists_every_setting() -> None:
