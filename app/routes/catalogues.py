@@ -73,11 +73,12 @@ class CatalogueList(ApiModel):
              summary="Start a catalogue job; answers with its id")
 def create_catalogue(body: CatalogueRequest, request: Request, ctx: ContextDep,
                      jobs: JobsDep) -> CatalogueCreated:
-    service.check_n(ctx, body.n)  # an oversized request is a 422, not a 429
-    with jobs.quotas.hold(client_of(request), body.n, ctx.settings) as quota:
-        row = service.create(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
+    # the request checked first: a bad one is told what is wrong (422), not to wait (429)
+    valid = service.validate(ctx, n=body.n, seed=body.seed, constraints=body.constraints,
                              model=body.model, method=body.sampler, score=body.score,
                              chunk_size=body.chunk_size, wagner_scan=body.wagner_scan)
+    with jobs.quotas.hold(client_of(request), body.n, ctx.settings) as quota:
+        row = service.store(ctx, valid)
     jobs.submit(row.id, quota=quota)
     return CatalogueCreated(id=row.id, status=row.status, href=f"/catalogues/{row.id}")
 

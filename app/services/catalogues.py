@@ -43,10 +43,30 @@ def check_n(ctx: ServiceContext, n: int) -> None:
 SUBSET_METHODS = ("subset", "subset-is")
 
 
+@dataclass(frozen=True)
+class ValidCatalogue:
+    """A catalogue request that passed :func:`validate`, ready to be stored."""
+    model_id: str
+    n: int
+    seed: int
+    chunk_size: int
+    spec: dict[str, Any]
+
+
 def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
            model: str | None = None, method: str = "auto", score: bool = True,
            chunk_size: int | None = None, wagner_scan: bool = False) -> CatalogueRow:
     """Validate and store a new catalogue job (status ``queued``); the caller runs it."""
+    return store(ctx, validate(ctx, n=n, seed=seed, constraints=constraints, model=model,
+                               method=method, score=score, chunk_size=chunk_size,
+                               wagner_scan=wagner_scan))
+
+
+def validate(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
+             model: str | None = None, method: str = "auto", score: bool = True,
+             chunk_size: int | None = None, wagner_scan: bool = False) -> ValidCatalogue:
+    """Every check of a catalogue request (422 or 404 naming the field), nothing stored:
+    the route checks it before it takes the client's quota."""
     check_n(ctx, n)
     if method not in SAMPLER_NAMES:
         raise InvalidInput(f"unknown sampler {method!r}; choose one of "
@@ -68,10 +88,17 @@ def create(ctx: ServiceContext, *, n: int, seed: int, constraints: list[str],
     spec = {"constraints": list(constraints), "method": method, "score": bool(score),
             "wagner_scan": bool(score and wagner_scan),
             "store_trajectories": bool(ctx.settings.store_trajectories)}
+    return ValidCatalogue(model_id=model_id, n=int(n), seed=int(seed), chunk_size=size,
+                          spec=spec)
+
+
+def store(ctx: ServiceContext, valid: ValidCatalogue) -> CatalogueRow:
+    """Store a validated catalogue job (status ``queued``)."""
+    n, size = valid.n, valid.chunk_size
     with ctx.db.session() as s:
-        row = CatalogueRow(id=repo.new_id("cat"), model_id=model_id, status="queued", n=n,
-                           seed=seed, chunk_size=size, n_chunks=(n + size - 1) // size,
-                           spec=spec)
+        row = CatalogueRow(id=repo.new_id("cat"), model_id=valid.model_id, status="queued",
+                           n=n, seed=valid.seed, chunk_size=size,
+                           n_chunks=(n + size - 1) // size, spec=dict(valid.spec))
         s.add(row)
     return row
 

@@ -87,3 +87,28 @@ def test_a_flooding_client_gets_429_and_others_still_get_in(quota_app: Any) -> N
         # the finished jobs gave their share back
         wait_for(lambda: quota_app.state.jobs.quotas.usage("10.0.0.1") == (0, 0), "release")
         assert flood.post("/catalogues", json=body).status_code == 202
+
+
+def test_a_bad_catalogue_request_is_422_even_over_the_quota(quota_app: Any) -> None:
+    """A client whose job slots are full sends a bad constraint: it is told what is wrong
+    (422 naming the constraint), not to wait (429), as POST /evaluations does; a valid
+    request still gets the 429."""
+    from fastapi.testclient import TestClient
+
+    with TestClient(quota_app, client=("10.0.0.3", 5000)) as c:
+        quotas = quota_app.state.jobs.quotas
+        settings = quota_app.state.ctx.settings
+        tokens = [quotas.admit("10.0.0.3", 1, settings) for _ in range(2)]
+        try:
+            r = c.post("/catalogues", json={"n": 4, "seed": 1, "constraints": ["foo<3"]})
+            assert r.status_code == 422, r.text
+            assert r.json()["error"]["field"].startswith("body.constraints"), r.json()
+            r = c.post("/catalogues", json={"n": 4, "seed": 1, "constraints": ["ttc<3"],
+                                            "sampler": "subset", "score": False})
+            assert r.status_code == 429, r.text
+            r = c.post("/catalogues", json={"n": 4, "seed": 1, "constraints": [],
+                                            "sampler": "subset"})
+            assert r.status_code == 422 and r.json()["error"]["field"] == "body.constraints"
+        finally:
+            for t in tokens:
+                quotas.release(t)
