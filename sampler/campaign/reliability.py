@@ -129,8 +129,11 @@ def assess(summary: Mapping[str, Any]) -> list[Finding]:
             f"enough collisions): {reached}; raise max_runs",
             "stopped at max_runs"))
     pilot = _int(summary.get("pilot_runs"))
-    # without any collision the no_collision finding says it all
-    if summary.get("adapt") == "ce" and pilot == 0 and (runs or 0) > 0 and k != 0:
+    chunks = _int(summary.get("chunks"))
+    # without any collision the no_collision finding says it all; a campaign of one chunk
+    # drew only the defensive mixture, as a kernels campaign's first chunk does
+    if (summary.get("adapt") == "ce" and pilot == 0 and (runs or 0) > 0 and k != 0
+            and (chunks is None or chunks > 1)):
         out.append(Finding(
             "ce_no_final_stage",
             "adapt=ce: the campaign ended before its final stage (no chunk was fitted on "

@@ -104,6 +104,11 @@ def test_a_cross_entropy_campaign_without_its_final_stage() -> None:
     assert _codes(_with(adapt="ce", pilot_runs=2000, runs=3000)) == []
     # the kernels' campaigns have no pilot chunks at all
     assert _codes(_with(adapt="kernels", pilot_runs=0)) == []
+    # one chunk: the defensive mixture only, as a kernels campaign's first chunk (the
+    # dashboard's and the README's 2,000 draws in one chunk of 2,000)
+    assert _codes(_with(adapt="ce", pilot_runs=0, runs=2000, chunks=1)) == []
+    assert _codes(_with(adapt="ce", pilot_runs=0, runs=4000, chunks=2)) == [
+        "ce_no_final_stage"]
     # without any collision "no collision" says it all (the default adapt is ce)
     assert _codes(_with(adapt="ce", pilot_runs=0, runs=1500, collisions=0,
                         p_collision={"rhw": None, "upper_bound": 2e-3, "hits": 0})) == [
