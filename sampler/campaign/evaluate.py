@@ -454,8 +454,10 @@ class CampaignResult:
     def records(self) -> list[dict[str, Any]]:
         """One dict per run: ``run``, ``chunk``, ``seed``, the parameters by name,
         ``weight`` (its weight in P: ``w / P(B)``), ``log_p``, ``log_q``, ``part`` (the
-        proposal part it came from), ``simulated`` and the outcome fields."""
+        proposal it came from), ``simulated``, ``counted`` (its chunk is one the estimate
+        uses: :attr:`counted_chunks`) and the outcome fields."""
         pb, _ = _p_bounds(self.model, self.region)
+        used = {c.index for c in self.counted_chunks}
         out: list[dict[str, Any]] = []
         run = 0
         for c in self.chunks:
@@ -470,7 +472,7 @@ class CampaignResult:
                 k = int(c.part[i])
                 rec["part"] = names[k] if 0 <= k < len(names) else k
                 rec["simulated"] = bool(c.simulated[i])
-                rec["counted"] = bool(c.counted)
+                rec["counted"] = c.index in used
                 for name, arr in c.outcome.items():
                     v = arr[i]
                     rec[name] = (bool(v) if arr.dtype == np.bool_ else str(v)
@@ -774,7 +776,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         done += chunk.n
         if progress is not None:
             progress("runs", done, planned)
-        if n is None and (adapt != "ce" or any(c.counted for c in chunks)):
+        if n is None and (adapt != "ce" or unscored(chunks)
+                          or any(c.counted for c in chunks)):
             est = _estimate(_counted(chunks), "collided", pb, cv_b)
             if est.hits >= min_collisions and est.estimate > 0:
                 cv = est.se / est.estimate

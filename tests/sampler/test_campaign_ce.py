@@ -181,6 +181,13 @@ def test_a_runner_without_a_score_adapts_as_kernels(model: CutInGMM) -> None:
     assert all(np.array_equal(c1.z, c2.z) for c1, c2 in zip(ce.chunks, ker.chunks,
                                                               strict=True))
     assert s_ce["warnings"] == s_k["warnings"]
+    assert all(x["counted"] for x in ce.records())  # every chunk made the estimate
+    # with the stop rule too: both stop after the same chunk
+    rule: dict[str, Any] = {**kw, "n": None, "rhw": 0.9, "max_runs": 3000}
+    s_ce, s_k = (evaluate(model, runner, **rule).summary(),
+                 evaluate(model, runner, adapt="kernels", **rule).summary())
+    assert s_k["runs"] == 300, s_k["runs"]  # kernels stops after its first chunk
+    assert s_ce["runs"] == s_k["runs"] and s_ce["p_collision"] == s_k["p_collision"]
     # a runner with a score keeps the cross-entropy stage
     assert evaluate(model, inner, **kw).summary()["adapt"] == "ce"
 
