@@ -512,7 +512,7 @@ def _counted(chunks: Sequence[ChunkResult]) -> list[ChunkResult]:
     gives no performance score (a cross-entropy campaign that adapted as ``kernels``
     from its second chunk on: its first chunk counts as a kernels campaign's does)."""
     out = [c for c in chunks if c.counted]
-    return out if out and not unscored(chunks) else list(chunks)
+    return out if out and not _unscored(chunks) else list(chunks)
 
 
 def performance_score(outcome: Mapping[str, NDArray[Any]], simulated: NDArray[np.bool_]
@@ -539,7 +539,7 @@ def performance_score(outcome: Mapping[str, NDArray[Any]], simulated: NDArray[np
     return np.asarray(np.where(collided, np.minimum(s, 0.0), s), dtype=np.float64)
 
 
-def unscored(chunks: Sequence[ChunkResult]) -> bool:
+def _unscored(chunks: Sequence[ChunkResult]) -> bool:
     """Whether the runner gives no performance score, judged on the first chunk that ran
     rows (a runner's outcome fields do not change between calls; a cross-entropy campaign
     then adapts as ``kernels`` does). False before any row ran."""
@@ -632,7 +632,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
     counted = True
     proposal: Proposal
-    if adapt == "ce" and not unscored(previous):
+    if adapt == "ce" and not _unscored(previous):
         proposal, counted, rng = _ce_proposal(k, model, region, seed, previous, envelopes,
                                               alpha, rho, ce_min_hits,
                                               {} if ce_fits is None else ce_fits)
@@ -776,7 +776,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         done += chunk.n
         if progress is not None:
             progress("runs", done, planned)
-        if n is None and (adapt != "ce" or unscored(chunks)
+        if n is None and (adapt != "ce" or _unscored(chunks)
                           or any(c.counted for c in chunks)):
             est = _estimate(_counted(chunks), "collided", pb, cv_b)
             if est.hits >= min_collisions and est.estimate > 0:
@@ -789,7 +789,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                     break
     else:
         stop = "n" if n is not None else "max_runs"
-    if adapt == "ce" and unscored(chunks):
+    if adapt == "ce" and _unscored(chunks):
         adapt = "kernels"  # the runner gave no score: the kernels' adaptation was used
     return CampaignResult(chunks=chunks, stop_reason=stop, model=model, region=region,
                           seed=seed, sut=sut or getattr(runner, "name", None), exposure=exp,
