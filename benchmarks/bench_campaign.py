@@ -24,6 +24,7 @@ simulator's runs per second, and naive Monte Carlo of ``--naive-sut`` runs with 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import re
 import time
@@ -246,6 +247,14 @@ def main() -> None:
     ap.add_argument("--sut-param", action="append", default=[])
     ap.add_argument("--sut-seeds", type=int, default=1)
     ap.add_argument("--naive-sut", type=float, default=0)
+    ap.add_argument("--naive-seed", type=int, default=777,
+                    help="root seed of the SUT's naive Monte Carlo (777 made the reference "
+                         "102/8392146; another root gives an independent sample to pool)")
+    ap.add_argument("--sut-seed0", type=int, default=0,
+                    help="first campaign seed (seeds --sut-seed0 .. + --sut-seeds - 1)")
+    ap.add_argument("--save", default=None, metavar="FILE",
+                    help="write each SUT campaign's summary as a JSON line (coverage "
+                         "against another reference can be recomputed from it)")
     ap.add_argument("--ref", default=None, metavar="HITS/RUNS",
                     help="a larger naive reference of the SUT measured earlier (e.g. "
                          "102/8392146 for acc k2=0.6, docs/evaluation.md): coverage is "
@@ -306,8 +315,22 @@ def main() -> None:
 
         runner_s = sut_runner(factory, careful=False, settings=settings, name=a.sut)
         print(f"  campaigns: adapt={a.adapt}, chunks of {a.sut_batch} runs")
-        res = campaigns(model, runner_s, range(a.sut_seeds), workers=a.sut_workers,
-                        batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw)
+        seeds = range(a.sut_seed0, a.sut_seed0 + a.sut_seeds)
+        res = campaigns(model, runner_s, seeds, workers=a.sut_workers,
+                        batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw) if seeds else []
+        if a.save:
+            with open(a.save, "w") as fh:
+                for s, r in zip(seeds, res, strict=True):
+                    fh.write(json.dumps({"seed": s, **r}, default=float) + "\n")
+        if not res:  # naive Monte Carlo only
+            if a.naive_sut > 0:
+                k, n_in, secs_n = naive_blocks(model, runner_s, int(a.naive_sut),
+                                               seed=a.naive_seed, workers=a.naive_workers)
+                lo, hi = cp(k, n_in)
+                print(f"  naive (seed {a.naive_seed}): {n_in} runs, {k} collisions -> P "
+                      f"{k / n_in:.3e} [{lo:.2e}, {hi:.2e}] ({secs_n:.0f} s with "
+                      f"{a.naive_workers} process(es), {n_in / secs_n:.0f} runs/s)")
+            return
         parts = sorted({re.sub(r"(@.*|x\d+$)", "", p["part"]) for r in res
                         for p in r["proposal"]})
         print(f"  proposal parts of the final chunks: {', '.join(parts)}; pilot runs per "
@@ -321,7 +344,7 @@ def main() -> None:
         if a.naive_sut > 0:
             # runner calls of 1024 rows: 512-4096 run equally fast, 128 and 16384 slower
             # (bench_sut.py --only-runner --runner-blocks 128 512 1024 2048 4096 16384)
-            k, n_in, secs_n = naive_blocks(model, runner_s, int(a.naive_sut), seed=777,
+            k, n_in, secs_n = naive_blocks(model, runner_s, int(a.naive_sut), seed=a.naive_seed,
                                            workers=a.naive_workers)
             p_ref = k / n_in if k else None
             ci = cp(k, n_in)
