@@ -248,8 +248,8 @@ def main() -> None:
     ap.add_argument("--sut-seeds", type=int, default=1)
     ap.add_argument("--naive-sut", type=float, default=0)
     ap.add_argument("--naive-seed", type=int, default=777,
-                    help="root seed of the SUT's naive Monte Carlo (777 made the reference "
-                         "102/8392146; another root gives an independent sample to pool)")
+                    help="root seed of the SUT's naive Monte Carlo (777 and 778 made the "
+                         "reference 102/8392146; another root gives an independent sample)")
     ap.add_argument("--sut-seed0", type=int, default=0,
                     help="first campaign seed (seeds --sut-seed0 .. + --sut-seeds - 1)")
     ap.add_argument("--save", default=None, metavar="FILE",
