@@ -131,6 +131,9 @@ def _serve(args: argparse.Namespace) -> int:
     port = args.port if args.port is not None else settings.port
     if not 1 <= port <= 65535:
         raise CliError(f"--port: must be between 1 and 65535, got {port}")
+    # the store before the port: a second service on it (whatever its port) stops here,
+    # naming the one that holds it (and so where it listens), before anything is resumed
+    lock = _lock_store(Path(settings.data_dir).expanduser().resolve(), _url(host, port))
     _logging()
     key = settings.api_key.get_secret_value() if settings.api_key is not None else ""
     if not _is_loopback(host) and not key:
@@ -140,8 +143,52 @@ def _serve(args: argparse.Namespace) -> int:
               "127.0.0.1", file=sys.stderr, flush=True)
     os.environ["SCENGEN_HOST"] = host  # the app's settings (trusted hosts) see the bind
     get_settings.cache_clear()
-    _listen_and_serve(host, port, args.log_level)
+    try:
+        _listen_and_serve(host, port, args.log_level)
+    finally:
+        os.close(lock)  # (the OS releases it as well when the process dies, even by SIGKILL)
     return 0
+
+
+#: the file in the data dir that a running ``scengen serve`` holds locked; it says which
+#: process holds it and where it listens ("PID URL")
+LOCK_FILE = "serve.lock"
+
+
+def _lock_store(data_dir: Path, url: str) -> int:
+    """Lock the store in ``data_dir`` for ``scengen serve`` (an exclusive ``flock`` on
+    ``LOCK_FILE``; its descriptor is returned, the lock lasts until it is closed or the
+    process ends), or a CliError naming the service that holds it. Each service resumes
+    the store's unfinished jobs when it starts: two on one store ran the same jobs twice
+    at once."""
+    import fcntl
+
+    try:
+        data_dir.mkdir(parents=True, exist_ok=True)
+        fd = os.open(data_dir / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise CliError(f"--data-dir: cannot use the store {data_dir}: "
+                       f"{exc.strerror or exc}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 4096, 0).decode("utf-8", "replace").split()
+        os.close(fd)
+        who = f" (pid {holder[0]}, {holder[1]})" if len(holder) == 2 else ""
+        raise CliError(f"--data-dir: the store {data_dir} is in use by another scengen "
+                       f"serve{who}; stop it or choose another --data-dir") from None
+    except OSError as exc:
+        os.close(fd)
+        raise CliError(f"--data-dir: cannot lock the store {data_dir}: "
+                       f"{exc.strerror or exc}") from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()} {url}\n".encode(), 0)
+    return fd
+
+
+def _url(host: str, port: int) -> str:
+    shown = f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}"
 
 
 def _listen_and_serve(host: str, port: int, log_level: str) -> None:
@@ -153,8 +200,7 @@ def _listen_and_serve(host: str, port: int, log_level: str) -> None:
 
     sock = _bind(host, port)
     # uvicorn says where it listens only for sockets it binds itself
-    shown = f"[{host}]" if ":" in host else host
-    print(f"scengen serve: listening on http://{shown}:{port}", file=sys.stderr, flush=True)
+    print(f"scengen serve: listening on {_url(host, port)}", file=sys.stderr, flush=True)
     config = uvicorn.Config("app.main:app", host=host, port=port, log_level=log_level)
     uvicorn.Server(config).run(sockets=[sock])
 
