@@ -286,6 +286,7 @@ def _in_store(exc: LookupError) -> CliError:
 def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
     from tqdm import tqdm
 
+    from app.jobs.joblock import JobBusy
     from app.services import catalogues
 
     bar: Any = None
@@ -311,6 +312,10 @@ def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
                                 if show_progress else None, stage=stages)
     except LookupError as exc:
         raise _in_store(exc) from None
+    except JobBusy as busy:
+        raise CliError(f"catalogue {catalogue_id} is being run by another process on this "
+                       f"store (pid {busy.pid or 'unknown'}); left to it: resume it here "
+                       "only if that process ends before the job does") from None
     except KeyboardInterrupt:
         # Ctrl-C: the catalogue says "cancelled" (not a stale "running") and how to go on
         stored, n = catalogues.mark_cancelled(ctx, catalogue_id)

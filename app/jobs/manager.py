@@ -22,6 +22,7 @@ from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow
 from app.jobs.fair import FairSlots, Share
+from app.jobs.joblock import JobBusy
 from app.jobs.runner import CatalogueRunner
 from app.quotas import ClientQuotas, QuotaToken
 
@@ -29,6 +30,8 @@ from app.quotas import ClientQuotas, QuotaToken
 RESUMED = "(resumed)"
 #: jobs running at once unless told otherwise
 RUNNING_LIMIT = 8
+#: seconds between two tries of the jobs another process runs (``JobBusy``)
+ELSEWHERE_POLL = 2.0
 
 log = logging.getLogger("scengen.jobs")
 
@@ -72,6 +75,10 @@ class JobManager:
         self._last_start: dict[str, int] = {}  # client -> seq of its last start
         self._started = False
         self._stop = threading.Event()
+        #: jobs another process holds (a CLI's ``catalogue create``): job -> client; tried
+        #: again every ELSEWHERE_POLL s and taken over if still unfinished once free
+        self._elsewhere: dict[str, str] = {}
+        self._watcher: threading.Thread | None = None
 
     @property
     def db(self) -> Database:
@@ -114,6 +121,7 @@ class JobManager:
                 event.set()
             if job_id in self._running and self._kind_of(job_id) is None:
                 self.runner.request_stop(job_id)  # its chunks in flight stop too
+            self._elsewhere.pop(job_id, None)
             queued = [q for q in self._queued if q.job_id == job_id]
             if queued:
                 self._queued.remove(queued[0])
@@ -181,7 +189,14 @@ class JobManager:
             with self.db.session() as s:
                 if s.get(CatalogueRow, job_id) is None:
                     return
-            self.runner.run(job_id, cancel=event, stop=self._stop, share=share)
+            try:
+                self.runner.run(job_id, cancel=event, stop=self._stop, share=share,
+                                only_active=True)
+            except JobBusy as busy:
+                self._run_elsewhere(job_id, client, busy)
+                return
+            with self._lock:
+                self._elsewhere.pop(job_id, None)
         except Exception:  # keep the service alive whatever one job does
             log.exception("job %s crashed", job_id)
         finally:
@@ -191,3 +206,44 @@ class JobManager:
                 token = self._tokens.pop(job_id, None)
                 self._dispatch()
             self.quotas.release(token)
+
+    def _run_elsewhere(self, job_id: str, client: str, busy: JobBusy) -> None:
+        """The job is run by another process (a CLI's ``catalogue create`` or ``resume``):
+        leave it to it, and try again every ``ELSEWHERE_POLL`` s, so that a job whose
+        process was killed before its end is finished here."""
+        with self._lock:
+            told = job_id in self._elsewhere
+            self._elsewhere[job_id] = client
+            if self._watcher is None:
+                self._watcher = threading.Thread(target=self._watch_elsewhere,
+                                                 name="scengen-jobs-elsewhere", daemon=True)
+                self._watcher.start()
+        if not told:
+            log.info("catalogue %s is being run by another process (pid %s): left to it; "
+                     "taken over here if that process ends before the job does",
+                     job_id, busy.pid or "unknown")
+
+    def _watch_elsewhere(self) -> None:
+        while not self._stop.wait(ELSEWHERE_POLL):
+            try:
+                self._try_elsewhere()
+            except Exception:  # the next round tries again
+                log.exception("checking the jobs run by other processes failed")
+
+    def _try_elsewhere(self) -> None:
+        """Submit again each job another process held that is still unfinished (the
+        runner takes it if it is free now); forget those that ended."""
+        with self._lock:
+            waiting = {j: c for j, c in self._elsewhere.items() if j not in self._running
+                       and all(q.job_id != j for q in self._queued)}
+        for job_id, client in waiting.items():
+            with self.db.session() as s:
+                row = s.get(CatalogueRow, job_id)
+                status = None if row is None else row.status
+            if status in repo.ACTIVE:
+                self.submit(job_id, client=client)  # still busy: back in _elsewhere
+                continue
+            with self._lock:
+                self._elsewhere.pop(job_id, None)
+            log.info("catalogue %s: %s by the process that ran it", job_id,
+                     status or "deleted")

@@ -26,6 +26,7 @@ from app.db import chunkfile
 from app.db import repository as repo
 from app.db.database import Database
 from app.db.models import CatalogueRow, utcnow
+from app.jobs import joblock
 from app.jobs.chunk import CatalogueSpec, ChunkStopped, region_seed
 from app.jobs.executors import ChunkExecutor
 from app.jobs.fair import JobCancelled, Share
@@ -253,7 +254,7 @@ class CatalogueRunner:
     def run(self, catalogue_id: str, *, cancel: threading.Event | None = None,
             stop: threading.Event | None = None, progress: Progress | None = None,
             note: Callable[[str], None] | None = None, stage: Stage | None = None,
-            share: Share | None = None) -> str:
+            share: Share | None = None, only_active: bool = False) -> str:
         """Finish the catalogue; return its final status (done, failed, cancelled,
         deleted, or interrupted when ``stop`` was set: the service is shutting down and
         the job stays ``running``, to be resumed at the next start). Errors of the job
@@ -261,12 +262,38 @@ class CatalogueRunner:
         done, ``stage`` the stages of the P(A) estimate, ``note`` why the job is still
         running after its scenarios are stored. ``share``: the job's turn on the workers
         (``app.jobs.fair``; the service's jobs share them chunk by chunk), also held for
-        the P(A) estimate and its refinement."""
+        the P(A) estimate and its refinement.
+
+        The job's lock (``app.jobs.joblock``) is held while it runs: a job that another
+        process runs raises ``JobBusy`` and is left unchanged. ``only_active`` (the
+        service's jobs): a job no longer queued or running once the lock is taken (its
+        previous holder ended it) is left as it is. Ctrl-C (the CLI) leaves the job
+        ``cancelled`` before its lock is released, so that a service waiting for the lock
+        does not take it over."""
+        with self.db.session() as s:
+            repo.get_catalogue(s, catalogue_id)  # an unknown id: LookupError, no lock file
+        lock = joblock.acquire(self.data_dir, catalogue_id)
+        try:
+            return self._run(catalogue_id, cancel, stop, progress, note, stage, share,
+                             only_active)
+        except KeyboardInterrupt:
+            with self.db.session() as s:
+                row = s.get(CatalogueRow, catalogue_id)
+                if row is not None and row.status in repo.ACTIVE:
+                    row.status, row.updated_at = "cancelled", utcnow()
+            raise
+        finally:
+            joblock.release(lock)
+
+    def _run(self, catalogue_id: str, cancel: threading.Event | None,
+             stop: threading.Event | None, progress: Progress | None,
+             note: Callable[[str], None] | None, stage: Stage | None,
+             share: Share | None, only_active: bool) -> str:
         halt = _Either(cancel, stop)
         with self.db.session() as s:
             row = repo.get_catalogue(s, catalogue_id)
-            if row.status == "done":
-                return "done"
+            if row.status == "done" or (only_active and row.status not in repo.ACTIVE):
+                return str(row.status)
             model_json = repo.get_model(s, row.model_id, field="model").model_json
             spec = worker_spec(row, model_json)
             row.status = "running"
