@@ -67,6 +67,12 @@ BAND_HITS_SHARE = 0.2
 BAND_HITS_TEMPER = 1.0
 BAND_HITS_INFLATE = 1.6
 BAND_HITS_K = 2
+#: the final stage's share of each band part whose ``g`` is Student-t kernels at the
+#: collided runs on its band (taken from the refit's ``BAND_HITS_SHARE``)
+BAND_KERNEL_SHARE = 0.1
+#: most kernel centres of that part, their bandwidth factor and degrees of freedom
+BAND_KERNEL_CENTRES = 300
+BAND_KERNEL_INFLATE = 1.3
 
 
 class MixturePart(Protocol):
@@ -560,10 +566,10 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
         parts.append(_fitted_part(elite[0], elite[1], rng, model, 300, 1.3, 5.0))
         shares.append(kernel_share)
         rest -= kernel_share
-        for hp in _band_hit_parts(sets, elite, rng):
+        for hp, share in _band_hit_parts(sets, elite, rng, band_hits_share):
             parts.append(hp)
-            shares.append(band_hits_share)
-            rest -= band_hits_share
+            shares.append(share)
+            rest -= share
     if history:
         parts.append(_MixturePart(f"ce:levels{len(history)}", _pooled_mixtures(history)))
         shares.append(history_share)
@@ -583,13 +589,19 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
 
 
 def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatArray],
-                    rng: np.random.Generator) -> list[BandPart]:
-    """For each band part, the same band with ``g`` refitted (weighted by ``p / q``,
-    at most 2 components) to the collided runs on its band, when at least 2 d of them
-    are there: the cross-entropy step inside the band, the band's thin direction still
-    drawn exactly from the model's conditional law (``sampler.campaign.band``)."""
+                    rng: np.random.Generator, share: float = BAND_HITS_SHARE
+                    ) -> list[tuple[BandPart, float]]:
+    """For each band part, when at least 2 d collided runs lie on its band, two parts of
+    the same band with their shares (together ``share``): ``g`` refitted to those runs
+    (weighted by ``p / q``, at most ``BAND_HITS_K`` components: the cross-entropy step
+    inside the band) and ``g`` made of Student-t kernels at them (resampled by weight,
+    ``BAND_KERNEL_SHARE``: non-parametric, so a group of collided runs on the band that
+    the refit does not cover, found once by the band part itself, is drawn again). The
+    band's thin direction is still drawn exactly from the model's conditional law
+    (``sampler.campaign.band``)."""
     z, w = elite
-    out: list[BandPart] = []
+    out: list[tuple[BandPart, float]] = []
+    k_share = min(BAND_KERNEL_SHARE, share)
     for b in sets:
         if not isinstance(b, BandPart):
             continue
@@ -598,11 +610,37 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
         on = (zj >= lo) & (zj <= hi)
         if int(on.sum()) < 2 * z.shape[1]:
             continue
-        g = fit_ce_mixture(z[on][:, b.law.rest], w[on] ** BAND_HITS_TEMPER, rng,
-                           max_k=BAND_HITS_K, inflate=BAND_HITS_INFLATE, nu=5.0,
-                           shape="fitted")
-        out.append(BandPart(f"ce:{b.name}-hits", b.law, b.band, g))
+        zr, wr = z[on][:, b.law.rest], w[on]
+        g = fit_ce_mixture(zr, wr ** BAND_HITS_TEMPER, rng, max_k=BAND_HITS_K,
+                           inflate=BAND_HITS_INFLATE, nu=5.0, shape="fitted")
+        if k_share < share:
+            out.append((BandPart(f"ce:{b.name}-hits", b.law, b.band, g), share - k_share))
+        if k_share > 0:
+            out.append((BandPart(f"ce:{b.name}-kernels", b.law, b.band,
+                                 band_kernels(zr, wr, rng)), k_share))
     return out
+
+
+def band_kernels(z: FloatArray, w: FloatArray, rng: np.random.Generator, *,
+                 max_centres: int | None = None, inflate: float | None = None,
+                 nu: float = 5.0) -> GaussianMixture:
+    """Student-t kernels at rows ``z`` resampled by weight ``w`` (at most ``max_centres``
+    centres, equal shares), one scale for all: the rows' weighted covariance plus a floor
+    of 0.05 per coordinate, times the square of Silverman's factor
+    ``(4 / (d + 2))^(1 / (d + 4)) n^(-1 / (d + 4))`` (``n``: the distinct rows) and of
+    ``inflate``: the rule of ``KernelProposal`` over the rows' own space."""
+    max_centres = BAND_KERNEL_CENTRES if max_centres is None else max_centres
+    inflate = BAND_KERNEL_INFLATE if inflate is None else inflate
+    p = np.asarray(w, dtype=np.float64) / float(np.sum(w))
+    m = min(max_centres, max(z.shape[0], 1) * 4)
+    centres = z[rng.choice(z.shape[0], size=m, p=p)]
+    d = z.shape[1]
+    diff = z - p @ z
+    cov = (diff * p[:, None]).T @ diff + 0.05 * np.eye(d)
+    n_distinct = max(int(np.unique(np.round(z, 12), axis=0).shape[0]), 1)
+    h = (4.0 / (d + 2)) ** (1.0 / (d + 4)) * n_distinct ** (-1.0 / (d + 4)) * inflate
+    return GaussianMixture(np.full(m, 1.0 / m), centres,
+                           np.broadcast_to(h * h * cov, (m, d, d)).copy(), nu=nu)
 
 
 def _pooled_mixtures(mixtures: Sequence[GaussianMixture]) -> GaussianMixture:

@@ -166,8 +166,9 @@ def test_band_part_is_a_density_on_its_band(model: CutInGMM, part: BandPart) -> 
 
 def test_final_stage_refits_the_band_to_its_collisions(model: CutInGMM) -> None:
     """At level 0 with enough elite rows on the band, the proposal gains the band part
-    refitted to them (its share ``band_hits_share``), the set share drops to the final
-    one, and the whole mixture's weights still average to 1."""
+    refitted to them and the band with kernels at them (together ``band_hits_share``,
+    the kernels ``BAND_KERNEL_SHARE`` of it), the set share drops to the final one, and
+    the whole mixture's weights still average to 1."""
     envs = (f"v_cut_min<{C:g}",)
     band = v_cut_min_band(model, C)
     z = model.sample_z(200_000, np.random.default_rng(7))
@@ -183,7 +184,8 @@ def test_final_stage_refits_the_band_to_its_collisions(model: CutInGMM) -> None:
                              rng=np.random.default_rng(8), envelopes=envs)
     shares = {d["part"]: d["share"] for d in prop.describe()}
     assert math.isclose(shares[f"band:v_cut_min<{C:g}"], 0.1, rel_tol=1e-12)
-    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-hits"], 0.2, rel_tol=1e-12)
+    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-hits"], 0.1, rel_tol=1e-12)
+    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-kernels"], 0.1, rel_tol=1e-12)
     zq, _ = prop.draw(40_000, np.random.default_rng(9))
     w = np.exp(model.log_density_z(zq) - prop.log_q(zq))
     assert np.isfinite(w).all() and w.max() <= 1 / 0.1 + 1e-9
@@ -207,3 +209,51 @@ def test_final_stage_refits_the_band_to_its_collisions(model: CutInGMM) -> None:
     jg = _col(model, "gap")
     assert (np.median(np.abs(zh[:, jg] - centre[jg]))
             < 0.5 * np.median(np.abs(zb[:, jg] - centre[jg])))
+
+
+def test_band_kernels_keep_mass_on_a_group_the_refit_misses(model: CutInGMM) -> None:
+    """Collided rows on the band in two groups, one of 3 rows far from the other 57: the
+    refit (at most 2 components, BIC on the effective size) may merge or drop the small
+    group, the kernels may not. Each kernel is a Student-t(5) at a resampled row with the
+    scale Silverman's rule gives (checked by hand on the mixture's fields); the kernel
+    part's density at the small group is at least that of one kernel at its own centre
+    times its share of the centres; and the band part made of them draws there."""
+    envs = (f"v_cut_min<{C:g}",)
+    band = v_cut_min_band(model, C)
+    z = model.sample_z(200_000, np.random.default_rng(7))
+    lo, hi = band(z)
+    zj = z[:, _col(model, "p_v0")]
+    z_on = z[(zj > lo) & (zj < hi)]
+    jg = _col(model, "gap")
+    order = np.argsort(z_on[:, jg])
+    z_e = np.concatenate([z_on[order[:57]], z_on[order[-3:]]])  # smallest and largest gaps
+    prop = build_ce_proposal(model, region=None, lane_width=model.lane_width_,
+                             elite=(z_e, np.ones(60)), level=0.0,
+                             rng=np.random.default_rng(8), envelopes=envs)
+    kern = next(p for p in prop.parts if p.name.endswith("-kernels"))
+    assert isinstance(kern, BandPart)
+    g = kern.g
+    rest = kern.law.rest
+    d = rest.size
+    m = g.weights.size
+    assert m == 240 and np.allclose(g.weights, 1 / m) and g.nu == 5.0
+    # the scale by hand: weighted covariance (equal weights, ddof 0) + 0.05 I, times h^2
+    zr = z_e[:, rest]
+    n_distinct = np.unique(np.round(zr, 12), axis=0).shape[0]
+    h = (4 / (d + 2)) ** (1 / (d + 4)) * n_distinct ** (-1 / (d + 4)) * 1.3
+    cov = np.cov(zr.T, bias=True) + 0.05 * np.eye(d)
+    assert np.allclose(g.covs[0], h * h * cov) and np.allclose(g.covs, g.covs[0])
+    # every centre is one of the rows
+    assert all(np.any(np.all(np.isclose(c, zr), axis=1)) for c in g.means)
+    small = zr[-3:]
+    at_small = np.sum(np.all(np.isclose(g.means[:, None, :], small[None]), axis=2), axis=0)
+    assert at_small.sum() >= 1  # 3 of 60 rows, 240 draws: P(none) = (57/60)^240 ~ 5e-6
+    # the density against a slow reference: the mean of the 240 t pdfs (scipy)
+    pts = np.concatenate([small, zr[:5], g.draw(20, np.random.default_rng(13))])
+    ref = np.mean([stats.multivariate_t(loc=c, shape=g.covs[0], df=5.0).pdf(pts)
+                   for c in g.means], axis=0)
+    assert np.allclose(np.exp(g.log_q(pts)), ref, rtol=1e-9)
+    # at the small group: at least its centres' share of one kernel's peak
+    i = int(np.argmax(at_small))
+    peak = stats.multivariate_t(loc=small[i], shape=g.covs[0], df=5.0).pdf(small[i])
+    assert np.exp(g.log_q(small[i:i + 1]))[0] >= at_small[i] / m * peak
