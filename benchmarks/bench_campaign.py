@@ -257,8 +257,8 @@ def main() -> None:
                          "against another reference can be recomputed from it)")
     ap.add_argument("--ref", default=None, metavar="HITS/RUNS",
                     help="a larger naive reference of the SUT measured earlier (e.g. "
-                         "102/8392146 for acc k2=0.6, docs/evaluation.md): coverage is "
-                         "also reported against it")
+                         "364/27992106 for acc k2=0.6 on 3.5 m lanes, docs/evaluation.md): "
+                         "coverage is also reported against it")
     ap.add_argument("--sut-workers", type=int, default=1,
                     help="processes for the SUT campaigns (whole campaigns each)")
     ap.add_argument("--naive-workers", type=int, default=1,
