@@ -1,7 +1,7 @@
 """``scengen evaluate``: a system under test driven through importance-sampled cut-ins
 (issue 24; docs/evaluation.md).
 
-``scengen evaluate --sut NAME [-c C]... [-n N | --rhw 0.3] [--adapt ce|kernels] [--seed S]
+``scengen evaluate --sut NAME [-c C]... [-n N | --rhw 0.15] [--adapt ce|kernels] [--seed S]
 [--runs FILE]`` runs
 a campaign in this process (``sampler.campaign.evaluate``; nothing is stored) and prints
 its summary as JSON on stdout: ``p_collision`` and ``rate_per_hour`` (each ``estimate``,
@@ -58,7 +58,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      help="exactly N draws (no stop rule)")
     how.add_argument("--rhw", type=float, default=None, metavar="R",
                      help="stop when the relative half-width of the 95 %% interval is at "
-                     "most R, with at least 10 collisions (default 0.3)")
+                     "most R, with at least 10 collisions (default 0.15)")
     p.add_argument("--max-runs", type=int, default=None, metavar="M",
                    help="most draws with the stop rule (200000)")
     p.add_argument("--adapt", choices=("ce", "kernels"), default="ce",
@@ -147,7 +147,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                                 field="--sut-param")
     spec = service.CampaignSpec(
         sut=entry.name, sut_params=dict(factory.params), constraints=args.constraints or [],
-        n=args.n, rhw=0.3 if args.rhw is None else float(args.rhw),
+        n=args.n, rhw=service.DEFAULT_RHW if args.rhw is None else float(args.rhw),
         max_runs=service.DEFAULT_MAX_RUNS if args.max_runs is None else args.max_runs,
         seed=args.seed,
         # 0 is refused by check_spec, not taken for "the default"

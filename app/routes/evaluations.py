@@ -44,9 +44,10 @@ class EvaluationRequest(BaseModel):
         "'v_ego>25'); default: the model's whole distribution")
     n: int | None = Field(default=None, ge=1, description="exactly this many draws (no "
                           "stop rule)")
-    rhw: float = Field(default=0.3, gt=0, lt=10, description="stop when the relative "
-                       "half-width of the 95 % interval of P(collision) is at most this "
-                       "(and at least 10 collisions); ignored with n")
+    rhw: float = Field(default=service.DEFAULT_RHW, gt=0, lt=10,
+                       description="stop when the relative half-width of the 95 % interval "
+                       "of P(collision) is at most this (and at least 10 collisions); "
+                       "ignored with n")
     max_runs: int | None = Field(default=None, ge=1, description="most draws with the stop "
                                  "rule (default 200,000)")
     seed: int = Field(default=0, ge=0, le=SEED_MAX)

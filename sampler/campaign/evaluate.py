@@ -308,7 +308,7 @@ class CampaignResult:
     exposure: Exposure | None = None
     bootstrap: bool = True
     confidence: float = 0.95
-    rhw_target: float | None = 0.3
+    rhw_target: float | None = 0.15
     alpha: float = 0.15
     p_region: Any = None  # PRegion of the user's region (None without constraints)
     adapt: str = "kernels"
@@ -674,7 +674,7 @@ def _exposure(model: CutInGMM, exposure: Exposure | Mapping[str, Any] | None
 
 
 def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Region | None
-             = None, n: int | None = None, rhw: float = 0.3, max_runs: int = 1_000_000,
+             = None, n: int | None = None, rhw: float = 0.15, max_runs: int = 1_000_000,
              seed: int = 0, exposure: Exposure | Mapping[str, Any] | None = None,
              batch_size: int = 2000, progress: ProgressFn | None = None,
              on_chunk: Callable[[ChunkResult], None] | None = None,
