@@ -60,8 +60,8 @@ DEFAULT_BATCH = 2000
 #: the most runs a campaign with the stop rule may use when a request does not say
 DEFAULT_MAX_RUNS = 200_000
 #: the stop rule's relative half-width of the 95 % interval when a request gives neither
-#: ``n`` nor ``rhw``: at P ~ 1e-5 the reported interval covered P in 87 % of 120 campaigns
-#: with 0.3, 92.5 % of 80 with 0.15 (docs/evaluation.md, "How tight a stop rule"). A
+#: ``n`` nor ``rhw``: at P ~ 1e-5 the reported interval covered P in 83 % of 120 campaigns
+#: with 0.3, 90 % of 80 with 0.15 (docs/evaluation.md, "How tight a stop rule"). A
 #: stored spec always holds its rhw, so changing this does not change a resumed job
 DEFAULT_RHW = 0.15
 #: columns /runs may order by; filters: <name>_min/_max on the numbers, flags =true|false
