@@ -328,14 +328,31 @@ def test_200_cut_ins_agree_with_scengens_simulator(library: Path, sut: str, beyo
 @pytest.mark.slow
 def test_acc_aeb_gap_difference_is_the_ttc_threshold_grazed(
         library: Path, default_200: list[ConcreteScenario]) -> None:
-    """The largest smallest-gap difference of the 200 cut-ins (acc_aeb, run 65: 2.41 m in
-    scengen, 3.79 m in esmini; docs/systems.md): the TTC comes down to the AEB's 1.5 s and
-    turns back. With the cutter's speed interpolated (scengen) it stays above 1.5 s and the
-    AEB never fires; with esmini's speed, constant along each 0.1 s segment, it dips below
+    """The largest smallest-gap difference of the 200 cut-ins with acc_aeb is the TTC
+    grazing the AEB's 1.5 s (docs/systems.md: run 65, 2.41 m in scengen, 3.79 m in esmini,
+    on the machine it was measured on): the TTC comes down to the threshold and turns
+    back. With the cutter's speed interpolated (scengen) it stays above 1.5 s and the AEB
+    never fires; with esmini's speed, constant along each 0.1 s segment, it dips below
     1.5 s at the end of a segment and the AEB (9 m/s²) fires. Fails if the difference has
-    another cause (the AEB firing in both or in neither, or a TTC far from the threshold)."""
+    another cause (the AEB firing in both or in neither, or a TTC far from the threshold).
+
+    The run is found, not named: the 200 draws differ between processors in their last
+    bits, so which run grazes (if any) depends on the machine. Where none does, every
+    verdict agrees and every smallest gap within 0.15 m (checked): nothing to explain."""
     scenarios = default_200
-    run = 65
+    whole = CutInBatch.from_scenarios(scenarios)
+    all_ours = simulate(make_sut("acc_aeb"), whole, seeds=7)
+    all_theirs = simulate_esmini(make_sut("acc_aeb"), scenarios, seeds=7,
+                                 library=library).runs
+    assert bool(np.all(all_ours.collided == all_theirs.collided))
+    both_inf = np.isinf(all_ours.min_gap) & np.isinf(all_theirs.min_gap)
+    gaps = np.where(both_inf, 0.0, all_theirs.min_gap - all_ours.min_gap)
+    run = int(np.argmax(np.abs(gaps)))
+    if abs(gaps[run]) <= 0.15:
+        # no run grazes the threshold on this machine: every verdict agrees (above) and
+        # every smallest gap within 0.15 m, the bound of the 200-run test above (a
+        # one-step difference of the AEB's onset, as acc_aeb's run 54 in docs/systems.md)
+        return
     batch = CutInBatch.from_scenarios(scenarios).subset(np.array([run]))
     ours = simulate(make_sut("acc_aeb"), batch, seeds=7, profiles=True, engine="loop")
     res = simulate_esmini(make_sut("acc_aeb"), [scenarios[run]], seeds=7, library=library,
