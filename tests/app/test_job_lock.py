@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from sqlalchemy.exc import OperationalError
 
 from app.db import repository as repo
 from app.db.database import Database
@@ -202,13 +203,22 @@ def _start_create(env: dict[str, str], data_dir: Path,
 
     def running() -> bool:
         assert cli.poll() is None, out.read_text()[-2000:]
-        return (data_dir / "scengen.db").is_file() and \
-            [s for _, s in _catalogues(data_dir)] == ["running"]
+        if not (data_dir / "scengen.db").is_file():
+            return False
+        try:
+            return [s for _, s in _catalogues(data_dir)] == ["running"]
+        except OperationalError:  # the file is there before the CLI has made its tables
+            return False
 
-    wait_for(running, "the CLI to run its job", attempts=1200)
-    [(cid, _)] = _catalogues(data_dir)
-    workers = _workers_of(cli.pid)
-    _signal_all(workers, signal.SIGSTOP)
+    try:
+        wait_for(running, "the CLI to run its job", attempts=1200)
+        [(cid, _)] = _catalogues(data_dir)
+        workers = _workers_of(cli.pid)
+        _signal_all(workers, signal.SIGSTOP)
+    except BaseException:
+        cli.kill()  # never leave the CLI running behind a failed start
+        cli.wait()
+        raise
     return cli, cid, workers
 
 
