@@ -141,38 +141,50 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @contextmanager
-def uvicorn_service(env: dict[str, str], log: Path, *args: str) -> Iterator[str]:
-    """``uvicorn app.main:app`` in its own session on a free loopback port with ``env``;
-    yields its base URL once /health answers (bounded polling), then stops it (SIGTERM,
-    SIGKILL after 60 s). The server's output goes to ``log``. Without
-    SCENGEN_SYNC_BUDGET_SECONDS in ``env`` the service gets ``GENEROUS_BUDGET``."""
-    env = {"SCENGEN_SYNC_BUDGET_SECONDS": GENEROUS_BUDGET, **env}
-    port = free_port()
+def process_service(cmd: list[str], env: dict[str, str], log: Path, port: int,
+                    name: str) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+    """The HTTP service ``cmd`` (listening on loopback ``port``) in its own session with
+    ``env``; yields (the process, its base URL) once /health answers (bounded polling),
+    then stops its whole session (SIGTERM, SIGKILL after 60 s; nothing to do when a test
+    killed it already). Its output goes to ``log``; ``name`` names it in failures."""
     with open(log, "wb") as log_file:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
-             "--port", str(port), *args], cwd=ROOT, env=env, stdout=log_file,
-            stderr=log_file, start_new_session=True)
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log_file, stderr=log_file,
+                                start_new_session=True)
     base = f"http://127.0.0.1:{port}"
 
     def up() -> bool:
         if proc.poll() is not None:
-            raise AssertionError(f"uvicorn exited: {log.read_text()[-2000:]}")
+            raise AssertionError(f"{name} exited: {log.read_text()[-2000:]}")
         try:
             return httpx.get(f"{base}/health", timeout=2).status_code == 200
         except httpx.TransportError:
             return False
 
     try:
-        wait_for(up, "uvicorn to answer /health", attempts=1200)
-        yield base
+        wait_for(up, f"{name} to answer /health", attempts=1200)
+        yield proc, base
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)
         try:
+            os.killpg(proc.pid, signal.SIGTERM)
             proc.wait(timeout=60)
+        except ProcessLookupError:
+            pass
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=30)
+
+
+@contextmanager
+def uvicorn_service(env: dict[str, str], log: Path, *args: str) -> Iterator[str]:
+    """``uvicorn app.main:app`` on a free loopback port with ``env`` (``process_service``);
+    yields its base URL. Without SCENGEN_SYNC_BUDGET_SECONDS in ``env`` the service gets
+    ``GENEROUS_BUDGET``."""
+    env = {"SCENGEN_SYNC_BUDGET_SECONDS": GENEROUS_BUDGET, **env}
+    port = free_port()
+    cmd = [sys.executable, "-m", "uvicorn", "app.main:app", "--host", "127.0.0.1",
+           "--port", str(port), *args]
+    with process_service(cmd, env, log, port, "uvicorn") as (_, base):
+        yield base
 
 
 @contextmanager

@@ -11,6 +11,8 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -222,10 +224,13 @@ def _start_create(env: dict[str, str], data_dir: Path,
     return cli, cid, workers
 
 
-@pytest.mark.slow
-def test_a_service_leaves_a_job_the_cli_runs_to_the_cli(
-        store: tuple[Path, dict[str, str]], tmp_path: Path) -> None:
-    data_dir, env = store
+@contextmanager
+def _cli_job_left_by_a_service(env: dict[str, str], data_dir: Path, tmp_path: Path
+                               ) -> Iterator[tuple[subprocess.Popen[bytes], str, list[int]]]:
+    """A CLI ``catalogue create`` running its job (``_start_create``, output in
+    ``cli.out``) and a service started beside it (log in ``serve.log``) that has left the
+    job to it; yields (the CLI, the catalogue id, its stopped workers) inside the
+    service's life. The CLI is stopped afterwards if the test left it running."""
     cli, cid, workers = _start_create(env, data_dir, tmp_path / "cli.out")
     try:
         log = tmp_path / "serve.log"
@@ -233,16 +238,25 @@ def test_a_service_leaves_a_job_the_cli_runs_to_the_cli(
             wait_for(lambda: _left(log, f"catalogue {cid} is being run by another process "
                                    f"(pid {cli.pid}): left to it"),
                      "the service to leave the job to the CLI", attempts=1200)
-            _signal_all(workers, signal.SIGCONT)
-            assert cli.wait(timeout=600) == 0, (tmp_path / "cli.out").read_text()[-2000:]
-            wait_for(lambda: f"catalogue {cid}: done by the process that ran it"
-                     in log.read_text(), "the service to see the job done", attempts=600)
-        assert RUNNING not in log.read_text()  # it never ran the job
+            yield cli, cid, workers
     finally:
         if cli.poll() is None:
             _signal_all(workers, signal.SIGCONT)
             cli.kill()
             cli.wait()
+
+
+@pytest.mark.slow
+def test_a_service_leaves_a_job_the_cli_runs_to_the_cli(
+        store: tuple[Path, dict[str, str]], tmp_path: Path) -> None:
+    data_dir, env = store
+    log = tmp_path / "serve.log"
+    with _cli_job_left_by_a_service(env, data_dir, tmp_path) as (cli, cid, workers):
+        _signal_all(workers, signal.SIGCONT)
+        assert cli.wait(timeout=600) == 0, (tmp_path / "cli.out").read_text()[-2000:]
+        wait_for(lambda: f"catalogue {cid}: done by the process that ran it"
+                 in log.read_text(), "the service to see the job done", attempts=600)
+    assert RUNNING not in log.read_text()  # it never ran the job
     assert f'{{"id": "{cid}", "status": "done"}}' in (tmp_path / "cli.out").read_text()
     assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
     assert not _lock_file(data_dir, cid).exists()
@@ -252,21 +266,12 @@ def test_a_service_leaves_a_job_the_cli_runs_to_the_cli(
 def test_a_service_takes_over_the_job_of_a_killed_cli(
         store: tuple[Path, dict[str, str]], tmp_path: Path) -> None:
     data_dir, env = store
-    cli, cid, workers = _start_create(env, data_dir, tmp_path / "cli.out")
-    try:
-        log = tmp_path / "serve.log"
-        with _service(env, log):
-            wait_for(lambda: _left(log, "left to it"),
-                     "the service to leave the job to the CLI", attempts=1200)
-            cli.kill()  # SIGKILL, the CLI alone: no clean-up runs; its worker dies with it
-            cli.wait(timeout=60)
-            wait_for(lambda: _status_in_store(data_dir, cid) == "done",
-                     "the service to take the job over and finish it", attempts=3000)
-        assert log.read_text().count(RUNNING) == 1
-    finally:
-        if cli.poll() is None:
-            _signal_all(workers, signal.SIGCONT)
-            cli.kill()
-            cli.wait()
+    log = tmp_path / "serve.log"
+    with _cli_job_left_by_a_service(env, data_dir, tmp_path) as (cli, cid, _):
+        cli.kill()  # SIGKILL, the CLI alone: no clean-up runs; its worker dies with it
+        cli.wait(timeout=60)
+        wait_for(lambda: _status_in_store(data_dir, cid) == "done",
+                 "the service to take the job over and finish it", attempts=3000)
+    assert log.read_text().count(RUNNING) == 1
     assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
     assert not _lock_file(data_dir, cid).exists()

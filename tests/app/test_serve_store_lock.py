@@ -24,6 +24,7 @@ from tests.app.factories import (
     copy_model_cache,
     free_port,
     make_settings,
+    process_service,
     service_env,
     wait_for,
 )
@@ -42,31 +43,8 @@ def _service(env: dict[str, str], log: Path) -> Iterator[tuple[subprocess.Popen[
     """A `scengen serve` on a free port, once /health answers; stopped afterwards (its
     whole session: a SIGKILLed one may leave its pool worker for a moment)."""
     port = free_port()
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(_serve(port), cwd=ROOT, env=env, stdout=out,
-                                stderr=out, start_new_session=True)
-    base = f"http://127.0.0.1:{port}"
-
-    def up() -> bool:
-        if proc.poll() is not None:
-            raise AssertionError(f"scengen serve exited: {log.read_text()[-2000:]}")
-        try:
-            return httpx.get(f"{base}/health", timeout=2).status_code == 200
-        except httpx.TransportError:
-            return False
-
-    try:
-        wait_for(up, "scengen serve to answer /health", attempts=1200)
-        yield proc, base
-    finally:
-        try:
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(timeout=60)
-        except ProcessLookupError:
-            pass
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=30)
+    with process_service(_serve(port), env, log, port, "scengen serve") as out:
+        yield out
 
 
 def _second(env: dict[str, str]) -> tuple[subprocess.CompletedProcess[str], str]:
