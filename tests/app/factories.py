@@ -22,6 +22,8 @@ import pytest
 from fastapi import FastAPI
 from sqlalchemy.engine import make_url
 
+from app.db import repository as repo
+from app.db.database import Database
 from app.main import create_app
 from app.settings import Settings, get_settings
 
@@ -172,6 +174,49 @@ def process_service(cmd: list[str], env: dict[str, str], log: Path, port: int,
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=30)
+
+
+def serve_cmd(port: int) -> list[str]:
+    """The command line of ``scengen serve`` on loopback ``port`` (this interpreter)."""
+    return [sys.executable, "-m", "app.cli", "serve", "--port", str(port)]
+
+
+@contextmanager
+def serve_service(env: dict[str, str], log: Path
+                  ) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+    """A ``scengen serve`` on a free loopback port with ``env`` (``process_service``);
+    yields (the process, its base URL) once /health answers, then stops its whole session
+    (a SIGKILLed one may leave its pool worker for a moment)."""
+    port = free_port()
+    with process_service(serve_cmd(port), env, log, port, "scengen serve") as out:
+        yield out
+
+
+def _store_db(data_dir: Path) -> Database:
+    return Database(f"sqlite:///{data_dir / 'scengen.db'}")
+
+
+def status_in_store(data_dir: Path, cid: str) -> str:
+    """Catalogue ``cid``'s status as the SQLite store in ``data_dir`` holds it now (read
+    through a database handle of its own, beside whichever process runs the job)."""
+    db = _store_db(data_dir)
+    try:
+        with db.session() as s:
+            return repo.get_catalogue(s, cid).status
+    finally:
+        db.dispose()
+
+
+def chunk_indices_in_store(data_dir: Path, cid: str) -> list[int]:
+    """The indices of catalogue ``cid``'s chunks stored in the SQLite store in
+    ``data_dir``, in the store's order (``repository.chunk_rows``): a chunk stored twice
+    appears twice."""
+    db = _store_db(data_dir)
+    try:
+        with db.session() as s:
+            return [c.chunk_index for c in repo.chunk_rows(s, cid)]
+    finally:
+        db.dispose()
 
 
 @contextmanager

@@ -23,8 +23,15 @@ from app.db.database import Database
 from app.jobs import joblock
 from app.services import catalogues
 from app.services.store import open_context
-from tests.app.factories import copy_model_cache, make_settings, service_env, wait_for
-from tests.app.test_serve_store_lock import _chunk_indices, _service, _status_in_store
+from tests.app.factories import (
+    chunk_indices_in_store,
+    copy_model_cache,
+    make_settings,
+    serve_service,
+    service_env,
+    status_in_store,
+    wait_for,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 N, CHUNK = 40, 2
@@ -128,7 +135,7 @@ def test_the_service_leaves_a_job_its_previous_holder_ended(
     finally:
         ctx.close()
     assert _catalogues(data_dir) == [(cid, "cancelled")]
-    assert _chunk_indices(data_dir, cid) == []
+    assert chunk_indices_in_store(data_dir, cid) == []
     assert not _lock_file(data_dir, cid).exists()
 
 
@@ -171,7 +178,7 @@ def test_resume_of_a_job_a_service_runs_exits_2_and_the_service_finishes_it(
     finally:
         ctx.close()
     log = tmp_path / "serve.log"
-    with _service(env, log) as (service, _):
+    with serve_service(env, log) as (service, _):
         wait_for(lambda: f"{cid}: 0 of" in log.read_text(), "the service to run the job",
                  attempts=1200)
         workers = _workers_of(service.pid)
@@ -187,10 +194,10 @@ def test_resume_of_a_job_a_service_runs_exits_2_and_the_service_finishes_it(
             f"(pid {service.pid}); left to it: resume it here only if that process ends "
             "before the job does"]
         assert resumed.stdout == ""
-        wait_for(lambda: _status_in_store(data_dir, cid) == "done", "the job to finish",
+        wait_for(lambda: status_in_store(data_dir, cid) == "done", "the job to finish",
                  attempts=3000)
     assert log.read_text().count(f"{cid}: done") == 1
-    assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
+    assert chunk_indices_in_store(data_dir, cid) == list(range(N // CHUNK))
     assert not _lock_file(data_dir, cid).exists()
 
 
@@ -234,7 +241,7 @@ def _cli_job_left_by_a_service(env: dict[str, str], data_dir: Path, tmp_path: Pa
     cli, cid, workers = _start_create(env, data_dir, tmp_path / "cli.out")
     try:
         log = tmp_path / "serve.log"
-        with _service(env, log):
+        with serve_service(env, log):
             wait_for(lambda: _left(log, f"catalogue {cid} is being run by another process "
                                    f"(pid {cli.pid}): left to it"),
                      "the service to leave the job to the CLI", attempts=1200)
@@ -258,7 +265,7 @@ def test_a_service_leaves_a_job_the_cli_runs_to_the_cli(
                  in log.read_text(), "the service to see the job done", attempts=600)
     assert RUNNING not in log.read_text()  # it never ran the job
     assert f'{{"id": "{cid}", "status": "done"}}' in (tmp_path / "cli.out").read_text()
-    assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
+    assert chunk_indices_in_store(data_dir, cid) == list(range(N // CHUNK))
     assert not _lock_file(data_dir, cid).exists()
 
 
@@ -270,8 +277,8 @@ def test_a_service_takes_over_the_job_of_a_killed_cli(
     with _cli_job_left_by_a_service(env, data_dir, tmp_path) as (cli, cid, _):
         cli.kill()  # SIGKILL, the CLI alone: no clean-up runs; its worker dies with it
         cli.wait(timeout=60)
-        wait_for(lambda: _status_in_store(data_dir, cid) == "done",
+        wait_for(lambda: status_in_store(data_dir, cid) == "done",
                  "the service to take the job over and finish it", attempts=3000)
     assert log.read_text().count(RUNNING) == 1
-    assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
+    assert chunk_indices_in_store(data_dir, cid) == list(range(N // CHUNK))
     assert not _lock_file(data_dir, cid).exists()

@@ -8,24 +8,22 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
 import pytest
 
-from app.db import repository as repo
-from app.db.database import Database
 from app.services import catalogues
 from app.services.store import open_context
 from tests.app.factories import (
+    chunk_indices_in_store,
     copy_model_cache,
     free_port,
     make_settings,
-    process_service,
+    serve_cmd,
+    serve_service,
     service_env,
+    status_in_store,
     wait_for,
 )
 
@@ -34,24 +32,11 @@ ROOT = Path(__file__).resolve().parents[2]
 N, CHUNK = 40, 2
 
 
-def _serve(port: int) -> list[str]:
-    return [sys.executable, "-m", "app.cli", "serve", "--port", str(port)]
-
-
-@contextmanager
-def _service(env: dict[str, str], log: Path) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
-    """A `scengen serve` on a free port, once /health answers; stopped afterwards (its
-    whole session: a SIGKILLed one may leave its pool worker for a moment)."""
-    port = free_port()
-    with process_service(_serve(port), env, log, port, "scengen serve") as out:
-        yield out
-
-
 def _second(env: dict[str, str]) -> tuple[subprocess.CompletedProcess[str], str]:
     """Another `scengen serve` on the store, on a free port; it must end by itself (a
     service that started is stopped after 120 s and fails the test)."""
     port = free_port()
-    proc = subprocess.Popen(_serve(port), cwd=ROOT, env=env, stdout=subprocess.PIPE,
+    proc = subprocess.Popen(serve_cmd(port), cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         out, err = proc.communicate(timeout=120)
@@ -85,24 +70,6 @@ def unfinished(tmp_path: Path, model_cache_dir: Path) -> tuple[Path, str, dict[s
 def _status(base: str, cid: str) -> str:
     status: str = httpx.get(f"{base}/catalogues/{cid}", timeout=10).json()["status"]
     return status
-
-
-def _status_in_store(data_dir: Path, cid: str) -> str:
-    db = Database(f"sqlite:///{data_dir / 'scengen.db'}")
-    try:
-        with db.session() as s:
-            return repo.get_catalogue(s, cid).status
-    finally:
-        db.dispose()
-
-
-def _chunk_indices(data_dir: Path, cid: str) -> list[int]:
-    db = Database(f"sqlite:///{data_dir / 'scengen.db'}")
-    try:
-        with db.session() as s:
-            return [c.chunk_index for c in repo.chunk_rows(s, cid)]
-    finally:
-        db.dispose()
 
 
 RESUMING = "resuming unfinished catalogue"
@@ -151,7 +118,7 @@ def test_a_second_service_on_the_store_exits_2_and_runs_nothing(
         unfinished: tuple[Path, str, dict[str, str]], tmp_path: Path) -> None:
     data_dir, cid, env = unfinished
     log = tmp_path / "first.log"
-    with _service(env, log) as (first, base):
+    with serve_service(env, log) as (first, base):
         wait_for(lambda: RESUMING in log.read_text(), "the first service to resume the job")
         second, second_base = _second(env)
         assert _status(base, cid) in ("queued", "running")  # the job was live meanwhile
@@ -164,7 +131,7 @@ def test_a_second_service_on_the_store_exits_2_and_runs_nothing(
         assert httpx.get(f"{base}/health", timeout=10).status_code == 200
         wait_for(lambda: _status(base, cid) == "done", "the job to finish", attempts=3000)
     assert log.read_text().count(RESUMING) == 1
-    assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
+    assert chunk_indices_in_store(data_dir, cid) == list(range(N // CHUNK))
 
 
 @pytest.mark.slow
@@ -172,13 +139,13 @@ def test_a_killed_service_leaves_no_lock_and_the_next_resumes(
         unfinished: tuple[Path, str, dict[str, str]], tmp_path: Path) -> None:
     data_dir, cid, env = unfinished
     log = tmp_path / "first.log"
-    with _service(env, log) as (first, _):
+    with serve_service(env, log) as (first, _):
         wait_for(lambda: RESUMING in log.read_text(), "the first service to resume the job")
         os.kill(first.pid, signal.SIGKILL)  # the service alone, as a user would
         first.wait(timeout=60)
-        assert _status_in_store(data_dir, cid) in ("queued", "running")
+        assert status_in_store(data_dir, cid) in ("queued", "running")
         log2 = tmp_path / "next.log"
-        with _service(env, log2) as (after, base2):
+        with serve_service(env, log2) as (after, base2):
             wait_for(lambda: RESUMING in log2.read_text(), "the next service to resume")
             # it holds the store now: a further one names it, not the killed one
             third, _ = _second(env)
@@ -186,5 +153,5 @@ def test_a_killed_service_leaves_no_lock_and_the_next_resumes(
             assert third.stderr.splitlines() == [_refusal(data_dir, after.pid, base2)]
             wait_for(lambda: _status(base2, cid) == "done", "the resumed job to finish",
                      attempts=3000)
-    assert _chunk_indices(data_dir, cid) == list(range(N // CHUNK))
+    assert chunk_indices_in_store(data_dir, cid) == list(range(N // CHUNK))
 
