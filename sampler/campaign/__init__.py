@@ -11,7 +11,7 @@ collision probability per cut-in and rate per hour with both intervals (docs/eva
   ``warnings``).
 """
 
-from sampler.campaign.evaluate import CampaignResult, ChunkResult, evaluate
+from sampler.campaign.evaluate import DEFAULT_RHW, CampaignResult, ChunkResult, evaluate
 from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
 from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons, with_verdict
 from sampler.campaign.reliability import warnings as summary_warnings
@@ -29,6 +29,7 @@ from sampler.campaign.sut import SutRunner, SutRuns, sut_runner
 
 __all__ = [
     "DEFAULT_ENVELOPES",
+    "DEFAULT_RHW",
     "MIN_COLLISIONS",
     "MIN_ESS",
     "CampaignResult",
