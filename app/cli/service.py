@@ -33,6 +33,7 @@ from app.cli.sampling import StageBars
 
 if TYPE_CHECKING:
     from app.context import ServiceContext
+    from app.jobs.joblock import JobBusy
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -283,6 +284,12 @@ def _in_store(exc: LookupError) -> CliError:
     return CliError(f"{exc.args[0] if exc.args else exc} in the store at {store_label()}")
 
 
+def _left_to_its_runner(catalogue_id: str, busy: JobBusy) -> CliError:
+    return CliError(f"catalogue {catalogue_id} is being run by another process on this "
+                    f"store (pid {busy.pid or 'unknown'}); left to it: resume it here only "
+                    "if that process ends before the job does")
+
+
 def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
     from tqdm import tqdm
 
@@ -313,9 +320,7 @@ def _run(ctx: ServiceContext, catalogue_id: str, show_progress: bool) -> int:
     except LookupError as exc:
         raise _in_store(exc) from None
     except JobBusy as busy:
-        raise CliError(f"catalogue {catalogue_id} is being run by another process on this "
-                       f"store (pid {busy.pid or 'unknown'}); left to it: resume it here "
-                       "only if that process ends before the job does") from None
+        raise _left_to_its_runner(catalogue_id, busy) from None
     except KeyboardInterrupt:
         # Ctrl-C: the catalogue says "cancelled" (not a stale "running") and how to go on
         stored, n = catalogues.mark_cancelled(ctx, catalogue_id)
@@ -354,6 +359,16 @@ def _create(args: argparse.Namespace) -> int:
 
 
 def _resume(args: argparse.Namespace) -> int:
+    from app.jobs.joblock import JobBusy, check_free
+    from app.settings import get_settings
+
+    # a job another process runs is refused before the pool's workers start (their start
+    # took seconds before the runner found the job's lock held); the runner still takes
+    # the lock itself, and refuses the same way if another took it meanwhile
+    try:
+        check_free(Path(get_settings().data_dir).resolve(), args.id)
+    except JobBusy as busy:
+        raise _left_to_its_runner(args.id, busy) from None
     ctx = _context_with_pool(load_defaults=False)
     try:
         return _run(ctx, args.id, not args.quiet)

@@ -69,6 +69,30 @@ def acquire(data_dir: Path, job_id: str) -> JobLock:
     return JobLock(path, fd)
 
 
+def check_free(data_dir: Path, job_id: str) -> None:
+    """``JobBusy`` naming the holder's pid if another runner holds the job's lock now; takes
+    nothing and creates nothing (a command checks this before it starts its workers). The
+    answer holds only for that moment: a runner still takes the lock itself (``acquire``).
+    A job without a lock file, or an id that is no file name, has no holder."""
+    import fcntl
+
+    if not job_id or "\0" in job_id or Path(job_id).name != job_id:
+        return
+    try:
+        fd = os.open(lock_path(data_dir, job_id), os.O_RDONLY)
+    except FileNotFoundError:  # a holder keeps its file until it has unlocked it
+        return
+    try:
+        try:
+            # shared: refused while a runner holds it, taken for an instant otherwise
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            text = os.pread(fd, 64, 0).decode("ascii", "replace").strip()
+            raise JobBusy(job_id, int(text) if text.isdigit() else 0) from None
+    finally:
+        os.close(fd)  # which unlocks
+
+
 def release(lock: JobLock) -> None:
     """Remove the lock file (while still holding it: a runner waiting on the old file
     sees it gone and takes a new one) and unlock."""

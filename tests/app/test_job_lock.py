@@ -113,6 +113,27 @@ def test_the_job_lock_names_its_holder_and_leaves_nothing(tmp_path: Path) -> Non
     joblock.release(joblock.acquire(tmp_path, "cat-1"))
 
 
+def test_the_check_names_the_holder_and_takes_or_makes_nothing(tmp_path: Path) -> None:
+    joblock.check_free(tmp_path, "cat-1")
+    assert list(tmp_path.iterdir()) == []  # no lock file, no folder: no holder
+    held = joblock.acquire(tmp_path, "cat-1")
+    try:
+        with pytest.raises(joblock.JobBusy) as busy:
+            joblock.check_free(tmp_path, "cat-1")
+        assert busy.value.pid == os.getpid()
+        with pytest.raises(joblock.JobBusy):  # still held after the check
+            joblock.acquire(tmp_path, "cat-1")
+        joblock.check_free(tmp_path, "cat-2")
+        for not_a_name in ("", "../jobs/cat-1", "cat-1/", "cat\0"):
+            joblock.check_free(tmp_path, not_a_name)
+    finally:
+        joblock.release(held)
+    # a lock file its holder left (SIGKILL) is no holder; the check leaves it unlocked
+    _lock_file(tmp_path, "cat-1").write_text("4242\n")
+    joblock.check_free(tmp_path, "cat-1")
+    joblock.release(joblock.acquire(tmp_path, "cat-1"))
+
+
 def _set_status(data_dir: Path, cid: str, status: str) -> None:
     db = Database(f"sqlite:///{data_dir / 'scengen.db'}")
     try:
@@ -168,6 +189,54 @@ def test_ctrl_c_cancels_the_job_before_its_lock_is_released(
     assert not _lock_file(data_dir, cid).exists()
 
 
+def _refusal(cid: str, pid: int) -> str:
+    return (f"scengen: error: catalogue {cid} is being run by another process on this "
+            f"store (pid {pid}); left to it: resume it here only if that process ends "
+            "before the job does")
+
+
+def test_resume_of_a_held_job_is_refused_before_its_pool_starts(
+        store: tuple[Path, dict[str, str]], monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The refusal comes before the pool's workers start (their start and warm-up took
+    seconds first); the job, its lock and the store are left as they were."""
+    from app.cli import main
+    from app.jobs.executors import InlineExecutor
+    from app.settings import get_settings
+
+    data_dir, _ = store
+    ctx = open_context(make_settings(data_dir))
+    try:
+        cid = catalogues.create(ctx, n=N, seed=5, constraints=["ttc<3"], chunk_size=CHUNK).id
+    finally:
+        ctx.close()
+    started: list[dict[str, object]] = []
+
+    def make_executor(**kwargs: object) -> InlineExecutor:
+        started.append(kwargs)
+        return InlineExecutor()
+
+    monkeypatch.setattr("app.jobs.executors.make_executor", make_executor)
+    for name in ("SCENGEN_DATABASE_URL", "SCENGEN_DASK_SCHEDULER"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("SCENGEN_DATA_DIR", str(data_dir))
+    get_settings.cache_clear()
+    # held through another open file of this process: refused as another process's lock
+    held = joblock.acquire(data_dir, cid)
+    try:
+        code = main(["catalogue", "resume", cid, "-q"])
+        assert _lock_file(data_dir, cid).read_text() == f"{os.getpid()}\n"
+    finally:
+        joblock.release(held)
+        get_settings.cache_clear()
+    assert code == 2 and started == []
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [_refusal(cid, os.getpid())]
+    assert captured.out == ""
+    assert _catalogues(data_dir) == [(cid, "queued")]
+    assert chunk_indices_in_store(data_dir, cid) == []
+
+
 @pytest.mark.slow
 def test_resume_of_a_job_a_service_runs_exits_2_and_the_service_finishes_it(
         store: tuple[Path, dict[str, str]], tmp_path: Path) -> None:
@@ -189,10 +258,7 @@ def test_resume_of_a_job_a_service_runs_exits_2_and_the_service_finishes_it(
         finally:
             _signal_all(workers, signal.SIGCONT)
         assert resumed.returncode == 2, resumed.stderr[-2000:]
-        assert resumed.stderr.splitlines() == [
-            f"scengen: error: catalogue {cid} is being run by another process on this store "
-            f"(pid {service.pid}); left to it: resume it here only if that process ends "
-            "before the job does"]
+        assert resumed.stderr.splitlines() == [_refusal(cid, service.pid)]
         assert resumed.stdout == ""
         wait_for(lambda: status_in_store(data_dir, cid) == "done", "the job to finish",
                  attempts=3000)
