@@ -31,18 +31,15 @@ FIRST_KEYS = ("sut", "p_collision", "rate_per_hour", "runs", "collisions", "ess"
               "acceleration")
 
 
-class _Help(argparse.HelpFormatter):
-    """``--rhw``'s help with the stop rule's default, ``sampler.campaign.DEFAULT_RHW``,
-    read when the help is printed: building the parser imports no sampler (2-3 s; the
-    other commands' --help and every argument error answer in 0.1 s)."""
-
-    def _get_help_string(self, action: argparse.Action) -> str | None:
-        text = super()._get_help_string(action)
-        if action.dest == "rhw" and text is not None:
-            from sampler.campaign import DEFAULT_RHW
-
-            text = f"{text} (default {DEFAULT_RHW})"
-        return text
+#: the stop rule's relative half-width when neither -n nor --rhw is given:
+#: ``sampler.campaign.DEFAULT_RHW`` (where it is explained), written out so that building
+#: the parser and printing --help import no sampler (2 s); ``tests/app/
+#: test_stop_rule_default.py`` checks that the two agree
+DEFAULT_RHW = 0.15
+#: ``--adapt``'s choices, the default first: ``app.services.evaluations.ADAPT`` and
+#: ``sampler.campaign.evaluate(adapt=...)``'s default, written out for the same reason and
+#: checked by the same test
+ADAPT_CHOICES = ("ce", "kernels")
 
 
 def register(subparsers: argparse._SubParsersAction[Any]) -> None:
@@ -51,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
         "evaluate", help="estimate a system under test's collision rate (importance "
         "sampling)", description="Drive a system under test through importance-sampled "
         "cut-ins of the model and print its collision probability per cut-in and rate per "
-        "hour with both intervals, as JSON (docs/evaluation.md).", formatter_class=_Help)
+        "hour with both intervals, as JSON (docs/evaluation.md).")
     p.add_argument("--sut", default=None, metavar="NAME",
                    help="a registered SUT (see --list-suts) or module:Class")
     p.add_argument("--sut-param", action="append", default=[], metavar="KEY=VALUE",
@@ -72,10 +69,10 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                      help="exactly N draws (no stop rule)")
     how.add_argument("--rhw", type=float, default=None, metavar="R",
                      help="stop when the relative half-width of the 95 %% interval is at "
-                     "most R, with at least 10 collisions")
+                     f"most R, with at least 10 collisions (default {DEFAULT_RHW})")
     p.add_argument("--max-runs", type=int, default=None, metavar="M",
                    help="most draws with the stop rule (200000)")
-    p.add_argument("--adapt", choices=("ce", "kernels"), default="ce",
+    p.add_argument("--adapt", choices=ADAPT_CHOICES, default=ADAPT_CHOICES[0],
                    help="how later chunks adapt the proposal: 'ce' (default: adaptive "
                    "cross-entropy on the SUT's performance score: pilot chunks until 20 "
                    "collided runs, then only the final stage counts) or 'kernels' "
@@ -161,7 +158,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                                 field="--sut-param")
     spec = service.CampaignSpec(
         sut=entry.name, sut_params=dict(factory.params), constraints=args.constraints or [],
-        n=args.n, rhw=service.DEFAULT_RHW if args.rhw is None else float(args.rhw),
+        n=args.n, rhw=DEFAULT_RHW if args.rhw is None else float(args.rhw),
         max_runs=service.DEFAULT_MAX_RUNS if args.max_runs is None else args.max_runs,
         seed=args.seed,
         # 0 is refused by check_spec, not taken for "the default"

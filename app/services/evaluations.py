@@ -48,7 +48,7 @@ from datasets import PARAM_NAMES
 from riskcore import ConcreteScenario
 
 # the stop rule's default rhw: defined and explained in sampler.campaign.evaluate, kept
-# here under its name for the routes, the CLI and the tests
+# here under its name for the routes and the tests (the CLI writes it out: app.cli.evaluate)
 from sampler.campaign import DEFAULT_RHW as DEFAULT_RHW
 
 if TYPE_CHECKING:
@@ -133,7 +133,7 @@ def check_settings(settings: Mapping[str, Any] | None, field: str) -> None:
 
 # --------------------------------------------------------------------------- create
 #: the campaign's adaptation stages (``sampler.campaign.evaluate(adapt=...)``), default first
-ADAPT = ("kernels", "ce")
+ADAPT = ("ce", "kernels")
 
 
 @dataclass(frozen=True)
@@ -229,7 +229,7 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
              model: str | None = None, constraints: Sequence[str] = (), n: int | None = None,
              rhw: float = DEFAULT_RHW, max_runs: int | None = None, seed: int = 0,
              batch_size: int | None = None, settings: Mapping[str, Any] | None = None,
-             risk: bool = False, adapt: str = "kernels") -> ValidEvaluation:
+             risk: bool = False, adapt: str = "ce") -> ValidEvaluation:
     """Every check of ``create`` (``InvalidInput`` naming the field, 404 for an unknown
     model), nothing stored: the route asks for the client's quota only after it, so that a
     bad request is told what is wrong (422), not to wait (429)."""

@@ -63,7 +63,9 @@ MIN_COLLISIONS = 10
 #: ``n`` nor ``rhw`` (``evaluate``, ``POST /evaluations``, ``scengen evaluate``): at
 #: P ~ 1e-5 the reported interval covered P in 83 % of 120 campaigns with 0.3, 90 % of 80
 #: with 0.15 (docs/evaluation.md, "How tight a stop rule"). A stored evaluation's spec
-#: always holds its rhw, so changing this does not change a resumed job
+#: always holds its rhw, so changing this does not change a resumed job. ``scengen
+#: evaluate`` writes it out (``app.cli.evaluate.DEFAULT_RHW``, so that its --help imports
+#: no sampler); tests/app/test_stop_rule_default.py fails if the two differ
 DEFAULT_RHW = 0.15
 #: -ln(0.05): the one-sided 95 % "rule of three" factor
 RULE_OF_THREE = -math.log(0.05)

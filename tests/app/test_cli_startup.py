@@ -70,6 +70,24 @@ def test_the_pool_module_and_the_cli_import_no_sampler() -> None:
     assert out.strip() == "[]"
 
 
+def test_evaluate_help_imports_no_sampler() -> None:
+    """``scengen evaluate --help`` prints the stop rule's default from the CLI's written-out
+    copy (app.cli.evaluate.DEFAULT_RHW), not by loading the sampler to read it (a help
+    formatter that did: 2.1 s instead of 0.06 s)."""
+    code = ("import contextlib, io, sys\n"
+            "from app.cli import build_parser\n"
+            "out = io.StringIO()\n"
+            "with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):\n"
+            "    build_parser().parse_args(['evaluate', '--help'])\n"
+            "assert '--rhw' in out.getvalue(), out.getvalue()\n"
+            "heavy = [m for m in ('sampler', 'sklearn', 'numba', 'riskcore', 'fastapi')"
+            " if m in sys.modules]\n"
+            "print(heavy)\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                         text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
 class _Noted:
     """Writes ``path`` when it is destroyed, e.g. in the interpreter's module teardown."""
 
