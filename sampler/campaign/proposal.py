@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import logsumexp
 
-from sampler.campaign.band import BandPart, band_part_for_set
+from sampler.campaign.band import BandPart, band_part_for_set, fit_band_part, lateral_band
 from sampler.methods.envelope import HalfSpace, find_envelope
 from sampler.methods.importance import KernelProposal
 from sampler.model.bootstrap import pooled_model
@@ -46,7 +46,7 @@ from sampler.region.constraints import Region
 
 __all__ = ["DEFAULT_ENVELOPES", "GaussianMixture", "MixturePart", "Proposal", "band_part",
            "build_ce_proposal", "build_proposal", "fit_ce_mixture", "fit_weighted_gmm",
-           "region_mixture", "widened_model"]
+           "lateral_band_parts", "region_mixture", "widened_model"]
 
 FloatArray = NDArray[np.float64]
 
@@ -221,6 +221,17 @@ def _envelope_parts(model: CutInGMM, constraints: Sequence[str], lane_width: flo
     for c in constraints:
         todo.append((c, Region.from_constraints([c], lane_width=lane_width)))
     for name, reg in todo:
+        lat_c = _end_margin_bound(reg) if name != "region" else None
+        if lat_c is not None:
+            # a thin band of p_y1 on each side (sampler.campaign.band.lateral_band), drawn
+            # by band parts directly: no half-space envelope is searched for
+            def make_lateral(c: float = lat_c, nm: str = name,
+                             lw: float = reg.lane_width) -> tuple[BandPart, ...]:
+                return tuple(lateral_band_parts(model, c, lw, name=f"band:{nm}"))
+
+            out.extend(memoised(model, ("campaign_lateral_band", reg), make_lateral))
+            continue
+
         def find(r: Region = reg) -> HalfSpace | None:
             return find_envelope(model, r)
 
@@ -259,10 +270,41 @@ def band_part(model: CutInGMM, c: float, *, seed: int = 0, n: int = 1 << 18,
     """The band part of ``0 < v_cut_min < c`` (``sampler.campaign.band``), its ``g`` a
     Student-t(5) mixture (K <= 3 by BIC, fitted covariances times 1.2^2) fitted to
     ``n`` model draws weighted by the band's conditional mass."""
-    def fit(zr: FloatArray, w: FloatArray, rng: np.random.Generator) -> GaussianMixture:
-        return fit_ce_mixture(zr, w, rng, max_k=3, inflate=1.2, nu=5.0, shape="fitted")
+    return band_part_for_set(model, c, _rest_fit, seed=seed, n=n, name=name)
 
-    return band_part_for_set(model, c, fit, seed=seed, n=n, name=name)
+
+def _rest_fit(zr: FloatArray, w: FloatArray, rng: np.random.Generator) -> GaussianMixture:
+    """A band part's ``g``: Student-t(5) mixture, K <= 3 by BIC, covariances times 1.2^2."""
+    return fit_ce_mixture(zr, w, rng, max_k=3, inflate=1.2, nu=5.0, shape="fitted")
+
+
+def lateral_band_parts(model: CutInGMM, c: float, lane_width: float, *, seed: int = 0,
+                       n: int = 1 << 18, name: str | None = None) -> list[BandPart]:
+    """The band parts of ``0 < end_margin < c`` (a cutter whose lane change ends just
+    inside the ego lane): one per side, ``{name}:left`` (``p_y1 > 0``, the cutter moves
+    left) and ``{name}:right`` (``p_y1 < 0``), each on ``lateral_band``'s band of
+    ``p_y1`` with ``g`` fitted as ``band_part``'s (seeds ``seed`` and ``seed + 1``) to a
+    uniform subset of the weighted rows (``fit_band_part(thin="random")``: on the TNO
+    model each band holds about a percent of the model); a side whose band carries too
+    little of the model's mass is left out."""
+    j = list(model.features_).index("p_y1")
+    base = name or f"band:end_margin<{c:g}"
+    out: list[BandPart] = []
+    for k, (side, label) in enumerate(((1, "left"), (-1, "right"))):
+        bp = fit_band_part(model, j, lateral_band(model, c, side, lane_width), _rest_fit,
+                           f"{base}:{label}", seed=seed + k, n=n, thin="random")
+        if bp is not None:
+            out.append(bp)
+    return out
+
+
+def _end_margin_bound(region: Region) -> float | None:
+    """``c`` when ``region`` is the single constraint ``end_margin < c`` (or ``<=``), c > 0."""
+    cons = list(region.constraints)
+    if (len(cons) == 1 and cons[0].name == "end_margin" and cons[0].op in ("<", "<=")
+            and cons[0].value > 0):
+        return float(cons[0].value)
+    return None
 
 
 def _v_cut_min_bound(region: Region) -> float | None:
