@@ -341,22 +341,22 @@ class CampaignResult:
 
     def _model_replicates(self, key: str, pb_b: FloatArray) -> FloatArray | None:
         """P_b(key and A | B) of each bootstrap replicate from the same runs:
-        ``(1/N) sum_i w_i c_i p_b(z_i) / p(z_i) / P_b(B)``."""
+        ``(1/N) sum_i w_i c_i p_b(z_i) / p(z_i) / P_b(B)``, with ``w_i p_b / p = p_b / q``
+        evaluated as one exponent (``p_b / p`` alone overflows where p is far smaller
+        than a replicate, and ``w`` underflows there: inf times 0)."""
         n = self.counted_runs
-        zs, ws, lps = [], [], []
+        zs, lqs = [], []
         for c in self.counted_chunks:
             sel = c.simulated & np.asarray(c.outcome.get(key, np.zeros(c.n, dtype=bool)),
                                            dtype=bool)
             zs.append(c.z[sel])
-            ws.append(c.weights[sel])
-            lps.append(c.log_p[sel])
+            lqs.append(c.log_q[sel])
         z = np.concatenate(zs)
         if not z.shape[0]:
             return np.zeros(pb_b.shape[0])
         lpb = log_density_z_boot(self.model, z)  # (B, m)
-        r = np.exp(lpb - np.concatenate(lps)[None, :])
-        return np.asarray((r * np.concatenate(ws)[None, :]).sum(axis=1) / n / pb_b,
-                          dtype=np.float64)
+        r = np.exp(lpb - np.concatenate(lqs)[None, :])
+        return np.asarray(r.sum(axis=1) / n / pb_b, dtype=np.float64)
 
     def summary(self) -> dict[str, Any]:
         """The campaign's figures, JSON-safe (None for undefined); docs/evaluation.md."""

@@ -55,7 +55,7 @@ FloatArray = NDArray[np.float64]
 #: inside the set (``v_cut_min<3``: a cutter that slows to a crawl or a stop; its speed
 #: is a product of the pulse's acceleration and length, no half-space in z)
 DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "dv>4",
-                                      "v_cut_min<3")
+                                      "v_cut_min<3", "end_margin<0.05")
 
 #: the cross-entropy stage's share of the parts fitted to a set without a half-space
 SET_SHARE = 0.2
@@ -634,7 +634,8 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
                     rng: np.random.Generator, share: float = BAND_HITS_SHARE
                     ) -> list[tuple[BandPart, float]]:
     """For each band part, when at least 2 d collided runs lie on its band, two parts of
-    the same band with their shares (together ``share``): ``g`` refitted to those runs
+    the same band with their shares (together ``share``, split equally between the bands
+    that have such runs): ``g`` refitted to those runs
     (weighted by ``p / q``, at most ``BAND_HITS_K`` components: the cross-entropy step
     inside the band) and ``g`` made of Student-t kernels at them (resampled by weight,
     ``BAND_KERNEL_SHARE``: non-parametric, so a group of collided runs on the band that
@@ -643,7 +644,7 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
     (``sampler.campaign.band``)."""
     z, w = elite
     out: list[tuple[BandPart, float]] = []
-    k_share = min(BAND_KERNEL_SHARE, share)
+    eligible: list[tuple[BandPart, FloatArray, FloatArray]] = []
     for b in sets:
         if not isinstance(b, BandPart):
             continue
@@ -652,11 +653,16 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
         on = (zj >= lo) & (zj <= hi)
         if int(on.sum()) < 2 * z.shape[1]:
             continue
-        zr, wr = z[on][:, b.law.rest], w[on]
+        eligible.append((b, z[on][:, b.law.rest], w[on]))
+    # several bands with collided runs split ``share`` equally (one band keeps all of it)
+    n_b = max(len(eligible), 1)
+    k_share = min(BAND_KERNEL_SHARE, share) / n_b
+    b_share = share / n_b
+    for b, zr, wr in eligible:
         g = fit_ce_mixture(zr, wr ** BAND_HITS_TEMPER, rng, max_k=BAND_HITS_K,
                            inflate=BAND_HITS_INFLATE, nu=5.0, shape="fitted")
-        if k_share < share:
-            out.append((BandPart(f"ce:{b.name}-hits", b.law, b.band, g), share - k_share))
+        if k_share < b_share:
+            out.append((BandPart(f"ce:{b.name}-hits", b.law, b.band, g), b_share - k_share))
         if k_share > 0:
             out.append((BandPart(f"ce:{b.name}-kernels", b.law, b.band,
                                  band_kernels(zr, wr, rng)), k_share))

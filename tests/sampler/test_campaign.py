@@ -248,6 +248,33 @@ def test_model_interval_collapses_when_every_replicate_is_the_model(model: CutIn
     assert s["rate_per_1e6_km"] is None
 
 
+def test_model_replicates_survive_a_weight_that_underflows(model: CutInGMM) -> None:
+    """The replicates' ``sum w p_b / p`` is ``sum p_b / q``: a collided row whose model
+    density is far below a replicate's (``p_b / p`` overflows, ``w = p / q`` underflows to
+    0) still gives finite replicates, equal to the plain formula on the other rows."""
+    a, b, _ = _rare_halfspace(model, 1e-3)
+    twin = CutInGMM.from_dict(model.to_dict())
+    reps = 4
+    twin.bootstrap_ = {"weights": [model.weights_.tolist()] * reps,
+                       "means": [model.means_.tolist()] * reps,
+                       "covariances": [model.covariances_.tolist()] * reps}
+    r = evaluate(twin, halfspace_runner(twin, a, b), n=1000, seed=2, batch_size=500,
+                 physical_bounds=False)
+    pb_b = np.ones(reps)
+    plain = r._model_replicates("collided", pb_b)
+    # by hand on the unchanged rows: (1/N) sum_i w_i p_b(z_i) / p(z_i) (replicates = p)
+    y = np.concatenate([np.where(c.collided, c.weights, 0.0) for c in r.counted_chunks])
+    assert plain == pytest.approx(np.full(reps, y.sum() / r.counted_runs), rel=1e-9)
+    c0 = r.counted_chunks[0]
+    i = int(np.flatnonzero(c0.collided)[0])
+    c0.log_p[i] = -900.0  # p / q underflows; the replicates' p_b stays as it was
+    c0.weights[i] = math.exp(-900.0 - c0.log_q[i])
+    with np.errstate(over="raise", invalid="raise"):
+        got = r._model_replicates("collided", pb_b)
+    assert np.all(np.isfinite(got))
+    assert got == pytest.approx(plain, rel=1e-12)
+
+
 def test_records_carry_weights_and_outcomes(model: CutInGMM) -> None:
     a, b, _ = _rare_halfspace(model, 1e-3)
     r = evaluate(model, halfspace_runner(model, a, b), n=400, seed=0, batch_size=200,

@@ -184,8 +184,8 @@ def test_lateral_part_is_a_density_on_its_band(model: CutInGMM, parts: list[Band
 
 def test_envelope_parts_make_two_bands_once(model: CutInGMM) -> None:
     """``end_margin<c`` (or ``<=``) among the envelopes gives the two lateral band parts
-    on p_y1, memoised; the default envelopes do not include it."""
-    assert not any(e.startswith("end_margin") for e in DEFAULT_ENVELOPES)
+    on p_y1, memoised; the default envelopes include ``end_margin<0.05``."""
+    assert "end_margin<0.05" in DEFAULT_ENVELOPES
     first = _envelope_parts(model, ["end_margin<0.05"], LANE, None)
     assert [p.name for p in first] == ["band:end_margin<0.05:left",
                                        "band:end_margin<0.05:right"]
@@ -209,3 +209,31 @@ def test_thinning_is_checked(model: CutInGMM) -> None:
                       thin="smallest")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="side"):
         lateral_band(model, C, 0, LANE)
+
+
+def test_bands_with_collided_runs_split_the_refits_share(model: CutInGMM,
+                                                         parts: list[BandPart]) -> None:
+    """In the final stage each band with at least 2 d collided runs on it gets a refit and a
+    kernel part; with both lateral bands hit they split ``BAND_HITS_SHARE`` equally (with
+    one share each, as before the split, the shares summed past 1 and the proposal raised),
+    and the whole mixture still has mean weight 1."""
+    from sampler.campaign.proposal import BAND_HITS_SHARE, BAND_KERNEL_SHARE, build_ce_proposal
+
+    rng = np.random.default_rng(11)
+    d = model.n_features
+    hits = np.concatenate([p.draw(2 * d + 4, rng) for p in parts])
+    prop = build_ce_proposal(model, region=None, lane_width=LANE,
+                             elite=(hits, np.ones(hits.shape[0])), level=0.0,
+                             rng=np.random.default_rng(12), envelopes=("end_margin<0.05",))
+    shares = {x["part"]: x["share"] for x in prop.describe()}
+    for side in ("left", "right"):
+        refit = shares[f"ce:band:end_margin<0.05:{side}-hits"]
+        kern = shares[f"ce:band:end_margin<0.05:{side}-kernels"]
+        assert math.isclose(kern, BAND_KERNEL_SHARE / 2, rel_tol=1e-12)
+        assert math.isclose(refit + kern, BAND_HITS_SHARE / 2, rel_tol=1e-12)
+    assert all(s > 0 for s in shares.values())
+    assert math.isclose(sum(shares.values()), 1.0, rel_tol=1e-12)
+    z, _ = prop.draw(100_000, np.random.default_rng(13))
+    w = np.exp(model.log_density_z(z) - prop.log_q(z))
+    se = w.std(ddof=1) / math.sqrt(w.size)
+    assert abs(w.mean() - 1.0) <= 4 * se
