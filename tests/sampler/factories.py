@@ -72,3 +72,28 @@ def closed_form(weights: Any, means: Any, covs: Any, z_cut: float) -> float:
     """P(z_gap < z_cut) of a mixture in z (gap is feature 0): a half-space."""
     return float(sum(w * stats.norm.cdf((z_cut - m[0]) / math.sqrt(c[0][0]))
                      for w, m, c in zip(weights, means, covs, strict=True)))
+
+
+def assert_band_density(model: Any, part: Any, zq: np.ndarray, n: int,
+                        rng: np.random.Generator) -> None:
+    """A band part's density is normalised and its weights average to the band's mass.
+
+    ``zq``: ``part``'s own draws. With ``n`` model draws added (from ``rng``), the ratio
+    ``q / r`` under the equal mixture ``r = (p + q) / 2`` has mean 1 (q integrates to 1),
+    and ``p / q`` over the part's draws has mean P(band) as 400,000 model draws count it."""
+    z = np.concatenate([model.sample_z(n, rng), zq])
+    log_p = model.log_density_z(z)
+    log_q = part.log_q(z)
+    assert np.isfinite(log_q[n:]).all()
+    log_r = np.logaddexp(log_p, log_q) - math.log(2)
+    ratio = np.exp(log_q - log_r)
+    se = ratio.std(ddof=1) / math.sqrt(ratio.size)
+    assert abs(ratio.mean() - 1.0) <= 4 * se and se < 0.005
+    w = np.exp(log_p[n:] - log_q[n:])
+    zb = model.sample_z(400_000, np.random.default_rng(6))
+    lo_b, hi_b = part.band(zb)
+    on_b = (zb[:, part.law.j] > lo_b) & (zb[:, part.law.j] < hi_b)
+    p_band = on_b.mean()
+    se_b = math.sqrt(p_band * (1 - p_band) / on_b.size)
+    se_w = w.std(ddof=1) / math.sqrt(w.size)
+    assert abs(w.mean() - p_band) <= 4 * math.hypot(se_b, se_w)

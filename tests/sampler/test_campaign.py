@@ -229,14 +229,19 @@ def test_region_rate_is_conditional_on_the_region(model: CutInGMM) -> None:
     assert s["p_collision"]["rhw"] < 0.5
 
 
-def test_model_interval_collapses_when_every_replicate_is_the_model(model: CutInGMM
-                                                                   ) -> None:
-    a, b, _ = _rare_halfspace(model, 1e-4)
+def _twin(model: CutInGMM, reps: int) -> CutInGMM:
+    """A copy of ``model`` whose ``reps`` bootstrap replicates are all the model itself."""
     twin = CutInGMM.from_dict(model.to_dict())
-    reps = 5
     twin.bootstrap_ = {"weights": [model.weights_.tolist()] * reps,
                        "means": [model.means_.tolist()] * reps,
                        "covariances": [model.covariances_.tolist()] * reps}
+    return twin
+
+
+def test_model_interval_collapses_when_every_replicate_is_the_model(model: CutInGMM
+                                                                   ) -> None:
+    a, b, _ = _rare_halfspace(model, 1e-4)
+    twin = _twin(model, 5)
     hours = 50.0
     exp = Exposure(n_events=300, hours=hours, km=None, source="test")
     r = evaluate(twin, halfspace_runner(twin, a, b), n=1000, seed=1, batch_size=500,
@@ -253,11 +258,8 @@ def test_model_replicates_survive_a_weight_that_underflows(model: CutInGMM) -> N
     density is far below a replicate's (``p_b / p`` overflows, ``w = p / q`` underflows to
     0) still gives finite replicates, equal to the plain formula on the other rows."""
     a, b, _ = _rare_halfspace(model, 1e-3)
-    twin = CutInGMM.from_dict(model.to_dict())
     reps = 4
-    twin.bootstrap_ = {"weights": [model.weights_.tolist()] * reps,
-                       "means": [model.means_.tolist()] * reps,
-                       "covariances": [model.covariances_.tolist()] * reps}
+    twin = _twin(model, reps)
     r = evaluate(twin, halfspace_runner(twin, a, b), n=1000, seed=2, batch_size=500,
                  physical_bounds=False)
     pb_b = np.ones(reps)

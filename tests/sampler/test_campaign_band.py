@@ -25,7 +25,7 @@ from sampler.campaign.band import (
 )
 from sampler.campaign.proposal import band_part, build_ce_proposal
 from sampler.region.kinematics import plateau_speeds
-from tests.sampler.factories import synthetic_parameter_table
+from tests.sampler.factories import assert_band_density, synthetic_parameter_table
 
 #: ~0.15 % of the synthetic model's draws (as tests/sampler/test_campaign_ce.py)
 C = 15.0
@@ -142,22 +142,7 @@ def test_band_part_is_a_density_on_its_band(model: CutInGMM, part: BandPart) -> 
     full = hi > lo  # an empty band: p_v0 from the untruncated conditional
     assert full.mean() > 0.9
     assert np.all((zj[full] >= lo[full]) & (zj[full] <= hi[full]))
-    z = np.concatenate([model.sample_z(n, rng), zq])
-    log_p = model.log_density_z(z)
-    log_q = part.log_q(z)
-    assert np.isfinite(log_q[n:]).all()
-    log_r = np.logaddexp(log_p, log_q) - math.log(2)
-    ratio = np.exp(log_q - log_r)
-    se = ratio.std(ddof=1) / math.sqrt(ratio.size)
-    assert abs(ratio.mean() - 1.0) <= 4 * se and se < 0.005
-    w = np.exp(log_p[n:] - log_q[n:])
-    zb = model.sample_z(400_000, np.random.default_rng(6))
-    lo_b, hi_b = part.band(zb)
-    on_b = (zb[:, part.law.j] > lo_b) & (zb[:, part.law.j] < hi_b)
-    p_band = on_b.mean()
-    se_b = math.sqrt(p_band * (1 - p_band) / on_b.size)
-    se_w = w.std(ddof=1) / math.sqrt(w.size)
-    assert abs(w.mean() - p_band) <= 4 * math.hypot(se_b, se_w)
+    assert_band_density(model, part, zq, n, rng)
     again = band_part(model, C, seed=5, n=1 << 16)
     assert again is not None
     assert np.array_equal(again.draw(50, np.random.default_rng(9)),

@@ -28,7 +28,7 @@ from sampler.campaign.proposal import (
     lateral_band_parts,
 )
 from sampler.region.constraints import derive
-from tests.sampler.factories import synthetic_parameter_table
+from tests.sampler.factories import assert_band_density, synthetic_parameter_table
 
 LANE = 7.0
 C = 0.05
@@ -158,22 +158,7 @@ def test_lateral_part_is_a_density_on_its_band(model: CutInGMM, parts: list[Band
     full = hi > lo
     assert full.mean() > 0.99
     assert np.all((zj[full] >= lo[full]) & (zj[full] <= hi[full]))
-    z = np.concatenate([model.sample_z(n, rng), zq])
-    log_p = model.log_density_z(z)
-    log_q = part.log_q(z)
-    assert np.isfinite(log_q[n:]).all()
-    log_r = np.logaddexp(log_p, log_q) - math.log(2)
-    ratio = np.exp(log_q - log_r)
-    se = ratio.std(ddof=1) / math.sqrt(ratio.size)
-    assert abs(ratio.mean() - 1.0) <= 4 * se and se < 0.005
-    w = np.exp(log_p[n:] - log_q[n:])
-    zb = model.sample_z(400_000, np.random.default_rng(6))
-    lo_b, hi_b = part.band(zb)
-    on_b = (zb[:, part.law.j] > lo_b) & (zb[:, part.law.j] < hi_b)
-    p_band = on_b.mean()
-    se_b = math.sqrt(p_band * (1 - p_band) / on_b.size)
-    se_w = w.std(ddof=1) / math.sqrt(w.size)
-    assert abs(w.mean() - p_band) <= 4 * math.hypot(se_b, se_w)
+    assert_band_density(model, part, zq, n, rng)
     e = np.asarray(derive(model.params_matrix(model.from_z(zq[:5000])), ["end_margin"],
                           lane_width=LANE)["end_margin"])
     assert ((e > 0) & (e < C)).mean() > 0.93  # measured 0.956 and 0.964 on 20,000
