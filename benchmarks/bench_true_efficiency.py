@@ -52,8 +52,7 @@ from datasets import PARAM_NAMES
 from datasets.embedded import default_parameter_table
 from riskcore.sut import SimSettings, make_sut
 from sampler import CutInGMM
-from sampler.campaign import evaluate, sut_runner
-from sampler.campaign.evaluate import _ce_proposal, _p_bounds, _region
+from sampler.campaign import evaluate, next_ce_proposal, sut_runner
 from sampler.campaign.proposal import DEFAULT_ENVELOPES
 from sampler.model import bootstrap_fit
 from sampler.rates import tno_exposure
@@ -182,9 +181,6 @@ def measure(model: CutInGMM, runner: Any, paths: Sequence[str], seeds: Sequence[
                          f"(a file without its closing line?)")
     p = p_ref if p_ref is not None else hits / runs
     print(f"{z.shape[0]} exact collisions from {runs} naive runs; P = {p:.3e}")
-    region = _region(model, None, True)
-    pb, _ = _p_bounds(model, region)
-    print(f"P(B) of the physical cut-ins {pb:.4f}")
     log_p = np.asarray(model.log_density_z(z), dtype=np.float64)
     x = model.params_matrix(model.from_z(z))
     rows = []
@@ -193,9 +189,8 @@ def measure(model: CutInGMM, runner: Any, paths: Sequence[str], seeds: Sequence[
         res = evaluate(model, runner, seed=s, rhw=rhw, batch_size=500,
                        envelopes=tuple(envelopes), max_runs=max_runs)
         summ = res.summary()
-        k = len(res.chunks)
-        prop, _, _ = _ce_proposal(k, model, region, s, res.chunks, tuple(envelopes), 0.15,
-                                  0.1, 20, {})
+        pb = float(summ["p_bounds"])  # P(B) of the physical cut-ins
+        prop = next_ce_proposal(res, envelopes=envelopes)
         log_q = np.asarray(prop.log_q(z), dtype=np.float64)
         eff = efficiency(log_p, log_q, p, p_bounds=pb)
         # naive runs saved per campaign SUT run (its pilot's runs included): the counted

@@ -11,7 +11,13 @@ collision probability per cut-in and rate per hour with both intervals (docs/eva
   ``warnings``).
 """
 
-from sampler.campaign.evaluate import DEFAULT_RHW, CampaignResult, ChunkResult, evaluate
+from sampler.campaign.evaluate import (
+    DEFAULT_RHW,
+    CampaignResult,
+    ChunkResult,
+    evaluate,
+    next_ce_proposal,
+)
 from sampler.campaign.proposal import DEFAULT_ENVELOPES, Proposal, build_proposal
 from sampler.campaign.reliability import MIN_COLLISIONS, MIN_ESS, interval_reasons, with_verdict
 from sampler.campaign.reliability import warnings as summary_warnings
@@ -46,6 +52,7 @@ __all__ = [
     "halfspace_runner",
     "interval_reasons",
     "late_brake_runner",
+    "next_ce_proposal",
     "summary_warnings",
     "sut_runner",
     "union_probability",

@@ -47,7 +47,7 @@ from sampler.rates.exposure import Exposure
 from sampler.region.constraints import Region
 from sampler.sampling import estimate_p_region
 
-__all__ = ["CampaignResult", "ChunkResult", "evaluate"]
+__all__ = ["CampaignResult", "ChunkResult", "evaluate", "next_ce_proposal"]
 
 FloatArray = NDArray[np.float64]
 #: progress callback: (stage, runs done, runs planned)
@@ -629,6 +629,17 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
     prop, counted, level, rng = build(k, history(k))
     fits[k] = (prop.fitted, level)
     return prop, counted, rng
+
+
+def next_ce_proposal(result: CampaignResult, *, envelopes: Sequence[str] = DEFAULT_ENVELOPES,
+                     alpha: float = 0.15, rho: float = 0.1, ce_min_hits: int = 20
+                     ) -> Proposal:
+    """The proposal the next chunk of a cross-entropy campaign would draw from, rebuilt
+    from its chunks as ``evaluate`` builds it (pass the settings the campaign ran with):
+    for diagnostics such as ``benchmarks/bench_true_efficiency.py``."""
+    prop, _, _ = _ce_proposal(len(result.chunks), result.model, result.region, result.seed,
+                              result.chunks, tuple(envelopes), alpha, rho, ce_min_hits, {})
+    return prop
 
 
 def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runner,

@@ -340,3 +340,20 @@ def test_ce_campaign_with_a_set_part_is_unbiased_and_covers(model: CutInGMM) -> 
         envelopes=(*_OTHER_ENVELOPES, _SET))
     assert all(any(p["part"] == f"band:{_SET}" for p in summ["proposal"])
                for summ in summaries)
+
+
+def test_next_ce_proposal_is_the_one_the_next_chunk_drew_from(model: CutInGMM) -> None:
+    """``next_ce_proposal`` of a campaign cut after k chunks gives the density chunk k of
+    the longer campaign (same seed) used: its log q at that chunk's draws, bit for bit."""
+    from sampler.campaign import next_ce_proposal
+
+    a, b, _ = _rare_halfspace(model, 1e-3)
+    runner = halfspace_runner(model, a, b)
+    short = evaluate(model, runner, n=1500, seed=8, batch_size=300, adapt="ce",
+                     physical_bounds=False)
+    longer = evaluate(model, runner, n=1800, seed=8, batch_size=300, adapt="ce",
+                      physical_bounds=False)
+    nxt = longer.chunks[len(short.chunks)]
+    prop = next_ce_proposal(short)
+    assert np.array_equal(prop.log_q(nxt.z), nxt.log_q)
+    assert prop.describe() == nxt.proposal
