@@ -120,13 +120,38 @@ def careful_request(st: EvaluationStatus) -> dict[str, Any]:
     return body
 
 
+def failures_by_weight(ctx: ServiceContext, evaluation_id: str
+                       ) -> tuple[int, int, list[dict[str, Any]]]:
+    """(collided runs, how many of them are pilot runs, the first ``FAILURES`` of them):
+    the collided runs of the counted chunks by weight, highest first (the runs that carry
+    most of P), then those of the pilot chunks of a cross-entropy campaign by weight (its
+    estimate leaves them out). Each record gains ``counted`` and ``share``: its weight over
+    the sum of the weights of the counted collided runs (the shares add up to 1; null for
+    a pilot run, and for every run until the evaluation is done)."""
+    hit = (("collided", True),)
+    pilots = service.pilot_chunks(ctx, evaluation_id)
+    counted = service.RunFilter(flags=hit, skip_chunks=pilots)
+    total, runs = service.page_runs(ctx, evaluation_id, counted, 0, FAILURES,
+                                    order_by="weight", desc=True)
+    whole = service.weight_sum(ctx, evaluation_id, counted)
+    for r in runs:
+        r["counted"] = True
+        w = r.get("weight")
+        r["share"] = w / whole if whole and w is not None else None
+    n_pilot = 0
+    if pilots:
+        n_pilot, extra = service.page_runs(
+            ctx, evaluation_id, service.RunFilter(flags=hit, chunks=pilots), 0,
+            FAILURES - len(runs), order_by="weight", desc=True)
+        runs += [{**r, "counted": False, "share": None} for r in extra]
+    return total + n_pilot, n_pilot, runs
+
+
 def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
     """Status and figures of one evaluation, the careful driver's beside them, the
     failures list and the r_dep-against-btn scatter."""
     st = service.describe(ctx, evaluation_id)
-    failures_total, failures = service.page_runs(
-        ctx, evaluation_id, service.RunFilter(flags=(("collided", True),)), 0, FAILURES,
-        order_by="impact_speed", desc=True)
+    failures_total, failures_pilot, failures = failures_by_weight(ctx, evaluation_id)
     scatter: dict[str, Any] = {"run": [], "btn": [], "r_dep_peak": [], "impact_speed": [],
                                "collided": [], "vs_careful": [], "note": None}
     _, hits = service.page_runs(ctx, evaluation_id,
@@ -159,6 +184,7 @@ def overview(ctx: ServiceContext, evaluation_id: str) -> EvaluationOverview:
                                    jsonconv.decode(st.spec).get("settings")),
         careful_request=careful_request(st),
         failures_total=failures_total,
+        failures_pilot=failures_pilot,
         failures=jsonconv.encode(failures),
         scatter=EvaluationScatter(**jsonconv.plot_values(scatter)),
     )

@@ -298,8 +298,15 @@ class EvaluationOverview(ApiModel):
     careful_request: dict[str, Any] = Field(description="the POST /evaluations body that "
                                             "evaluates r157_cc on the same model, region, "
                                             "seed, runs and simulator settings")
-    failures_total: int
-    failures: list[dict[str, Any]]
+    failures_total: int = Field(description="the collided runs")
+    failures_pilot: int = Field(description="how many of them are pilot runs of a "
+                                "cross-entropy campaign (left out of the estimate)")
+    failures: list[dict[str, Any]] = Field(description="the first 25 collided runs: those "
+                                           "the estimate counts by weight, highest first, "
+                                           "then the pilot ones; each run's record with "
+                                           "counted and share (its weight over the sum of "
+                                           "the counted collided runs' weights; null for a "
+                                           "pilot run or until done)")
     scatter: EvaluationScatter
 
 

@@ -561,6 +561,10 @@ class RunFilter:
     ranges: tuple[tuple[str, float | None, float | None], ...] = ()
     flags: tuple[tuple[str, bool], ...] = ()
     vs_careful: tuple[str, ...] = ()
+    #: not query parameters (the dashboard's): only the runs of these chunks (None: of
+    #: any), and none of those of ``skip_chunks``
+    chunks: tuple[int, ...] | None = None
+    skip_chunks: tuple[int, ...] = ()
 
 
 def run_filter(items: Sequence[tuple[str, str]], vs_careful: Sequence[str] = (),
@@ -602,13 +606,7 @@ def run_record(r: EvaluationRunRow, pb: float | None) -> dict[str, Any]:
     return rec
 
 
-def page_runs(ctx: ServiceContext, evaluation_id: str, flt: RunFilter, offset: int,
-              limit: int, *, order_by: str = "impact_speed",
-              desc: bool = True) -> tuple[int, list[dict[str, Any]]]:
-    """(matching runs, one page of their records). ``weight`` (w / P(B)) is null until
-    the evaluation is done (P(B) comes with its summary)."""
-    row = get(ctx, evaluation_id)
-    pb = _p_bounds(row)
+def _conditions(evaluation_id: str, flt: RunFilter) -> list[Any]:
     conds: list[Any] = [EvaluationRunRow.evaluation_id == evaluation_id]
     for name, lo, hi in flt.ranges:
         col = _column(name)
@@ -620,6 +618,21 @@ def page_runs(ctx: ServiceContext, evaluation_id: str, flt: RunFilter, offset: i
         conds.append(_column(name).is_(value))
     if flt.vs_careful:
         conds.append(EvaluationRunRow.vs_careful.in_(flt.vs_careful))
+    if flt.chunks is not None:
+        conds.append(EvaluationRunRow.chunk_index.in_(flt.chunks))
+    if flt.skip_chunks:
+        conds.append(EvaluationRunRow.chunk_index.not_in(flt.skip_chunks))
+    return conds
+
+
+def page_runs(ctx: ServiceContext, evaluation_id: str, flt: RunFilter, offset: int,
+              limit: int, *, order_by: str = "impact_speed",
+              desc: bool = True) -> tuple[int, list[dict[str, Any]]]:
+    """(matching runs, one page of their records). ``weight`` (w / P(B)) is null until
+    the evaluation is done (P(B) comes with its summary)."""
+    row = get(ctx, evaluation_id)
+    pb = _p_bounds(row)
+    conds = _conditions(evaluation_id, flt)
     col = _column(order_by)
     ordering = [col.is_(None), col.desc() if desc else col.asc(), EvaluationRunRow.run]
     with ctx.db.read_session() as s:
@@ -627,6 +640,48 @@ def page_runs(ctx: ServiceContext, evaluation_id: str, flt: RunFilter, offset: i
         rows = list(s.scalars(select(EvaluationRunRow).where(*conds).order_by(*ordering)
                               .offset(offset).limit(limit)))
         return total, [run_record(r, pb) for r in rows]
+
+
+def weight_sum(ctx: ServiceContext, evaluation_id: str, flt: RunFilter) -> float | None:
+    """The sum of the ``weight`` (w / P(B)) of the runs matching ``flt``; None until the
+    evaluation is done. Over the collided runs of the counted chunks it is n * P (the
+    estimate's numerator, docs/evaluation.md)."""
+    pb = _p_bounds(get(ctx, evaluation_id))
+    if pb is None:
+        return None
+    with ctx.db.read_session() as s:
+        total = s.scalar(select(func.coalesce(func.sum(EvaluationRunRow.weight_raw), 0.0))
+                         .where(*_conditions(evaluation_id, flt)))
+    return float(total or 0.0) / pb
+
+
+def pilot_chunks(ctx: ServiceContext, evaluation_id: str) -> tuple[int, ...]:
+    """The chunks of a finished evaluation that its estimate leaves out: the pilot chunks
+    of a cross-entropy campaign (each stored with ``counted`` false; docs/evaluation.md,
+    "what counts"). () when the summary's ``pilot_runs`` is 0 (every chunk counts, also
+    a campaign that never reached its final stage) or before the evaluation is done. The
+    stored chunks are read in order only until the pilot ones hold ``pilot_runs`` draws."""
+    row = get(ctx, evaluation_id)
+    summary = jsonconv.decode(row.summary) if row.summary else None
+    pilot = summary.get("pilot_runs") if isinstance(summary, dict) else None
+    if not isinstance(pilot, int | float) or pilot <= 0:
+        return ()
+    out: list[int] = []
+    seen = 0
+    with ctx.db.read_session() as s:
+        sizes = list(s.execute(select(EvaluationChunkRow.chunk_index, EvaluationChunkRow.n_runs)
+                               .where(EvaluationChunkRow.evaluation_id == evaluation_id)
+                               .order_by(EvaluationChunkRow.chunk_index)))
+        for index, n_runs in sizes:
+            if seen >= pilot:
+                break
+            data = s.scalar(select(EvaluationChunkRow.data).where(
+                EvaluationChunkRow.evaluation_id == evaluation_id,
+                EvaluationChunkRow.chunk_index == index))
+            if data is not None and not decode_chunk(data).counted:
+                out.append(int(index))
+                seen += int(n_runs)
+    return tuple(out)
 
 
 def run_by_index(ctx: ServiceContext, evaluation_id: str, run: int) -> dict[str, Any] | None:

@@ -20,6 +20,9 @@
   const VS_CAREFUL = "worse, same or better than UN R157's careful driver on the same " +
     "cut-in (worse: collides where it does not, or at a higher relative impact speed)";
   const WEIGHT = "the run's importance weight p/q in P(collision)";
+  const SHARE = "the run's weight over the sum of the weights of all collided runs the " +
+    "estimate counts (P is that sum over the number of draws it counts; pilot runs of a " +
+    "cross-entropy campaign are left out)";
   const RISK_HINT = "not computed: start the evaluation with risk: true (--risk, or tick " +
     "'score the drive with TTR risk') to " +
     "compute Wagner's r_dep of the SUT's drive; it costs several times the simulation";
@@ -273,29 +276,39 @@
       box.innerHTML = "<p class=\"note\">No run collided.</p>";
       return;
     }
-    const head = ["run", "impact speed (relative) [m/s]", "peak r_dep", "vs careful",
-                  "cutter v0 [m/s]", "dv [m/s]", "gap [m]", "weight"];
+    const head = ["run", "share of P", "weight", "impact speed (relative) [m/s]", "peak r_dep",
+                  "vs careful", "cutter v0 [m/s]", "dv [m/s]", "gap [m]"];
     const tips = {
+      "share of P": SHARE,
+      "weight": WEIGHT,
       "impact speed (relative) [m/s]": "the ego's speed minus the cutter's at contact",
       "peak r_dep": "the highest Wagner r_dep of the SUT's drive",
       "vs careful": VS_CAREFUL,
-      "weight": WEIGHT,
     };
+    // the share is the server's (view.failures[i].share); a pilot run has none
+    const share = (r) => r.counted === false ? "pilot (not counted)"
+      : r.share === null || r.share === undefined ? "–" : S.fmt(100 * r.share) + " %";
     const body = view.failures.map((r) => "<tr data-run=\"" + r.run + "\"><td><a href=\"#\">" +
-      r.run + "</a></td><td>" + S.esc(S.fmt(r.impact_speed)) + "</td><td>" +
+      r.run + "</a></td><td>" + S.esc(share(r)) + "</td><td>" + S.esc(S.fmt(r.weight)) +
+      "</td><td>" + S.esc(S.fmt(r.impact_speed)) + "</td><td>" +
       S.esc(riskCell(r.r_dep_peak)) + "</td><td>" + S.esc(r.vs_careful || "–") + "</td><td>" +
       S.esc(S.fmt(r.p_v0)) + "</td><td>" + S.esc(S.fmt(r.dv)) + "</td><td>" +
-      S.esc(S.fmt(r.gap)) + "</td><td>" + S.esc(S.fmt(r.weight)) + "</td></tr>").join("");
-    const shown = view.failures.length < view.failures_total
-      ? "the " + view.failures.length + " with the highest impact speed"
-      : "highest impact speed first";
+      S.esc(S.fmt(r.gap)) + "</td></tr>").join("");
+    const counted = view.failures.filter((r) => r.counted !== false).length;
+    const shown = (view.failures.length < view.failures_total
+      ? "the " + counted + " that carry most of P, largest weight first"
+      : "largest weight first (those that carry most of P)") +
+      (view.failures_pilot ? "; " + view.failures_pilot + " of them " +
+       (view.failures_pilot === 1 ? "is a pilot run" : "are pilot runs") + " of the " +
+       "cross-entropy campaign, not counted in P, listed after the others" : "");
     box.innerHTML = "<p class=\"note\">" + view.failures_total + " failing runs, " + shown +
       " (click one to drive it again beside the careful driver in " +
       "view 4 · Scenario):</p><table><tr>" +
       head.map((h) => "<th" + (tips[h] ? " title=\"" + S.esc(tips[h]) + "\"" : "") + ">" +
                S.esc(h) + "</th>").join("") + "</tr>" + body + "</table>" +
-      "<p class=\"note\" id=\"sut-failures-legend\">vs careful: " + S.esc(VS_CAREFUL) +
-      ". weight: " + S.esc(WEIGHT) + "." + (view.scatter.note || view.failures.some((r) =>
+      "<p class=\"note\" id=\"sut-failures-legend\">share of P: " + S.esc(SHARE) +
+      ". weight: " + S.esc(WEIGHT) + ". vs careful: " + S.esc(VS_CAREFUL) + "." +
+      (view.scatter.note || view.failures.some((r) =>
         riskCell(r.r_dep_peak) === "not computed") ? " peak r_dep " + S.esc(RISK_HINT) + "." : "") + "</p>";
     box.querySelectorAll("tr[data-run]").forEach((tr) => tr.addEventListener("click", (e) => {
       e.preventDefault();

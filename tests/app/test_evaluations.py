@@ -554,6 +554,100 @@ class _nothing:
         return False
 
 
+# --------------------------------------------------------------------------- by weight
+#: the hand-built campaign: chunk 0 a pilot chunk (counted False), chunk 1 counted;
+#: (weight_raw = p/q, collided, impact speed [m/s], simulated) per draw
+HAND_CHUNKS = (
+    (False, ((0.9, True, 1.0, True), (0.2, True, 3.0, True), (0.05, False, 0.0, True))),
+    (True, ((0.01, True, 40.0, True), (0.3, True, 2.0, True), (0.06, True, 5.0, True),
+            (0.5, False, 0.0, True), (0.7, False, 0.0, False))),
+)
+HAND_BATCH = 5  # chunk k's runs start at 5 k
+HAND_PB = 0.5  # the summary's P(B): weight = weight_raw / P(B)
+
+
+def _hand_built_evaluation(ctx: Any, *, done: bool) -> str:
+    """An evaluation whose chunks and runs are the hand-made ``HAND_CHUNKS`` (no
+    simulator): the weights, hence the order and the shares, are known by hand."""
+    from app import jsonconv
+    from app.db.models import EvaluationRow
+    from sampler.campaign import ChunkResult
+
+    eid = service.create(ctx, sut="acc", n=10, batch_size=HAND_BATCH, seed=0).id
+    model = ctx.model(service.describe(ctx, eid).model)
+    draws = 0
+    for k, (counted, runs) in enumerate(HAND_CHUNKS):
+        n = len(runs)
+        z = np.linspace(-0.5, 0.5, n)[:, None] * np.ones((1, model.n_features))
+        w = np.array([r[0] for r in runs])
+        chunk = ChunkResult(
+            index=k, params=model.params_matrix(model.from_z(z)), z=z,
+            seeds=np.arange(n, dtype=np.uint64), part=np.zeros(n, dtype=np.int64),
+            log_p=np.log(w), log_q=np.zeros(n), weights=w,
+            simulated=np.array([r[3] for r in runs]),
+            outcome={"collided": np.array([r[1] for r in runs]),
+                     "impact_speed": np.array([r[2] for r in runs])},
+            counted=counted)
+        assert service.store_chunk(ctx, eid, chunk, HAND_BATCH)
+        draws += n
+    if done:
+        pilot = sum(len(runs) for counted, runs in HAND_CHUNKS if not counted)
+        with ctx.db.session() as s:
+            row = s.get(EvaluationRow, eid)
+            row.status = "done"
+            row.summary = jsonconv.encode({"p_bounds": HAND_PB, "runs": draws,
+                                           "pilot_runs": pilot, "collisions": 3})
+    return eid
+
+
+def test_runs_by_weight_and_the_failures_that_carry_p(eval_client: Any) -> None:
+    """``order_by=weight`` and the dashboard's failures list on a hand-built campaign: the
+    counted collided runs have weights_raw 0.01 (impact 40 m/s: first by impact speed),
+    0.3 and 0.06, the pilot ones 0.9 and 0.2; P(B) = 0.5."""
+    ctx = eval_client.app.state.ctx
+    eid = _hand_built_evaluation(ctx, done=True)
+    # run index = chunk * 5 + position: chunk 0's are 0-2, chunk 1's 5-9 (9 not simulated)
+    page = eval_client.get(f"/evaluations/{eid}/runs",
+                           params={"order_by": "weight", "collided": "true"}).json()
+    assert [r["run"] for r in page["runs"]] == [0, 6, 1, 7, 5]  # 0.9, 0.3, 0.2, 0.06, 0.01
+    assert [r["weight"] for r in page["runs"]] == pytest.approx([1.8, 0.6, 0.4, 0.12, 0.02])
+    every = eval_client.get(f"/evaluations/{eid}/runs", params={"order_by": "weight"}).json()
+    assert [r["run"] for r in every["runs"]] == [0, 8, 6, 1, 7, 2, 5]  # 9: not simulated
+    up = eval_client.get(f"/evaluations/{eid}/runs",
+                         params={"order_by": "weight", "desc": "false", "limit": 2}).json()
+    assert [r["run"] for r in up["runs"]] == [5, 2]
+    # the dashboard: the counted collided runs by weight, then the pilot ones
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    assert view["failures_total"] == 5 and view["failures_pilot"] == 2
+    rows = view["failures"]
+    assert [r["run"] for r in rows] == [6, 7, 5, 0, 1]
+    assert [r["counted"] for r in rows] == [True, True, True, False, False]
+    counted_sum = 0.01 + 0.3 + 0.06  # P(B) cancels: weight / sum = weight_raw / sum
+    assert rows[0]["share"] == pytest.approx(0.3 / counted_sum, rel=1e-12)  # 0.8108...
+    assert rows[1]["share"] == pytest.approx(0.06 / counted_sum, rel=1e-12)
+    assert rows[2]["share"] == pytest.approx(0.01 / counted_sum, rel=1e-12)
+    assert rows[3]["share"] is None and rows[4]["share"] is None
+
+
+def test_failures_before_done_have_no_share(eval_client: Any) -> None:
+    """Until the evaluation is done (no P(B), no pilot_runs) every collided run is listed
+    by weight_raw and no share is given."""
+    eid = _hand_built_evaluation(eval_client.app.state.ctx, done=False)
+    view = eval_client.get(f"/dashboard/api/evaluations/{eid}").json()
+    assert view["failures_total"] == 5 and view["failures_pilot"] == 0
+    assert [r["run"] for r in view["failures"]] == [0, 6, 1, 7, 5]
+    assert all(r["share"] is None and r["weight"] is None for r in view["failures"])
+
+
+@pytest.mark.parametrize("key", ["weight_raw", "Weight", "-weight", "share"])
+def test_a_bad_order_key_is_named(eval_client: Any, key: str) -> None:
+    eid = _hand_built_evaluation(eval_client.app.state.ctx, done=True)
+    r = eval_client.get(f"/evaluations/{eid}/runs", params={"order_by": key})
+    assert r.status_code == 422
+    err = r.json()["error"]
+    assert err["field"] == "query.order_by" and "weight" in err["message"]
+
+
 # --------------------------------------------------------------------------- dashboard
 def test_dashboard_views_of_an_evaluation(eval_client: Any) -> None:
     eid = eval_client.post("/evaluations", json={"sut": "acc", "n": 600,
@@ -563,8 +657,24 @@ def test_dashboard_views_of_an_evaluation(eval_client: Any) -> None:
     assert view["evaluation"]["sut"] == "acc"
     assert view["figures"]["collisions"] == st["summary"]["collisions"]
     assert view["failures_total"] == st["summary"]["collisions"]
-    speeds = [r["impact_speed"] for r in view["failures"]]
-    assert speeds == sorted(speeds, reverse=True)
+    # the runs that carry most of P first; the shares of all counted collided runs add up
+    # to 1 and make P: sum(weight) / counted draws (the summary's runs - pilot_runs)
+    # (the pilot ones of the cross-entropy campaign after them); a run's share is its
+    # weight over the sum of the counted collided runs' weights, which is P times the
+    # counted draws (the summary's runs - pilot_runs; no region: P(A) = 1)
+    rows = view["failures"]
+    counted = [r for r in rows if r["counted"]]
+    assert rows[:len(counted)] == counted
+    if len(rows) == view["failures_total"]:  # all shown
+        assert len(rows) - len(counted) == view["failures_pilot"]
+    for part in (counted, rows[len(counted):]):
+        weights = [r["weight"] for r in part]
+        assert weights == sorted(weights, reverse=True)
+    summary = st["summary"]
+    whole = summary["p_collision"]["estimate"] * (summary["runs"] - summary["pilot_runs"])
+    assert counted and [r["share"] for r in counted] == pytest.approx(
+        [r["weight"] / whole for r in counted], rel=1e-9)
+    assert all(r["share"] is None for r in rows[len(counted):])
     sc = view["scatter"]
     n_shown = min(400, st["runs_simulated"])
     assert len(sc["run"]) == len(sc["btn"]) == len(sc["r_dep_peak"]) == n_shown

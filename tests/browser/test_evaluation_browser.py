@@ -136,12 +136,22 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
                 assert acc_rows.nth(1).get_attribute("class") is None
             if view["failures"]:
                 # the columns explained: tooltips and a legend under the table
-                for col in ("vs careful", "weight"):
+                for col in ("vs careful", "weight", "share of P"):
                     tip = page.locator("#sut-failures th", has_text=col).get_attribute("title")
                     assert tip and len(tip) > 20
                 legend = page.locator("#sut-failures-legend").inner_text()
                 assert "vs careful: worse, same or better than UN R157" in legend
                 assert "importance weight p/q" in legend
+                assert "share of P: the run's weight over the sum" in legend
+                # the share is the server's, as a percentage; a pilot run has none
+                cells = page.locator("#sut-failures tr[data-run] td:nth-child(2)")
+                for i, r in enumerate(view["failures"]):
+                    text = cells.nth(i).inner_text()
+                    if r["counted"] is False:
+                        assert text == "pilot (not counted)"
+                    else:
+                        assert text.endswith(" %")
+                        assert float(text[:-2]) == pytest.approx(100 * r["share"], rel=6e-3)
                 if sc["note"]:  # no risk asked: how to get it
                     assert "risk: true (--risk" in legend
             # every value of the failures list on one line (a weight like 8.25e-4 was
@@ -271,7 +281,8 @@ def test_a_failing_run_opens_in_the_scenario_view(served: tuple[str, dict[str, s
     page.wait_for_selector("#sut-note[data-state=done]", timeout=TIMEOUT_MS)
     # the evaluation of 400 draws (the test above adds two of 6 draws, newer)
     page.select_option("#eval-select", ids["acc"])
-    # its highest-impact failing run is drawn in view 4, beside the careful driver
+    # its first failing run (the largest weight) is drawn in view 4, beside the careful
+    # driver
     plot = "#view-scenario #scenario-run #sut-run-plot"
     page.wait_for_selector(f"{plot}[data-source='{ids['acc']}#{failures[0]['run']}']"
                            "[data-rendered='1']", timeout=TIMEOUT_MS)
@@ -294,7 +305,10 @@ def test_a_failing_run_opens_in_the_scenario_view(served: tuple[str, dict[str, s
         (t) => t.y.length > 0 && t.y[t.y.length - 1] !== null)""")
     note = page.locator("#sut-failures p.note:not(#sut-failures-legend)").inner_text()
     if len(failures) < view["failures_total"]:
-        assert f"the {len(failures)} with the highest impact speed" in note
+        counted = sum(1 for r in failures if r["counted"])
+        assert f"the {counted} that carry most of P, largest weight first" in note
+    else:
+        assert "largest weight first (those that carry most of P)" in note
     # section 7 no longer holds the profile; it says where it is
     assert page.locator("#view-sut #sut-run-plot").count() == 0
     where = page.locator("#view-sut a[href='#scenario-run']")
