@@ -32,6 +32,7 @@ from scipy.stats import norm
 from datasets import PARAM_NAMES
 from sampler.campaign.proposal import (
     DEFAULT_ENVELOPES,
+    BandPool,
     Proposal,
     build_ce_proposal,
     build_proposal,
@@ -558,31 +559,36 @@ def _unscored(chunks: Sequence[ChunkResult]) -> bool:
 
 
 def _ce_elite(previous: Sequence[ChunkResult], rho: float, min_hits: int
-              ) -> tuple[tuple[FloatArray, FloatArray] | None, float, bool]:
+              ) -> tuple[tuple[FloatArray, FloatArray] | None, float, bool, BandPool | None]:
     """The cross-entropy step's elite from the runs so far (multi-level: Rubinstein &
     Kroese 2004): with at least ``min_hits`` collided runs the elite are the collided
     runs (level 0, final stage); else the runs so far whose score is at most the
     ``rho``-quantile gamma of the last chunk's scores (level gamma > 0, a pilot stage).
-    Returns (z rows and weights p/q of the elite, or None; the level; final stage?)."""
+    Returns (z rows and weights p/q of the elite, or None; the level; final stage?;
+    in the final stage all the runs so far with their scores, for the bands' own step)."""
     zs, ws, ss = [], [], []
+    drawn: dict[str, int] = {}
     for c in previous:
         sc = performance_score(c.outcome, c.simulated)
         if sc is None:
-            return None, math.inf, False
+            return None, math.inf, False, None
         zs.append(c.z)
         ws.append(c.weights)
         ss.append(sc)
+        counts = np.bincount(c.part, minlength=len(c.proposal))
+        for j, row in enumerate(c.proposal):
+            drawn[row["part"]] = drawn.get(row["part"], 0) + int(counts[j])
     if not zs:
-        return None, math.inf, False
+        return None, math.inf, False, None
     z, w, s = np.concatenate(zs), np.concatenate(ws), np.concatenate(ss)
     hit = s <= 0
     if int(hit.sum()) >= min_hits:
-        return (z[hit], w[hit]), 0.0, True
+        return (z[hit], w[hit]), 0.0, True, BandPool(z, w, s, drawn)
     gamma = float(np.quantile(ss[-1], rho, method="inverted_cdf"))
     if not math.isfinite(gamma):
-        return None, math.inf, False
+        return None, math.inf, False, None
     sel = s <= gamma
-    return (z[sel], w[sel]), gamma, False
+    return (z[sel], w[sel]), gamma, False, None
 
 
 #: share of the earlier pilot levels' mixtures in a cross-entropy chunk's proposal
@@ -606,9 +612,10 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
     def build(j: int, history: list[Any]
               ) -> tuple[Proposal, bool, float, np.random.Generator]:
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(j)]))
-        elite, level, counted = _ce_elite(previous[:j], rho, ce_min_hits)
+        elite, level, counted, pool = _ce_elite(previous[:j], rho, ce_min_hits)
         prop = build_ce_proposal(model, region=region, lane_width=region.lane_width,
                                  elite=elite, level=level, rng=rng, envelopes=envelopes,
+                                 pool=pool,
                                  alpha=alpha, history=history,
                                  history_share=CE_HISTORY_SHARE, inflate=CE_INFLATE)
         return prop, counted, level, rng

@@ -44,8 +44,8 @@ from sampler.model.gmm import CutInGMM
 from sampler.model.memo import memoised
 from sampler.region.constraints import Region
 
-__all__ = ["DEFAULT_ENVELOPES", "GaussianMixture", "MixturePart", "Proposal", "band_part",
-           "build_ce_proposal", "build_proposal", "fit_ce_mixture", "fit_weighted_gmm",
+__all__ = ["DEFAULT_ENVELOPES", "BandPool", "GaussianMixture", "MixturePart", "Proposal",
+           "band_part", "build_ce_proposal", "build_proposal", "fit_ce_mixture", "fit_weighted_gmm",
            "lateral_band_parts", "region_mixture", "widened_model"]
 
 FloatArray = NDArray[np.float64]
@@ -73,6 +73,10 @@ BAND_KERNEL_SHARE = 0.1
 #: most kernel centres of that part, their bandwidth factor and degrees of freedom
 BAND_KERNEL_CENTRES = 300
 BAND_KERNEL_INFLATE = 1.3
+#: a band with too few collided runs: its own cross-entropy step on this many of its
+#: lowest-score runs, once the band part drew ``BAND_LEVEL_MIN_DRAWN`` rows
+BAND_LEVEL_ELITE = 30
+BAND_LEVEL_MIN_DRAWN = 300
 
 
 class MixturePart(Protocol):
@@ -577,7 +581,8 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
                       kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3,
                       history: Sequence[GaussianMixture] = (), history_share: float = 0.1,
                       inflate: float = 1.2, set_share: float | None = None,
-                      band_hits_share: float = BAND_HITS_SHARE) -> Proposal:
+                      band_hits_share: float = BAND_HITS_SHARE,
+                      pool: BandPool | None = None) -> Proposal:
     """The proposal of one chunk of an adaptive cross-entropy campaign: the model
     (``alpha``: weights stay below ``1 / alpha``), the wide part, the envelopes
     (``envelope_share`` together) and, with ``elite`` (z rows and their weights ``p/q``
@@ -588,7 +593,9 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     failure family found once (by an envelope, say) is drawn again in the next chunk
     even when the mixture fit has no component there; and for each band part
     (``sampler.campaign.band``) the same band refitted to the collided runs on it
-    (``band_hits_share`` each, :func:`_band_hit_parts`). The set and band parts share
+    (``band_hits_share`` each, :func:`_band_hit_parts`; with ``pool``, all the runs so
+    far, a band with too few collided runs gets the cross-entropy step on its own
+    runs' scores instead). The set and band parts share
     ``set_share``: ``SET_SHARE`` in the pilot, ``FINAL_SET_SHARE`` at level 0 by
     default. Without elite: as :func:`build_proposal` before any collision."""
     if set_share is None:
@@ -608,7 +615,7 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
         parts.append(_fitted_part(elite[0], elite[1], rng, model, 300, 1.3, 5.0))
         shares.append(kernel_share)
         rest -= kernel_share
-        for hp, share in _band_hit_parts(sets, elite, rng, band_hits_share):
+        for hp, share in _band_hit_parts(sets, elite, rng, band_hits_share, pool):
             parts.append(hp)
             shares.append(share)
             rest -= share
@@ -630,9 +637,49 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     return out
 
 
+@dataclass
+class BandPool:
+    """All the simulated runs so far, for the bands' own cross-entropy step: z rows,
+    weights ``p / q``, performance scores (at most 0 exactly for the collided runs) and,
+    per part name, how many rows that part drew."""
+
+    z: FloatArray
+    w: FloatArray
+    score: FloatArray
+    drawn: dict[str, int]
+
+
+def _band_level_elite(b: BandPart, pool: BandPool, min_drawn: int, size: int,
+                      block: int = 4096) -> tuple[FloatArray, FloatArray] | None:
+    """The ``size`` runs on ``b``'s band with the lowest scores (z rows, weights), once
+    the band part drew at least ``min_drawn`` rows (so the elite is the band's lower
+    tail, at most ``size / min_drawn`` of its runs); None before, or with fewer runs
+    on the band. Walks the runs by ascending score in blocks (the band is evaluated on
+    the rows it needs only)."""
+    if pool.drawn.get(b.name, 0) < min_drawn:
+        return None
+    order = np.argsort(pool.score, kind="stable")
+    order = order[np.isfinite(pool.score[order])]
+    got: list[NDArray[np.int64]] = []
+    n_got = 0
+    for i in range(0, order.size, block):
+        idx = order[i:i + block]
+        lo, hi = b.band(pool.z[idx])
+        zj = pool.z[idx, b.law.j]
+        on = idx[(zj >= lo) & (zj <= hi)]
+        got.append(on[:size - n_got])
+        n_got += min(on.size, size - n_got)
+        if n_got >= size:
+            break
+    if n_got < size:
+        return None
+    sel = np.concatenate(got)
+    return pool.z[sel], pool.w[sel]
+
+
 def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatArray],
-                    rng: np.random.Generator, share: float = BAND_HITS_SHARE
-                    ) -> list[tuple[BandPart, float]]:
+                    rng: np.random.Generator, share: float = BAND_HITS_SHARE,
+                    pool: BandPool | None = None) -> list[tuple[BandPart, float]]:
     """For each band part, when at least 2 d collided runs lie on its band, two parts of
     the same band with their shares (together ``share``, split equally between the bands
     that have such runs): ``g`` refitted to those runs
@@ -641,26 +688,42 @@ def _band_hit_parts(sets: Sequence[MixturePart], elite: tuple[FloatArray, FloatA
     ``BAND_KERNEL_SHARE``: non-parametric, so a group of collided runs on the band that
     the refit does not cover, found once by the band part itself, is drawn again). The
     band's thin direction is still drawn exactly from the model's conditional law
-    (``sampler.campaign.band``)."""
+    (``sampler.campaign.band``).
+
+    With ``pool`` (all the runs so far), a band with fewer collided runs gets one part,
+    ``ce:<band>-level``, its ``g`` refitted the same way to the ``BAND_LEVEL_ELITE``
+    runs on the band with the lowest scores, once the band part drew
+    ``BAND_LEVEL_MIN_DRAWN`` rows (:func:`_band_level_elite`): a multi-level
+    cross-entropy step inside the band, led by the band's own near misses. A collision
+    family that is a small corner of its band (the drifting cutter of ``end_margin``)
+    is too rare under the band part for the campaign to meet 2 d of it; its near misses
+    lead the band there."""
     z, w = elite
     out: list[tuple[BandPart, float]] = []
-    eligible: list[tuple[BandPart, FloatArray, FloatArray]] = []
+    eligible: list[tuple[BandPart, FloatArray, FloatArray, bool]] = []
     for b in sets:
         if not isinstance(b, BandPart):
             continue
         lo, hi = b.band(z)
         zj = z[:, b.law.j]
         on = (zj >= lo) & (zj <= hi)
-        if int(on.sum()) < 2 * z.shape[1]:
+        if int(on.sum()) >= 2 * z.shape[1]:
+            eligible.append((b, z[on][:, b.law.rest], w[on], True))
             continue
-        eligible.append((b, z[on][:, b.law.rest], w[on]))
-    # several bands with collided runs split ``share`` equally (one band keeps all of it)
+        lev = None if pool is None else _band_level_elite(
+            b, pool, BAND_LEVEL_MIN_DRAWN, max(BAND_LEVEL_ELITE, 2 * z.shape[1]))
+        if lev is not None:
+            eligible.append((b, lev[0][:, b.law.rest], lev[1], False))
+    # several bands with such runs split ``share`` equally (one band keeps all of it)
     n_b = max(len(eligible), 1)
     k_share = min(BAND_KERNEL_SHARE, share) / n_b
     b_share = share / n_b
-    for b, zr, wr in eligible:
+    for b, zr, wr, hits in eligible:
         g = fit_ce_mixture(zr, wr ** BAND_HITS_TEMPER, rng, max_k=BAND_HITS_K,
                            inflate=BAND_HITS_INFLATE, nu=5.0, shape="fitted")
+        if not hits:
+            out.append((BandPart(f"ce:{b.name}-level", b.law, b.band, g), b_share))
+            continue
         if k_share < b_share:
             out.append((BandPart(f"ce:{b.name}-hits", b.law, b.band, g), b_share - k_share))
         if k_share > 0:

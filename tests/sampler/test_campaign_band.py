@@ -23,7 +23,14 @@ from sampler.campaign.band import (
     _truncated_std_normal,
     v_cut_min_band,
 )
-from sampler.campaign.proposal import band_part, build_ce_proposal
+from sampler.campaign.proposal import (
+    BAND_HITS_SHARE,
+    BAND_LEVEL_ELITE,
+    BandPool,
+    _band_level_elite,
+    band_part,
+    build_ce_proposal,
+)
 from sampler.region.kinematics import plateau_speeds
 from tests.sampler.factories import assert_band_density, synthetic_parameter_table
 
@@ -242,3 +249,71 @@ def test_band_kernels_keep_mass_on_a_group_the_refit_misses(model: CutInGMM) -> 
     i = int(np.argmax(at_small))
     peak = stats.multivariate_t(loc=small[i], shape=g.covs[0], df=5.0).pdf(small[i])
     assert np.exp(g.log_q(small[i:i + 1]))[0] >= at_small[i] / m * peak
+
+
+def _on_band(part: BandPart, z: np.ndarray) -> np.ndarray:
+    lo, hi = part.band(z)
+    zj = z[:, part.law.j]
+    return np.asarray((zj >= lo) & (zj <= hi), dtype=bool)
+
+
+def test_band_level_elite_against_brute_force(model: CutInGMM, part: BandPart) -> None:
+    """The band's own elite is the ``size`` runs on the band with the lowest scores:
+    checked against the band evaluated on every row (the function walks the rows by
+    score in blocks), with non-finite scores never chosen; None until the band part drew
+    ``min_drawn`` rows, and None when fewer than ``size`` runs lie on the band."""
+    rng = np.random.default_rng(21)
+    z = model.sample_z(30_000, rng)
+    score = rng.standard_normal(z.shape[0])
+    score[::7] = np.inf  # runs outside the region: never elite
+    w = rng.uniform(0.5, 2.0, z.shape[0])
+    pool = BandPool(z, w, score, {part.name: 500})
+    on = _on_band(part, z) & np.isfinite(score)
+    assert on.sum() > 40
+    want = np.flatnonzero(on)[np.argsort(score[on], kind="stable")[:25]]
+    got = _band_level_elite(part, pool, min_drawn=300, size=25, block=997)
+    assert got is not None
+    assert np.array_equal(got[0], z[want]) and np.array_equal(got[1], w[want])
+    assert _band_level_elite(part, pool, min_drawn=501, size=25) is None
+    assert _band_level_elite(part, pool, min_drawn=300, size=int(on.sum()) + 1) is None
+    assert _band_level_elite(part, BandPool(z, w, score, {}), min_drawn=1, size=5) is None
+
+
+def test_final_stage_without_band_collisions_follows_the_band_near_misses(
+        model: CutInGMM) -> None:
+    """At level 0 with no collided run on the band but a pool of runs so far, the band
+    gets one part ``-level``: the band with ``g`` refitted to its lowest-score runs,
+    with all of ``band_hits_share``; its draws stay on the band and sit where those runs
+    do, and the whole mixture's weights still average to 1."""
+    envs = (f"v_cut_min<{C:g}",)
+    bp = band_part(model, C, seed=0, n=1 << 18)  # the proposal's own (memoised) part
+    assert bp is not None
+    rng = np.random.default_rng(31)
+    z = model.sample_z(200_000, rng)
+    on = _on_band(bp, z)
+    jg = _col(model, "gap")
+    score = np.where(on, z[:, jg], np.inf) + 10.0  # no run collided (score > 0)
+    pool = BandPool(z, np.ones(z.shape[0]), score, {bp.name: 1000})
+    # collided runs elsewhere only: far off the band
+    z_hit = z[~on][:40]
+    prop = build_ce_proposal(model, region=None, lane_width=model.lane_width_,
+                             elite=(z_hit, np.ones(40)), level=0.0,
+                             rng=np.random.default_rng(8), envelopes=envs, pool=pool)
+    shares = {d["part"]: d["share"] for d in prop.describe()}
+    name = f"ce:band:v_cut_min<{C:g}-level"
+    assert math.isclose(shares[name], BAND_HITS_SHARE, rel_tol=1e-12)
+    assert not any(n.endswith(("-hits", "-kernels")) for n in shares if n.startswith("ce:band"))
+    zq, _ = prop.draw(40_000, np.random.default_rng(9))
+    wq = np.exp(model.log_density_z(zq) - prop.log_q(zq))
+    se = wq.std(ddof=1) / math.sqrt(wq.size)
+    assert abs(wq.mean() - 1.0) <= 4 * se
+    lev = next(p for p in prop.parts if p.name == name)
+    assert isinstance(lev, BandPart)
+    zl = lev.draw(5000, np.random.default_rng(10))
+    lo, hi = lev.band(zl)
+    full = hi > lo
+    assert full.mean() > 0.9 and np.all(_on_band(lev, zl)[full])
+    elite = z[on][np.argsort(z[on][:, jg])[:BAND_LEVEL_ELITE]]
+    zb = bp.draw(5000, np.random.default_rng(11))
+    centre = np.median(elite[:, jg])
+    assert np.median(np.abs(zl[:, jg] - centre)) < 0.5 * np.median(np.abs(zb[:, jg] - centre))
