@@ -591,8 +591,13 @@ def _ce_elite(previous: Sequence[ChunkResult], rho: float, min_hits: int
     return (z[sel], w[sel]), gamma, False, None
 
 
+#: the largest defensive share of the model a campaign takes (the final stage's other
+#: parts take the rest: ``sampler.campaign.proposal.build_ce_proposal``)
+MAX_ALPHA = 0.2
 #: share of the earlier pilot levels' mixtures in a cross-entropy chunk's proposal
 CE_HISTORY_SHARE = 0.1
+#: ... in the final stage (level 0): its collided runs lead, the pilot levels keep less
+CE_FINAL_HISTORY_SHARE = 0.05
 #: scale factor of the cross-entropy mixture's components
 CE_INFLATE = 1.2
 
@@ -617,7 +622,9 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
                                  elite=elite, level=level, rng=rng, envelopes=envelopes,
                                  pool=pool,
                                  alpha=alpha, history=history,
-                                 history_share=CE_HISTORY_SHARE, inflate=CE_INFLATE)
+                                 history_share=(CE_HISTORY_SHARE if level > 0
+                                                else CE_FINAL_HISTORY_SHARE),
+                                 inflate=CE_INFLATE)
         return prop, counted, level, rng
 
     def history(j: int) -> list[Any]:
@@ -760,6 +767,9 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                            field="batch_size")
     if isinstance(seed, bool) or int(seed) < 0:
         raise SamplerError(f"seed: must be an integer >= 0, got {seed!r}", field="seed")
+    if not (isinstance(alpha, int | float) and 0 < alpha <= MAX_ALPHA):
+        raise SamplerError(f"alpha: the model's defensive share must be in (0, {MAX_ALPHA:g}], "
+                           f"got {alpha!r}", field="alpha")
     if adapt not in ("kernels", "ce"):
         raise SamplerError(f"adapt: must be 'kernels' or 'ce', got {adapt!r}", field="adapt")
     if not (isinstance(rho, int | float) and 0 < rho < 1):

@@ -60,9 +60,12 @@ DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "d
 #: the cross-entropy stage's share of the parts fitted to a set without a half-space
 SET_SHARE = 0.2
 #: ... and in the final stage (level 0), once the band parts' own collisions are fitted
-FINAL_SET_SHARE = 0.1
-#: the final stage's share of each band part refitted to the collided runs on its band
-BAND_HITS_SHARE = 0.2
+FINAL_SET_SHARE = 0.2
+#: the final stage's share of the band parts refitted to the runs on their bands (split
+#: equally between the bands that have such runs)
+BAND_HITS_SHARE = 0.3
+#: the final stage's share of the Student-t kernels at the collided runs
+FINAL_KERNEL_SHARE = 0.1
 #: the refit's weights are ``(p / q)^BAND_HITS_TEMPER``, its scales times ``BAND_HITS_INFLATE``
 BAND_HITS_TEMPER = 1.0
 BAND_HITS_INFLATE = 1.6
@@ -578,7 +581,7 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
                       rng: np.random.Generator,
                       envelopes: Sequence[str] = DEFAULT_ENVELOPES, alpha: float = 0.1,
                       wide_share: float = 0.05, envelope_share: float = 0.1,
-                      kernel_share: float = 0.2, widen: float = 1.5, max_k: int = 3,
+                      kernel_share: float = FINAL_KERNEL_SHARE, widen: float = 1.5, max_k: int = 3,
                       history: Sequence[GaussianMixture] = (), history_share: float = 0.1,
                       inflate: float = 1.2, set_share: float | None = None,
                       band_hits_share: float = BAND_HITS_SHARE,
@@ -623,6 +626,9 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
         parts.append(_MixturePart(f"ce:levels{len(history)}", _pooled_mixtures(history)))
         shares.append(history_share)
         rest -= history_share
+    if rest <= 0:
+        raise ValueError(f"build_ce_proposal: the fixed shares (alpha {alpha:g} and the "
+                         f"others) leave {rest:.3g} for the fitted mixture; lower alpha")
     parts.append(_MixturePart(f"ce:gmm{gm.weights.size}@{level:.4g}x{elite[0].shape[0]}",
                               gm))
     shares.append(rest)

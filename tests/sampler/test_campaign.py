@@ -294,7 +294,9 @@ def test_records_carry_weights_and_outcomes(model: CutInGMM) -> None:
 
 @pytest.mark.parametrize("kwargs, field", [({"n": 0}, "n"), ({"rhw": 0}, "rhw"),
                                            ({"seed": -1}, "seed"),
-                                           ({"batch_size": 0}, "batch_size")])
+                                           ({"batch_size": 0}, "batch_size"),
+                                           ({"alpha": 0.0}, "alpha"),
+                                           ({"alpha": 0.25}, "alpha")])
 def test_bad_settings_name_the_field(model: CutInGMM, kwargs: dict[str, object],
                                      field: str) -> None:
     with pytest.raises(SamplerError) as err:

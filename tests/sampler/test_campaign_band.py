@@ -25,7 +25,9 @@ from sampler.campaign.band import (
 )
 from sampler.campaign.proposal import (
     BAND_HITS_SHARE,
+    BAND_KERNEL_SHARE,
     BAND_LEVEL_ELITE,
+    FINAL_SET_SHARE,
     BandPool,
     _band_level_elite,
     band_part,
@@ -175,9 +177,16 @@ def test_final_stage_refits_the_band_to_its_collisions(model: CutInGMM) -> None:
                              elite=(z_e, np.ones(60)), level=0.0,
                              rng=np.random.default_rng(8), envelopes=envs)
     shares = {d["part"]: d["share"] for d in prop.describe()}
-    assert math.isclose(shares[f"band:v_cut_min<{C:g}"], 0.1, rel_tol=1e-12)
-    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-hits"], 0.1, rel_tol=1e-12)
-    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-kernels"], 0.1, rel_tol=1e-12)
+    assert math.isclose(shares[f"band:v_cut_min<{C:g}"], FINAL_SET_SHARE, rel_tol=1e-12)
+    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-hits"],
+                        BAND_HITS_SHARE - BAND_KERNEL_SHARE, rel_tol=1e-12)
+    assert math.isclose(shares[f"ce:band:v_cut_min<{C:g}-kernels"], BAND_KERNEL_SHARE,
+                        rel_tol=1e-12)
+    assert math.isclose(sum(shares.values()), 1.0, rel_tol=1e-12)
+    with pytest.raises(ValueError, match="lower alpha"):
+        build_ce_proposal(model, region=None, lane_width=model.lane_width_,
+                          elite=(z_e, np.ones(60)), level=0.0,
+                          rng=np.random.default_rng(8), envelopes=envs, alpha=0.45)
     zq, _ = prop.draw(40_000, np.random.default_rng(9))
     w = np.exp(model.log_density_z(zq) - prop.log_q(zq))
     assert np.isfinite(w).all() and w.max() <= 1 / 0.1 + 1e-9
