@@ -272,6 +272,8 @@ def main() -> None:
     ap.add_argument("--sut-rhw", type=float, default=0.3,
                     help="the SUT campaigns' stop rule: relative half-width of the 95 %% "
                          "interval (Part B)")
+    ap.add_argument("--band-step", action="store_true",
+                    help="SUT campaigns with evaluate(..., band_step=True)")
     ap.add_argument("--adapt", default="ce", choices=("ce", "kernels"),
                     help="proposal adaptation of the SUT campaigns (Part B)")
     a = ap.parse_args()
@@ -324,7 +326,8 @@ def main() -> None:
         print(f"  campaigns: adapt={a.adapt}, chunks of {a.sut_batch} runs")
         seeds = range(a.sut_seed0, a.sut_seed0 + a.sut_seeds)
         res = campaigns(model, runner_s, seeds, workers=a.sut_workers,
-                        batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw) if seeds else []
+                        batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw,
+                        **({"band_step": True} if a.band_step else {})) if seeds else []
         if a.save:
             with open(a.save, "w") as fh:
                 for s, r in zip(seeds, res, strict=True):

@@ -60,12 +60,17 @@ DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "d
 #: the cross-entropy stage's share of the parts fitted to a set without a half-space
 SET_SHARE = 0.2
 #: ... and in the final stage (level 0), once the band parts' own collisions are fitted
-FINAL_SET_SHARE = 0.2
+FINAL_SET_SHARE = 0.1
 #: the final stage's share of the band parts refitted to the runs on their bands (split
 #: equally between the bands that have such runs)
-BAND_HITS_SHARE = 0.3
+BAND_HITS_SHARE = 0.2
 #: the final stage's share of the Student-t kernels at the collided runs
-FINAL_KERNEL_SHARE = 0.1
+FINAL_KERNEL_SHARE = 0.2
+#: the final stage's shares with ``evaluate(..., band_step=True)``: the set and band
+#: parts, the band refits (the bands' own cross-entropy step included) and the kernels
+BAND_STEP_SET_SHARE = 0.2
+BAND_STEP_HITS_SHARE = 0.3
+BAND_STEP_KERNEL_SHARE = 0.1
 #: the refit's weights are ``(p / q)^BAND_HITS_TEMPER``, its scales times ``BAND_HITS_INFLATE``
 BAND_HITS_TEMPER = 1.0
 BAND_HITS_INFLATE = 1.6

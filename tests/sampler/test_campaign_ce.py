@@ -357,3 +357,32 @@ def test_next_ce_proposal_is_the_one_the_next_chunk_drew_from(model: CutInGMM) -
     prop = next_ce_proposal(short)
     assert np.array_equal(prop.log_q(nxt.z), nxt.log_q)
     assert prop.describe() == nxt.proposal
+
+
+def test_band_step_is_opt_in_and_sets_the_final_shares(model: CutInGMM) -> None:
+    """``band_step=True`` gives the final stage the band-weighted shares (the set and band
+    parts ``BAND_STEP_SET_SHARE`` together, the kernels ``BAND_STEP_KERNEL_SHARE``); the
+    default keeps ``FINAL_SET_SHARE`` and ``FINAL_KERNEL_SHARE``. The pilot is the same
+    either way, chunk for chunk."""
+    from sampler.campaign.proposal import (
+        BAND_STEP_KERNEL_SHARE,
+        BAND_STEP_SET_SHARE,
+        FINAL_KERNEL_SHARE,
+        FINAL_SET_SHARE,
+    )
+    a, b, _ = _rare_halfspace(model, 1e-4)
+    runs = {}
+    for step in (False, True):
+        runs[step] = evaluate(model, halfspace_runner(model, a, b), n=1500, seed=1,
+                              batch_size=300, physical_bounds=False, bootstrap=False,
+                              adapt="ce", ce_min_hits=5, band_step=step)
+    first = [c.counted for c in runs[False].chunks].index(True)
+    for k in range(first):
+        assert np.array_equal(runs[False].chunks[k].z, runs[True].chunks[k].z)
+    for step, set_share, kern_share in ((False, FINAL_SET_SHARE, FINAL_KERNEL_SHARE),
+                                        (True, BAND_STEP_SET_SHARE, BAND_STEP_KERNEL_SHARE)):
+        last = runs[step].chunks[-1].proposal
+        sets = sum(p["share"] for p in last if p["part"].startswith(("band:", "set:")))
+        kern = sum(p["share"] for p in last if p["part"].startswith("fitted:"))
+        assert math.isclose(sets, set_share, rel_tol=1e-9)
+        assert math.isclose(kern, kern_share, rel_tol=1e-9)
