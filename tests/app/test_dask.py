@@ -62,14 +62,24 @@ def test_executors_are_what_the_settings_say(cluster: Any) -> None:
         local.close()
 
 
-def _evaluate(data_dir: Path, **settings: Any) -> tuple[dict[str, Any], str]:
+def _evaluate(data_dir: Path, model: Any = None, **settings: Any
+              ) -> tuple[dict[str, Any], str, Any]:
+    """The summary of one evaluation, the executor's name and the default model object.
+    ``model``: that object from an earlier call, kept by this context (as a service keeps
+    it between requests): its memo (``sampler.model.memo``: the proposal's fixed parts,
+    about 10 s per model object here, estimated in the driver whatever the executor, from
+    a fixed seed) is not estimated again."""
     from app.services import evaluations
 
     ctx = open_context(make_settings(data_dir, **settings))
     try:
+        assert ctx.default_model_id is not None
+        if model is not None:
+            ctx.remember_model(ctx.default_model_id, model)
         row = evaluations.create(ctx, sut="acc", n=240, seed=5, batch_size=120)
         assert evaluations.run_job(ctx, row.id) == "done"
-        return evaluations.describe(ctx, row.id).summary or {}, ctx.executor.name
+        return (evaluations.describe(ctx, row.id).summary or {}, ctx.executor.name,
+                ctx.model(ctx.default_model_id))
     finally:
         ctx.close()
 
@@ -81,9 +91,9 @@ def test_an_evaluation_gives_the_same_summary_inline_on_the_pool_and_on_dask(
     local process pool, a dask.distributed cluster) with the same result as inline."""
     data_dir = tmp_path / "data"
     copy_model_cache(model_cache_dir, data_dir)
-    inline, k0 = _evaluate(data_dir, local_workers=0)
-    local, k1 = _evaluate(data_dir, local_workers=2)
-    dask, k2 = _evaluate(data_dir, dask_scheduler=cluster.scheduler_address)
+    inline, k0, model = _evaluate(data_dir, local_workers=0)
+    local, k1, _ = _evaluate(data_dir, model, local_workers=2)
+    dask, k2, _ = _evaluate(data_dir, model, dask_scheduler=cluster.scheduler_address)
     assert (k0, k1, k2) == ("inline", "local", "dask")
     assert inline["runs"] == 240 and inline["sut_runs"] > 0
     assert local == inline
