@@ -114,6 +114,23 @@ def service_env(data_dir: Path, **settings: str) -> dict[str, str]:
     return env
 
 
+def share_models(monkeypatch: pytest.MonkeyPatch, kept: dict[str, Any]) -> None:
+    """Every context opened from now on (until ``monkeypatch`` undoes it) keeps the one
+    model object ``kept`` holds for a model's JSON, the first one registered, instead of
+    its own copy: as one service process keeps its model between requests. Its memo
+    (``sampler.model.memo``: the campaign proposal's fixed parts, P(B) and its bootstrap,
+    about 9 s per model object, from a fixed seed) is then estimated once, not once per
+    CLI call. Not for a test that checks a fresh model gives the same bytes."""
+    from app.context import ServiceContext
+
+    remember = ServiceContext.remember_model
+
+    def keep(self: ServiceContext, model_id: str, model: Any) -> None:
+        remember(self, model_id, kept.setdefault(model.to_json(), model))
+
+    monkeypatch.setattr(ServiceContext, "remember_model", keep)
+
+
 def copy_model_cache(src_data_dir: Path, dst_data_dir: Path) -> None:
     """Reuse the extracted embedded table and the fitted default model (both caches are
     keyed by the data's hash)."""

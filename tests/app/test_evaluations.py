@@ -411,6 +411,21 @@ def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
     return _cli_runner(monkeypatch)
 
 
+@pytest.fixture(scope="module")
+def _models() -> dict[str, Any]:
+    """The model objects the CLI tests below share (``share_models``)."""
+    return {}
+
+
+@pytest.fixture
+def shared_model(monkeypatch: pytest.MonkeyPatch, _models: dict[str, Any]) -> None:
+    """The CLI's context keeps the default model object of the shared campaign (or of the
+    first CLI test to run): its memo is not estimated again (``share_models``)."""
+    from tests.app.factories import share_models
+
+    share_models(monkeypatch, _models)
+
+
 #: the CLI campaign that three tests below read (made once: each costs seconds)
 ACC_ARGV = ["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4", "--batch-size", "500"]
 
@@ -424,18 +439,21 @@ class CliRun:
 
 
 @pytest.fixture(scope="module")
-def acc_cli_run(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> CliRun:
+def acc_cli_run(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory,
+                _models: dict[str, Any]) -> CliRun:
     """``scengen evaluate`` ``ACC_ARGV --runs FILE`` on a private store with the stand-in
     runner (as the fixtures ``store`` and ``cli_runner``): its exit code, stdout, stderr
-    and runs file."""
+    and runs file. Its model object is the one ``shared_model`` gives the tests that ask
+    for it."""
     from app.cli import main
-    from tests.app.factories import cli_store
+    from tests.app.factories import cli_store, share_models
 
     tmp = tmp_path_factory.mktemp("cli-evaluate")
     runs = tmp / "runs.jsonl"
     out, err = io.StringIO(), io.StringIO()
     with pytest.MonkeyPatch.context() as mp, cli_store(tmp / "data", model_cache_dir, mp):
         _cli_runner(mp)
+        share_models(mp, _models)
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             code = main([*ACC_ARGV, "--runs", str(runs)])
     return CliRun(code, out.getvalue(), err.getvalue(), runs.read_text())
@@ -469,7 +487,8 @@ def test_cli_evaluate_prints_the_summary_and_writes_every_run(acc_cli_run: CliRu
 
 
 def test_cli_evaluate_stop_rule_bar_shows_no_time_to_max_runs(
-        store: Path, cli_runner: CountingRunner, capsys: pytest.CaptureFixture[str]) -> None:
+        store: Path, cli_runner: CountingRunner, capsys: pytest.CaptureFixture[str],
+        shared_model: None) -> None:
     """With the stop rule the bar's total is max_runs; tqdm's time remaining to it (an
     hour for a campaign that stopped after minutes) is left out, the rule is said."""
     from app.cli import main
@@ -499,7 +518,8 @@ def test_cli_evaluate_is_deterministic(store: Path, tmp_path: Path, cli_runner: 
 
 @pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_cli_evaluate_takes_a_module_path(store: Path, cli_runner: CountingRunner,
-                                         capsys: pytest.CaptureFixture[str]) -> None:
+                                         capsys: pytest.CaptureFixture[str],
+                                         shared_model: None) -> None:
     from app.cli import main
 
     assert main(["evaluate", "--sut", "tests.app.test_evaluations:OneRunBrake", "-n", "300",
@@ -853,7 +873,8 @@ def test_openapi_declares_the_summarys_verdict(eval_client: Any) -> None:
 @pytest.mark.slow  # >= 3 s: the CLI loads the model
 def test_cli_evaluate_prints_each_warning_on_stderr(store: Path, cli_runner: CountingRunner,
                                                    capsys: pytest.CaptureFixture[str],
-                                                   acc_cli_run: CliRun) -> None:
+                                                   acc_cli_run: CliRun,
+                                                   shared_model: None) -> None:
     """A tiny campaign whose stand-in never collides: the JSON as before on stdout (with
     warnings and reliable), one "warning: ..." line per warning on stderr after it, exit
     code 0 (also with -q)."""
