@@ -21,7 +21,7 @@ from app import jsonconv
 from app.services import evaluations as service
 from app.services.store import open_context
 from datasets import PARAM_NAMES
-from tests.app.factories import copy_model_cache, make_settings
+from tests.app.factories import copy_model_cache, make_settings, share_models
 from tests.app.test_evaluations import CountingRunner, Outcomes, _done
 
 DV_HIT = 6.0
@@ -77,9 +77,11 @@ def test_a_stored_spec_without_adapt_reads_as_kernels() -> None:
 # --------------------------------------------------------------------------- CLI
 @pytest.mark.slow  # two campaigns of 1,500 draws on a loaded machine
 def test_cli_adapt_ce_runs_a_cross_entropy_campaign(
-        store: Path, cli_runner: ScoredRunner, capsys: pytest.CaptureFixture[str]) -> None:
+        store: Path, cli_runner: ScoredRunner, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
     from app.cli import main
 
+    share_models(monkeypatch, {})  # the second call reuses the first's model object
     argv = ["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4", "--batch-size", "500",
             "-q"]
     assert main(argv) == 0  # the default is ce

@@ -15,12 +15,13 @@ import re
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
 from playwright.sync_api import BrowserContext, sync_playwright
 
-from tests.app.factories import make_settings, uvicorn_service
+from tests.app.factories import make_settings, share_models, uvicorn_service
 from tests.browser.factories import CHROMIUM, CHROMIUM_ARGS, prepare_data_dir
 
 pytestmark = pytest.mark.browser
@@ -31,16 +32,20 @@ TIMEOUT_MS = 180_000
 
 
 def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str, ...],
-           n: int, stopped: bool = False) -> Iterator[tuple[str, dict[str, str]]]:
+           n: int, models: dict[str, Any], stopped: bool = False
+           ) -> Iterator[tuple[str, dict[str, str]]]:
     """A service over a data dir holding finished evaluations of ``suts`` (n draws each);
     with ``stopped`` first (so not the newest) one of ``acc`` that the stop rule's
     ``max_runs`` ended (ids["stopped"]: its summary warns) and one of ``idm`` without any
-    collision (ids["quiet"])."""
+    collision (ids["quiet"]). The evaluations are made with the model object ``models``
+    holds (``share_models``: the module's two data dirs estimate its memo once)."""
     from app.services import evaluations as service
     from app.services.store import open_context
 
     data_dir = prepare_data_dir(tmp_path_factory.mktemp(name))
-    ctx = open_context(make_settings(data_dir))
+    with pytest.MonkeyPatch.context() as mp:
+        share_models(mp, models)
+        ctx = open_context(make_settings(data_dir))
     ids = {}
     try:
         if stopped:
@@ -67,15 +72,23 @@ def _serve(tmp_path_factory: pytest.TempPathFactory, name: str, suts: tuple[str,
 
 
 @pytest.fixture(scope="module")
-def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, dict[str, str]]]:
-    yield from _serve(tmp_path_factory, "sut-browser", ("r157_cc", "acc"), 400, stopped=True)
+def models() -> dict[str, Any]:
+    """The model object the module's evaluations share (``share_models``)."""
+    return {}
 
 
 @pytest.fixture(scope="module")
-def served_alone(tmp_path_factory: pytest.TempPathFactory
+def served(tmp_path_factory: pytest.TempPathFactory, models: dict[str, Any]
+           ) -> Iterator[tuple[str, dict[str, str]]]:
+    yield from _serve(tmp_path_factory, "sut-browser", ("r157_cc", "acc"), 400, models,
+                      stopped=True)
+
+
+@pytest.fixture(scope="module")
+def served_alone(tmp_path_factory: pytest.TempPathFactory, models: dict[str, Any]
                  ) -> Iterator[tuple[str, dict[str, str]]]:
     """Only the SUT's evaluation: no careful driver's on this model and region."""
-    yield from _serve(tmp_path_factory, "sut-browser-alone", ("acc",), 200)
+    yield from _serve(tmp_path_factory, "sut-browser-alone", ("acc",), 200, models)
 
 
 def _finished(base: str, eid: str) -> dict:
