@@ -62,18 +62,31 @@ def runner() -> CountingRunner:
 
 
 @pytest.fixture(scope="module")
+def _models() -> dict[str, Any]:
+    """The model objects the module's contexts share (``share_models``; not the
+    determinism test's)."""
+    return {}
+
+
+@pytest.fixture(scope="module")
 def eval_client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory,
-                runner: CountingRunner) -> Iterator[Any]:
+                runner: CountingRunner, _models: dict[str, Any]) -> Iterator[Any]:
     from fastapi.testclient import TestClient
 
-    from tests.app.factories import make_app
+    from tests.app.factories import make_app, share_models
 
     data_dir = tmp_path_factory.mktemp("evaluations")
     copy_model_cache(model_cache_dir, data_dir)
     app = make_app(make_settings(data_dir))
-    with TestClient(app) as client:
-        client.app.state.ctx.campaign_runner = lambda factory, settings: runner
-        yield client
+    start = pytest.MonkeyPatch()
+    share_models(start, _models)  # for the app's start only
+    try:
+        with TestClient(app) as client:
+            start.undo()
+            client.app.state.ctx.campaign_runner = lambda factory, settings: runner
+            yield client
+    finally:
+        start.undo()
 
 
 def _done(client: Any, eid: str) -> dict[str, Any]:
@@ -319,7 +332,7 @@ def test_delete_cancels_and_removes(eval_client: Any) -> None:
 # --------------------------------------------------------------------------- resume
 @pytest.mark.slow  # >= 3 s (issue 26 item 8: pytest --durations, loaded machine)
 def test_an_interrupted_job_resumes_from_its_stored_chunks(
-        model_cache_dir: Path, tmp_path: Path, database_url: str) -> None:
+        model_cache_dir: Path, tmp_path: Path, database_url: str, shared_model: None) -> None:
     """Stop after 2 of 5 chunks, resume: the stored chunks are replayed, not simulated
     again, and the result equals an uninterrupted run's, bit for bit (SQLite and
     PostgreSQL); the runs' filters and order work on both."""
@@ -411,16 +424,11 @@ def cli_runner(monkeypatch: pytest.MonkeyPatch) -> CountingRunner:
     return _cli_runner(monkeypatch)
 
 
-@pytest.fixture(scope="module")
-def _models() -> dict[str, Any]:
-    """The model objects the CLI tests below share (``share_models``)."""
-    return {}
-
-
 @pytest.fixture
 def shared_model(monkeypatch: pytest.MonkeyPatch, _models: dict[str, Any]) -> None:
-    """The CLI's context keeps the default model object of the shared campaign (or of the
-    first CLI test to run): its memo is not estimated again (``share_models``)."""
+    """The test's contexts keep the module's default model object (of ``eval_client``, of
+    the shared campaign or of the first test to run): its memo is not estimated again
+    (``share_models``)."""
     from tests.app.factories import share_models
 
     share_models(monkeypatch, _models)
