@@ -48,8 +48,15 @@ def cli_runner(monkeypatch: pytest.MonkeyPatch) -> ScoredRunner:
 
 
 @pytest.fixture(scope="module")
-def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory
-           ) -> Iterator[Any]:
+def models() -> dict[str, Any]:
+    """The model object the module's contexts share (``share_models``: its memo, about
+    9 s, estimated once)."""
+    return {}
+
+
+@pytest.fixture(scope="module")
+def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory,
+           models: dict[str, Any]) -> Iterator[Any]:
     from fastapi.testclient import TestClient
 
     from tests.app.factories import make_app
@@ -58,9 +65,15 @@ def client(model_cache_dir: Path, tmp_path_factory: pytest.TempPathFactory
     copy_model_cache(model_cache_dir, data_dir)
     runner = ScoredRunner(DV_HIT)
     app = make_app(make_settings(data_dir))
-    with TestClient(app) as c:
-        app.state.ctx.campaign_runner = lambda factory, settings: runner
-        yield c
+    start = pytest.MonkeyPatch()
+    share_models(start, models)  # for the app's start only
+    try:
+        with TestClient(app) as c:
+            start.undo()
+            app.state.ctx.campaign_runner = lambda factory, settings: runner
+            yield c
+    finally:
+        start.undo()
 
 
 # --------------------------------------------------------------------------- spec
@@ -78,10 +91,10 @@ def test_a_stored_spec_without_adapt_reads_as_kernels() -> None:
 @pytest.mark.slow  # two campaigns of 1,500 draws on a loaded machine
 def test_cli_adapt_ce_runs_a_cross_entropy_campaign(
         store: Path, cli_runner: ScoredRunner, capsys: pytest.CaptureFixture[str],
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, models: dict[str, Any]) -> None:
     from app.cli import main
 
-    share_models(monkeypatch, {})  # the second call reuses the first's model object
+    share_models(monkeypatch, models)  # the calls reuse the module's model object
     argv = ["evaluate", "--sut", "acc", "-n", "1500", "--seed", "4", "--batch-size", "500",
             "-q"]
     assert main(argv) == 0  # the default is ce
@@ -186,7 +199,8 @@ def test_service_refuses_an_unknown_adapt_naming_the_field(client: Any) -> None:
 # --------------------------------------------------------------------------- resume
 @pytest.mark.slow  # four campaigns of 1,500 draws on a loaded machine
 def test_old_and_ce_specs_resume_to_the_uninterrupted_result(
-        model_cache_dir: Path, tmp_path: Path) -> None:
+        model_cache_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        models: dict[str, Any]) -> None:
     """An evaluation stored before the field existed (its spec has no "adapt") is
     interrupted and resumed: it runs as kernels, equal to a fresh kernels run; a ce
     evaluation interrupted and resumed equals an uninterrupted ce run."""
@@ -194,6 +208,7 @@ def test_old_and_ce_specs_resume_to_the_uninterrupted_result(
 
     data_dir = tmp_path / "data"
     copy_model_cache(model_cache_dir, data_dir)
+    share_models(monkeypatch, models)
     ctx = open_context(make_settings(data_dir))
     try:
         runner = ScoredRunner(DV_HIT)
