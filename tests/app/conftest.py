@@ -25,6 +25,14 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
 
 
 @pytest.fixture(scope="session")
+def shared_models() -> dict[str, Any]:
+    """Model objects by their JSON, for the contexts of the tests that ask for them
+    (``factories.share_models``): one per test process, so a model's memo is estimated
+    once for all of them."""
+    return {}
+
+
+@pytest.fixture(scope="session")
 def model_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A data dir whose default model is fitted once per test process (then copied)."""
     from app.services.store import open_context

@@ -15,7 +15,13 @@ import pytest
 
 from app.db import repository as repo
 from app.jobs import CatalogueRunner, CatalogueSpec, InlineExecutor
-from tests.app.factories import copy_model_cache, make_app, make_settings, wait_for
+from tests.app.factories import (
+    copy_model_cache,
+    make_app,
+    make_settings,
+    share_models,
+    wait_for,
+)
 from tests.app.test_jobs import _catalogue, _db, fake_chunk
 
 CHUNK = 400  # scenarios of the one chunk the catalogue tests run
@@ -113,7 +119,8 @@ def test_a_cancel_during_the_p_a_estimate_stops_it(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_cancelled_evaluation_stops_between_the_parts_of_a_chunk(
-        model_cache_dir: Path, tmp_path: Path) -> None:
+        model_cache_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        shared_models: dict[str, Any]) -> None:
     """One chunk of 5000 draws, about half of them inside the region and simulated, in
     parts of 1024; the job is cancelled while the first part runs: no other part is
     simulated (before: all were, and the job stopped only once the chunk was done)."""
@@ -122,6 +129,7 @@ def test_a_cancelled_evaluation_stops_between_the_parts_of_a_chunk(
     from tests.app.test_evaluations import CountingRunner
 
     copy_model_cache(model_cache_dir, tmp_path)
+    share_models(monkeypatch, shared_models)  # its memo is not what is tested
     ctx = open_context(make_settings(tmp_path))
     try:
         cancel = threading.Event()

@@ -62,10 +62,10 @@ def runner() -> CountingRunner:
 
 
 @pytest.fixture(scope="module")
-def _models() -> dict[str, Any]:
+def _models(shared_models: dict[str, Any]) -> dict[str, Any]:
     """The model objects the module's contexts share (``share_models``; not the
-    determinism test's)."""
-    return {}
+    determinism test's): the test process's."""
+    return shared_models
 
 
 @pytest.fixture(scope="module")

@@ -48,10 +48,10 @@ def cli_runner(monkeypatch: pytest.MonkeyPatch) -> ScoredRunner:
 
 
 @pytest.fixture(scope="module")
-def models() -> dict[str, Any]:
+def models(shared_models: dict[str, Any]) -> dict[str, Any]:
     """The model object the module's contexts share (``share_models``: its memo, about
-    9 s, estimated once)."""
-    return {}
+    9 s, estimated once): the test process's."""
+    return shared_models
 
 
 @pytest.fixture(scope="module")
