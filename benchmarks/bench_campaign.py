@@ -274,6 +274,8 @@ def main() -> None:
                          "interval (Part B)")
     ap.add_argument("--band-step", action="store_true",
                     help="SUT campaigns with evaluate(..., band_step=True)")
+    ap.add_argument("--tune-shares", action="store_true",
+                    help="SUT campaigns with evaluate(..., tune_shares=True)")
     ap.add_argument("--adapt", default="ce", choices=("ce", "kernels"),
                     help="proposal adaptation of the SUT campaigns (Part B)")
     a = ap.parse_args()
@@ -327,7 +329,8 @@ def main() -> None:
         seeds = range(a.sut_seed0, a.sut_seed0 + a.sut_seeds)
         res = campaigns(model, runner_s, seeds, workers=a.sut_workers,
                         batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw,
-                        **({"band_step": True} if a.band_step else {})) if seeds else []
+                        **({"band_step": True} if a.band_step else {}),
+                        **({"tune_shares": True} if a.tune_shares else {})) if seeds else []
         if a.save:
             with open(a.save, "w") as fh:
                 for s, r in zip(seeds, res, strict=True):

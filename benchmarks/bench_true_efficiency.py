@@ -174,7 +174,8 @@ def read_hits(paths: Sequence[str]) -> tuple[FloatArray, int, int]:
 
 def measure(model: CutInGMM, runner: Any, paths: Sequence[str], seeds: Sequence[int],
             rhw: float, envelopes: Sequence[str], p_ref: float | None,
-            max_runs: int = 1_000_000, band_step: bool = False) -> None:
+            max_runs: int = 1_000_000, band_step: bool = False,
+            tune_shares: bool = False) -> None:
     z, hits, runs = read_hits(paths)
     if hits != z.shape[0] or not runs:
         raise SystemExit(f"hits files: {z.shape[0]} rows but {hits} collisions recorded "
@@ -187,10 +188,12 @@ def measure(model: CutInGMM, runner: Any, paths: Sequence[str], seeds: Sequence[
     for s in seeds:
         t0 = time.perf_counter()
         res = evaluate(model, runner, seed=s, rhw=rhw, batch_size=500,
-                       envelopes=tuple(envelopes), max_runs=max_runs, band_step=band_step)
+                       envelopes=tuple(envelopes), max_runs=max_runs, band_step=band_step,
+                       tune_shares=tune_shares)
         summ = res.summary()
         pb = float(summ["p_bounds"])  # P(B) of the physical cut-ins
-        prop = next_ce_proposal(res, envelopes=envelopes, band_step=band_step)
+        prop = next_ce_proposal(res, envelopes=envelopes, band_step=band_step,
+                                tune_shares=tune_shares)
         log_q = np.asarray(prop.log_q(z), dtype=np.float64)
         eff = efficiency(log_p, log_q, p, p_bounds=pb)
         # naive runs saved per campaign SUT run (its pilot's runs included): the counted
@@ -242,6 +245,8 @@ def main() -> None:
                     help="a constraint added to the proposal's critical sets")
     ap.add_argument("--band-step", action="store_true",
                     help="campaigns with evaluate(..., band_step=True)")
+    ap.add_argument("--tune-shares", action="store_true",
+                    help="campaigns with evaluate(..., tune_shares=True)")
     a = ap.parse_args()
     params = {kv.split("=")[0]: float(kv.split("=")[1]) for kv in a.sut_param}
     model = _model()
@@ -250,7 +255,8 @@ def main() -> None:
         collect(model, runner, int(a.draws), a.seed, a.out, a.workers)
     else:
         measure(model, runner, a.hits, _seeds(a.seeds), a.rhw,
-                (*DEFAULT_ENVELOPES, *a.extra_envelope), a.ref, a.max_runs, a.band_step)
+                (*DEFAULT_ENVELOPES, *a.extra_envelope), a.ref, a.max_runs, a.band_step,
+                a.tune_shares)
 
 
 if __name__ == "__main__":

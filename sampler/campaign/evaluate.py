@@ -609,7 +609,8 @@ CE_INFLATE = 1.2
 def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
                  previous: Sequence[ChunkResult], envelopes: Sequence[str], alpha: float,
                  rho: float, ce_min_hits: int, fits: dict[int, tuple[Any, float]],
-                 band_step: bool = False) -> tuple[Proposal, bool, np.random.Generator]:
+                 band_step: bool = False, tune_shares: bool = False
+                 ) -> tuple[Proposal, bool, np.random.Generator]:
     """Chunk k's cross-entropy proposal from the chunks before it, and whether it counts.
 
     Besides the mixture fitted at this chunk's level it keeps, with share
@@ -631,7 +632,7 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
         prop = build_ce_proposal(model, region=region, lane_width=region.lane_width,
                                  elite=elite, level=level, rng=rng, envelopes=envelopes,
                                  alpha=alpha, history=history, inflate=CE_INFLATE,
-                                 **shares)
+                                 tune=tune_shares, **shares)
         return prop, counted, level, rng
 
     def history(j: int) -> list[Any]:
@@ -654,13 +655,13 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
 
 def next_ce_proposal(result: CampaignResult, *, envelopes: Sequence[str] = DEFAULT_ENVELOPES,
                      alpha: float = 0.15, rho: float = 0.1, ce_min_hits: int = 20,
-                     band_step: bool = False) -> Proposal:
+                     band_step: bool = False, tune_shares: bool = False) -> Proposal:
     """The proposal the next chunk of a cross-entropy campaign would draw from, rebuilt
     from its chunks as ``evaluate`` builds it (pass the settings the campaign ran with):
     for diagnostics such as ``benchmarks/bench_true_efficiency.py``."""
     prop, _, _ = _ce_proposal(len(result.chunks), result.model, result.region, result.seed,
                               result.chunks, tuple(envelopes), alpha, rho, ce_min_hits, {},
-                              band_step)
+                              band_step, tune_shares)
     return prop
 
 
@@ -669,14 +670,15 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
                alpha: float, executor: Executor | None, part_size: int,
                min_fit_hits: int, adapt: str = "kernels", rho: float = 0.1,
                ce_min_hits: int = 10, ce_fits: dict[int, tuple[Any, float]] | None = None,
-               band_step: bool = False) -> ChunkResult:
+               band_step: bool = False, tune_shares: bool = False) -> ChunkResult:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
     counted = True
     proposal: Proposal
     if adapt == "ce" and not _unscored(previous):
         proposal, counted, rng = _ce_proposal(k, model, region, seed, previous, envelopes,
                                               alpha, rho, ce_min_hits,
-                                              {} if ce_fits is None else ce_fits, band_step)
+                                              {} if ce_fits is None else ce_fits, band_step,
+                                              tune_shares)
     else:
         hits = _hits(previous)
         if hits is not None and hits[0].shape[0] < min_fit_hits:
@@ -725,7 +727,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
              physical_bounds: bool = True, alpha: float = 0.15, confidence: float = 0.95,
              min_collisions: int = MIN_COLLISIONS, part_size: int = 1024,
              min_fit_hits: int = 2, adapt: str = "ce", rho: float = 0.1,
-             ce_min_hits: int = 20, band_step: bool = False) -> CampaignResult:
+             ce_min_hits: int = 20, band_step: bool = False,
+             tune_shares: bool = False) -> CampaignResult:
     """Run a campaign: importance-sampled cut-ins driven by ``runner`` until the stop rule.
 
     Parameters
@@ -769,6 +772,11 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         k2=0.6``: 433 naive runs saved per SUT run against 181) and worse where the
         bands only slice a failure set (a two-half-space stand-in: about 1.7 times the
         runs); docs/evaluation.md. Off by default for that reason.
+    tune_shares : bool, default False
+        With ``adapt="ce"``: each final-stage chunk sets its parts' shares from the
+        collided runs so far, to the shares that minimise the estimated variance of
+        the next chunk (``sampler.campaign.proposal.tune_shares``; the model keeps
+        ``alpha``, every other part stays within 0.5 - 3 times its fixed share).
     """
     model.check_fitted()
     if n is not None and (isinstance(n, bool) or int(n) < 1):
@@ -821,7 +829,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         else:
             chunk = _new_chunk(k, size, model, region, runner, seed, chunks, envelopes,
                                alpha, executor, part_size, min_fit_hits, adapt, float(rho),
-                               int(ce_min_hits), ce_fits, bool(band_step))
+                               int(ce_min_hits), ce_fits, bool(band_step),
+                               bool(tune_shares))
             if on_chunk is not None:
                 on_chunk(chunk)
         chunks.append(chunk)

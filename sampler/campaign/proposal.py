@@ -34,6 +34,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import minimize
 from scipy.special import logsumexp
 
 from sampler.campaign.band import BandPart, band_part_for_set, fit_band_part, lateral_band
@@ -46,7 +47,7 @@ from sampler.region.constraints import Region
 
 __all__ = ["DEFAULT_ENVELOPES", "BandPool", "GaussianMixture", "MixturePart", "Proposal",
            "band_part", "build_ce_proposal", "build_proposal", "fit_ce_mixture", "fit_weighted_gmm",
-           "lateral_band_parts", "region_mixture", "widened_model"]
+           "lateral_band_parts", "region_mixture", "tune_shares", "widened_model"]
 
 FloatArray = NDArray[np.float64]
 
@@ -590,7 +591,7 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
                       history: Sequence[GaussianMixture] = (), history_share: float = 0.1,
                       inflate: float = 1.2, set_share: float | None = None,
                       band_hits_share: float = BAND_HITS_SHARE,
-                      pool: BandPool | None = None) -> Proposal:
+                      pool: BandPool | None = None, tune: bool = False) -> Proposal:
     """The proposal of one chunk of an adaptive cross-entropy campaign: the model
     (``alpha``: weights stay below ``1 / alpha``), the wide part, the envelopes
     (``envelope_share`` together) and, with ``elite`` (z rows and their weights ``p/q``
@@ -605,7 +606,11 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     far, a band with too few collided runs gets the cross-entropy step on its own
     runs' scores instead). The set and band parts share
     ``set_share``: ``SET_SHARE`` in the pilot, ``FINAL_SET_SHARE`` at level 0 by
-    default. Without elite: as :func:`build_proposal` before any collision."""
+    default. Without elite: as :func:`build_proposal` before any collision.
+
+    With ``tune`` at level 0 the shares are then set from the collided runs so far
+    (:func:`tune_shares`): the model keeps ``alpha``, every other part stays within
+    ``TUNE_LO``-``TUNE_HI`` times the share given above."""
     if set_share is None:
         set_share = SET_SHARE if level > 0 else FINAL_SET_SHARE
     if elite is None or elite[0].shape[0] == 0:
@@ -643,8 +648,79 @@ def build_ce_proposal(model: CutInGMM, *, region: Region | None, lane_width: flo
     if sets:
         parts.extend(sets)
         shares.extend([set_share / len(sets)] * len(sets))
+    if tune and level <= 0:
+        fixed = np.zeros(len(parts), dtype=bool)
+        fixed[0] = True  # the model: the defensive share, weights <= 1 / alpha
+        shares = list(tune_shares(parts, np.asarray(shares) / np.sum(shares), elite[0],
+                                  elite[1], np.asarray(model.log_density_z(elite[0])),
+                                  fixed=fixed))
     out = Proposal(parts, shares)
     out.fitted = gm
+    return out
+
+
+#: bounds of a tuned share, times the part's fixed share (:func:`tune_shares`)
+TUNE_LO = 0.5
+TUNE_HI = 3.0
+#: fewest collided runs to tune on
+TUNE_MIN_HITS = 20
+
+
+def tune_shares(parts: Sequence[MixturePart], shares: FloatArray, z: FloatArray,
+                w: FloatArray, log_p: FloatArray, *, fixed: NDArray[np.bool_],
+                lo: float = TUNE_LO, hi: float = TUNE_HI) -> FloatArray:
+    """Shares of ``parts`` that minimise the estimated second moment of the next
+    chunk's weighted collision indicator (He & Owen 2014, "Optimal mixture weights in
+    multiple importance sampling", arXiv:1411.3954).
+
+    ``z``, ``w``: the collided runs so far and their weights ``p / q_k`` under the
+    proposal ``q_k`` each was drawn from; ``log_p``: the model's log density there.
+    For shares ``s``, ``q_s = sum_j s_j q_j`` and ``E_{q_s}[(1_C p / q_s)^2] =
+    E_{q_k}[1_C p^2 / (q_k q_s)]``, estimated (up to the constant number of draws) by
+    ``F(s) = sum_i w_i p_i / q_s(z_i)``: convex in ``s``, minimised over the simplex
+    with the ``fixed`` parts at their shares and every other part ``j`` within
+    ``[lo s_j, hi s_j]`` (SLSQP). The bounds keep every part drawing: a collision
+    family no run has met yet keeps the shares that might meet it, and parts fitted to
+    these very runs, whose density there is optimistic, cannot take everything.
+    Returns ``shares`` unchanged with fewer than ``TUNE_MIN_HITS`` runs. Deterministic.
+    The estimate stays unbiased: the shares depend on earlier chunks only."""
+    s0 = np.asarray(shares, dtype=np.float64)
+    s0 = s0 / s0.sum()
+    free = ~np.asarray(fixed, dtype=bool)
+    if z.shape[0] < TUNE_MIN_HITS or not free.any():
+        return s0
+    with np.errstate(divide="ignore"):
+        logr = np.stack([np.asarray(part.log_q(z), dtype=np.float64) for part in parts],
+                        axis=1) - np.asarray(log_p, dtype=np.float64)[:, None]
+    logr = np.where(np.isfinite(logr), logr, -np.inf)
+    m = logr.max(axis=1)
+    ok = np.isfinite(m) & (w > 0)
+    if int(ok.sum()) < TUNE_MIN_HITS:
+        return s0
+    r = np.exp(logr[ok] - m[ok, None])           # rows scaled to max 1
+    c = w[ok] * np.exp(-m[ok])                    # F = sum_i c_i / (r_i . s)
+    c = c / c.sum()
+    budget = 1.0 - float(s0[~free].sum())
+    base = r[:, ~free] @ s0[~free]
+    rf = r[:, free]
+
+    def f(x: FloatArray) -> tuple[float, FloatArray]:
+        q = base + rf @ x
+        v = c / q
+        return float(v.sum()), -(rf.T @ (v / q))
+
+    x0 = s0[free]
+    bounds = [(lo * v, min(hi * v, budget)) for v in x0]
+    res = minimize(f, x0, jac=True, method="SLSQP", bounds=bounds,
+                   constraints=[{"type": "eq", "fun": lambda x: float(x.sum()) - budget,
+                                 "jac": lambda x: np.ones_like(x)}],
+                   options={"maxiter": 200, "ftol": 1e-12})
+    x = np.clip(np.asarray(res.x, dtype=np.float64), [b[0] for b in bounds],
+                [b[1] for b in bounds])
+    if not (np.all(np.isfinite(x)) and f(x)[0] <= f(x0)[0]):
+        return s0
+    out = s0.copy()
+    out[free] = x * budget / x.sum()
     return out
 
 

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 from sampler import CutInGMM
@@ -386,3 +388,124 @@ def test_band_step_is_opt_in_and_sets_the_final_shares(model: CutInGMM) -> None:
         kern = sum(p["share"] for p in last if p["part"].startswith("fitted:"))
         assert math.isclose(sets, set_share, rel_tol=1e-9)
         assert math.isclose(kern, kern_share, rel_tol=1e-9)
+
+
+# --------------------------------------------------------------------------- tuned shares
+
+@dataclass
+class _TablePart:
+    """A part whose log density at the rows ``z = [[0], [1], ...]`` is read off a table."""
+
+    name: str
+    log_at: np.ndarray
+
+    def log_q(self, z: np.ndarray) -> np.ndarray:
+        return self.log_at[z[:, 0].astype(int)]
+
+    def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        raise NotImplementedError
+
+
+def _two_hit_case(c1: float, c2: float) -> tuple[Any, ...]:
+    """The model (fixed share 0.1, p = 1 at both rows) and parts A, B with g/p = 10 at one
+    row each and 0 at the other; 10 collided runs at each row, weights c1 and c2."""
+    ten = math.log(10.0)
+    parts = [_TablePart("model", np.array([0.0, 0.0])),
+             _TablePart("A", np.array([ten, -np.inf])),
+             _TablePart("B", np.array([-np.inf, ten]))]
+    z = np.repeat([[0.0], [1.0]], 10, axis=0)
+    w = np.repeat([c1, c2], 10)
+    return parts, np.array([0.1, 0.45, 0.45]), z, w, np.zeros(20), np.array([True, False, False])
+
+
+def test_tuned_shares_by_hand() -> None:
+    """F(s) = 10 (c1 / (0.1 + 10 s_A) + c2 / (0.1 + 10 s_B)) with s_A + s_B = 0.9. By hand
+    (Lagrange): (0.1 + 10 s_A) / (0.1 + 10 s_B) = sqrt(c1 / c2); for c1 = 4, c2 = 1 the
+    two sum to 9.2, so 0.1 + 10 s_B = 9.2 / 3 and s_A = (6.1333 - 0.1) / 10 = 0.60333,
+    s_B = 0.29667. For c1 = 1e4 the optimum's s_B would be negative: s_B sits on its lower
+    bound 0.5 * 0.45 and s_A takes the rest, 0.675. Fewer than 20 runs: unchanged."""
+    from sampler.campaign.proposal import tune_shares
+    parts, s0, z, w, log_p, fixed = _two_hit_case(4.0, 1.0)
+    s = tune_shares(parts, s0, z, w, log_p, fixed=fixed)
+    assert s[0] == pytest.approx(0.1, abs=1e-12)
+    assert s[1] == pytest.approx((9.2 * 2 / 3 - 0.1) / 10, abs=1e-4)
+    assert s[2] == pytest.approx((9.2 / 3 - 0.1) / 10, abs=1e-4)
+    parts, s0, z, w, log_p, fixed = _two_hit_case(1e4, 1.0)
+    s = tune_shares(parts, s0, z, w, log_p, fixed=fixed)
+    assert s == pytest.approx([0.1, 0.675, 0.225], abs=1e-6)
+    assert np.array_equal(tune_shares(parts, s0, z[:19], w[:19], log_p[:19], fixed=fixed),
+                          s0)
+
+
+def _second_moment(parts: list[Any], s: np.ndarray, z: np.ndarray, w: np.ndarray,
+                   log_p: np.ndarray) -> float:
+    """sum_i w_i p_i / q_s(z_i), straight from the definition (a loop over runs)."""
+    total = 0.0
+    for i in range(z.shape[0]):
+        q = sum(sj * math.exp(float(part.log_q(z[i:i + 1])[0]))
+                for sj, part in zip(s, parts, strict=True))
+        total += w[i] * math.exp(log_p[i]) / q
+    return total
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_tuned_shares_properties(seed: int) -> None:
+    """For any densities and weights: the shares sum to 1, the fixed part keeps its
+    share, every other part stays within [0.5, 3] times its own, and the second moment
+    (computed by the loop above) is no larger than at the shares given."""
+    from sampler.campaign.proposal import TUNE_HI, TUNE_LO, tune_shares
+    rng = np.random.default_rng(seed)
+    n, j = int(rng.integers(20, 60)), int(rng.integers(2, 6))
+    parts = [_TablePart(f"p{k}", rng.normal(0.0, 3.0, n)) for k in range(j)]
+    s0 = rng.dirichlet(np.ones(j))
+    s0 = np.maximum(s0, 0.02)
+    s0 /= s0.sum()
+    z = np.arange(n, dtype=np.float64)[:, None]
+    w = rng.lognormal(0.0, 2.0, n)
+    log_p = rng.normal(0.0, 1.0, n)
+    fixed = np.zeros(j, dtype=bool)
+    fixed[0] = True
+    s = tune_shares(parts, s0, z, w, log_p, fixed=fixed)
+    assert s.sum() == pytest.approx(1.0, abs=1e-9)
+    assert s[0] == pytest.approx(s0[0], rel=1e-12)
+    assert np.all(s[1:] >= TUNE_LO * s0[1:] * (1 - 1e-6))
+    assert np.all(s[1:] <= TUNE_HI * s0[1:] * (1 + 1e-6))
+    assert (_second_moment(parts, s, z, w, log_p)
+            <= _second_moment(parts, s0, z, w, log_p) * (1 + 1e-9))
+
+
+def test_tuned_shares_campaign_is_deterministic_and_moves_the_final_shares(
+        model: CutInGMM) -> None:
+    """``tune_shares=True``: the pilot is the default's chunk for chunk, the final chunks'
+    shares differ from the fixed ones while the model keeps ``alpha``, and the same seed
+    gives the same campaign bit for bit."""
+    a, b, _ = _rare_halfspace(model, 1e-4)
+    runner = halfspace_runner(model, a, b)
+    kw: dict[str, Any] = {"n": 1500, "seed": 1, "batch_size": 300, "physical_bounds": False,
+                          "bootstrap": False, "adapt": "ce", "ce_min_hits": 5}
+    fixed = evaluate(model, runner, **kw)
+    tuned = evaluate(model, runner, tune_shares=True, **kw)
+    again = evaluate(model, runner, tune_shares=True, **kw)
+    first = [c.counted for c in fixed.chunks].index(True)
+    for k in range(first):
+        assert np.array_equal(fixed.chunks[k].z, tuned.chunks[k].z)
+    last_f, last_t = fixed.chunks[-1].proposal, tuned.chunks[-1].proposal
+    assert [p["part"].split(":")[0] for p in last_f] == [p["part"].split(":")[0]
+                                                          for p in last_t]
+    assert last_t[0]["part"] == "model" and last_t[0]["share"] == pytest.approx(0.15)
+    assert max(abs(p["share"] - q["share"]) for p, q in zip(last_f, last_t, strict=True)) > 0.01
+    assert json.dumps(tuned.summary()) == json.dumps(again.summary())
+    for c1, c2 in zip(tuned.chunks, again.chunks, strict=True):
+        assert np.array_equal(c1.weights, c2.weights)
+
+
+@pytest.mark.slow
+def test_tuned_shares_campaign_is_unbiased_and_covering(model: CutInGMM) -> None:
+    """40 tuned campaigns on a half-space of known mass 1e-4 (chunks of 300, the final
+    stage from the sixth collision on): unbiased and covering as the fixed shares are."""
+    a, b, p_true = _rare_halfspace(model, 1e-4)
+    summaries = _assert_unbiased_and_covering(
+        model, halfspace_runner(model, a, b), p_true, n=1500, batch_size=300, adapt="ce",
+        ce_min_hits=5, tune_shares=True)
+    assert all(s["pilot_runs"] > 0 for s in summaries)
