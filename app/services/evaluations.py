@@ -154,13 +154,16 @@ class CampaignSpec:
     #: (cross-entropy, the default) or "kernels"; a stored spec without it was a kernels
     #: campaign (``from_dict``)
     adapt: str = "ce"
+    #: the final stage's band step (``sampler.campaign.evaluate(band_step=...)``): off by
+    #: default, and a stored spec without it ran without it (``from_dict``)
+    band_step: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {"sut": self.sut, "sut_params": self.sut_params,
                 "constraints": self.constraints, "n": self.n, "rhw": self.rhw,
                 "max_runs": self.max_runs, "seed": self.seed,
                 "batch_size": self.batch_size, "settings": self.settings,
-                "risk": self.risk, "adapt": self.adapt}
+                "risk": self.risk, "adapt": self.adapt, "band_step": self.band_step}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
@@ -169,7 +172,8 @@ class CampaignSpec:
                    rhw=float(d.get("rhw", 0.3)), max_runs=int(d["max_runs"]),
                    seed=int(d.get("seed", 0)), batch_size=int(d["batch_size"]),
                    settings=d.get("settings"), risk=bool(d.get("risk", False)),
-                   adapt=str(d.get("adapt") or "kernels"))
+                   adapt=str(d.get("adapt") or "kernels"),
+                   band_step=bool(d.get("band_step", False)))
 
     @property
     def planned(self) -> int:
@@ -200,6 +204,9 @@ def check_spec(spec: CampaignSpec, limit: int, where: str = "body") -> None:
     if spec.adapt not in ADAPT:
         raise InvalidInput(f"{f('adapt')}: must be one of {', '.join(ADAPT)}, got "
                            f"{spec.adapt!r}", field=f("adapt"))
+    if spec.band_step and spec.adapt != "ce":
+        raise InvalidInput(f"{f('band_step')}: the band step is a stage of adapt 'ce', got "
+                           f"adapt {spec.adapt!r}", field=f("band_step"))
 
 
 def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | None = None,
@@ -207,13 +214,13 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
            rhw: float = DEFAULT_RHW, max_runs: int | None = None, seed: int = 0,
            batch_size: int | None = None,
            settings: Mapping[str, Any] | None = None, risk: bool = False,
-           adapt: str = "ce") -> EvaluationRow:
+           adapt: str = "ce", band_step: bool = False) -> EvaluationRow:
     """Validate and store a queued evaluation job; the caller submits it. ``sut`` must be a
     registered name (a request never names a module)."""
     return store(ctx, validate(ctx, sut=sut, sut_params=sut_params, model=model,
                                constraints=constraints, n=n, rhw=rhw, max_runs=max_runs,
                                seed=seed, batch_size=batch_size, settings=settings,
-                               risk=risk, adapt=adapt))
+                               risk=risk, adapt=adapt, band_step=band_step))
 
 
 @dataclass(frozen=True)
@@ -229,7 +236,8 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
              model: str | None = None, constraints: Sequence[str] = (), n: int | None = None,
              rhw: float = DEFAULT_RHW, max_runs: int | None = None, seed: int = 0,
              batch_size: int | None = None, settings: Mapping[str, Any] | None = None,
-             risk: bool = False, adapt: str = "ce") -> ValidEvaluation:
+             risk: bool = False, adapt: str = "ce",
+             band_step: bool = False) -> ValidEvaluation:
     """Every check of ``create`` (``InvalidInput`` naming the field, 404 for an unknown
     model), nothing stored: the route asks for the client's quota only after it, so that a
     bad request is told what is wrong (422), not to wait (429)."""
@@ -240,7 +248,7 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
                                                      ctx.settings.catalogue_n_limit)),
                         seed=int(seed), batch_size=int(batch_size or DEFAULT_BATCH),
                         settings=dict(settings) if settings else None, risk=bool(risk),
-                        adapt=str(adapt))
+                        adapt=str(adapt), band_step=bool(band_step))
     check_spec(spec, ctx.settings.catalogue_n_limit)
     model_id = ctx.resolve_model_id(model)
     fitted = ctx.model(model_id)  # 404 before anything is stored
@@ -372,7 +380,7 @@ def campaign(model: CutInGMM, factory: suts.SutFactory, spec: CampaignSpec, *, r
         model, runner, constraints=spec.constraints or None, n=spec.n, rhw=spec.rhw,
         max_runs=spec.max_runs, seed=spec.seed, batch_size=spec.batch_size,
         progress=progress, on_chunk=on_chunk, stored=list(stored), executor=executor,
-        sut=spec.sut, adapt=spec.adapt)
+        sut=spec.sut, adapt=spec.adapt, band_step=spec.band_step)
     return result
 
 

@@ -324,6 +324,8 @@ class CampaignResult:
     alpha: float = 0.15
     p_region: Any = None  # PRegion of the user's region (None without constraints)
     adapt: str = "kernels"
+    #: the final stage's band step (``evaluate(band_step=...)``), as run
+    band_step: bool = False
     _summary: dict[str, Any] | None = field(default=None, repr=False)
 
     @property
@@ -443,6 +445,7 @@ class CampaignResult:
             "sut_runs": n_sim,
             "pilot_runs": self.runs - self.counted_runs,
             "adapt": self.adapt,
+            "band_step": self.band_step,
             "proposal": self.chunks[-1].proposal if self.chunks else [],
             "collisions": col.hits,
             "ess": _num(col.ess),
@@ -768,10 +771,12 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         With ``adapt="ce"``: the final stage gives each band part with fewer than 2 d
         collided runs its own cross-entropy step (``ce:<band>-level``) and moves shares
         to the band parts (set and band parts 0.2, band refits 0.3, kernels 0.1, pilot
-        levels 0.05). Measured better where collision families sit on the bands (``acc
-        k2=0.6``: 433 naive runs saved per SUT run against 181) and worse where the
-        bands only slice a failure set (a two-half-space stand-in: about 1.7 times the
-        runs); docs/evaluation.md. Off by default for that reason.
+        levels 0.05). Measured better at P near 1e-5 where collision families sit on
+        the bands (``acc k2=0.6``: 624 naive runs saved per SUT run against 168) and
+        worse at P near 1e-3 (``acc`` defaults: 24.7 against 46.0) and where the bands
+        only slice a failure set (a two-half-space stand-in: about 1.7 times the runs);
+        docs/evaluation.md, "When to use ``--band-step``". Off by default for that
+        reason; the summary's ``band_step`` says whether it ran.
     tune_shares : bool, default False
         With ``adapt="ce"``: each final-stage chunk sets its parts' shares from the
         collided runs so far, to the shares that minimise the estimated variance of
@@ -856,4 +861,5 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                           seed=seed, sut=sut or getattr(runner, "name", None), exposure=exp,
                           bootstrap=bootstrap, confidence=confidence,
                           rhw_target=None if n is not None else float(rhw), alpha=alpha,
-                          p_region=p_region, adapt=adapt)
+                          p_region=p_region, adapt=adapt,
+                          band_step=bool(band_step) and adapt == "ce")

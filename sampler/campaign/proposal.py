@@ -56,7 +56,7 @@ FloatArray = NDArray[np.float64]
 #: inside the set (``v_cut_min<3``: a cutter that slows to a crawl or a stop; its speed
 #: is a product of the pulse's acceleration and length, no half-space in z)
 DEFAULT_ENVELOPES: tuple[str, ...] = ("ttc<1.5", "ttc<3", "gap<4", "p_a1<-2", "dv>4",
-                                      "v_cut_min<3", "end_margin<0.05")
+                                      "v_cut_min<3", "end_margin<0.03")
 
 #: the cross-entropy stage's share of the parts fitted to a set without a half-space
 SET_SHARE = 0.2

@@ -84,7 +84,42 @@ def test_a_stored_spec_without_adapt_reads_as_kernels() -> None:
     spec = service.CampaignSpec.from_dict(old)
     assert spec.adapt == "kernels"
     assert service.CampaignSpec.from_dict({**old, "adapt": "ce"}).adapt == "ce"
-    assert spec.to_dict() == {**old, "adapt": "kernels"}
+    assert spec.to_dict() == {**old, "adapt": "kernels", "band_step": False}
+
+
+def test_a_stored_spec_without_band_step_reads_as_off() -> None:
+    """Specs stored before ``band_step`` existed ran without it and resume without it."""
+    old = {"sut": "acc", "sut_params": {}, "constraints": [], "n": 100, "rhw": 0.3,
+           "max_runs": 200000, "seed": 1, "batch_size": 50, "settings": None,
+           "risk": False, "adapt": "ce"}
+    assert service.CampaignSpec.from_dict(old).band_step is False
+    on = service.CampaignSpec.from_dict({**old, "band_step": True})
+    assert on.band_step is True
+    assert service.CampaignSpec.from_dict(on.to_dict()) == on
+
+
+def test_band_step_is_off_by_default_everywhere(tmp_path: Path) -> None:
+    """The sampler's default (off: measured worse at P near 1e-3, docs/evaluation.md) is
+    the service's, the request's, the OpenAPI schema's and the CLI's."""
+    import dataclasses
+    import inspect
+
+    from app.routes.evaluations import EvaluationRequest
+    from sampler.campaign import evaluate
+    from tests.app.test_stop_rule_default import _evaluate_parser, _openapi_request
+
+    [flag] = [a for a in _evaluate_parser()._actions if a.dest == "band_step"]
+    defaults = {
+        "evaluate()": inspect.signature(evaluate).parameters["band_step"].default,
+        "create()": inspect.signature(service.create).parameters["band_step"].default,
+        "validate()": inspect.signature(service.validate).parameters["band_step"].default,
+        "CampaignSpec": {f.name: f.default for f in
+                         dataclasses.fields(service.CampaignSpec)}["band_step"],
+        "EvaluationRequest": EvaluationRequest(sut="acc").band_step,
+        "OpenAPI": _openapi_request(tmp_path)["properties"]["band_step"]["default"],
+        "--band-step": flag.default,
+    }
+    assert {k: v for k, v in defaults.items() if v is not False} == {}
 
 
 # --------------------------------------------------------------------------- CLI
@@ -123,6 +158,19 @@ def test_cli_bad_adapt_is_one_line_and_exit_2(store: Path, cli_runner: ScoredRun
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1, err
     assert "--adapt" in err and "kernels" in err and "ce" in err
+    assert cli_runner.rows == 0
+
+
+def test_cli_band_step_with_kernels_is_one_line_and_nonzero(
+        store: Path, cli_runner: ScoredRunner, capsys: pytest.CaptureFixture[str]) -> None:
+    from app.cli import main
+
+    code = main(["evaluate", "-q", "--sut", "acc", "-n", "5", "--adapt", "kernels",
+                 "--band-step"])
+    assert code != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert err.count("--band-step") == 1 and "'kernels'" in err
     assert cli_runner.rows == 0
 
 
@@ -194,6 +242,43 @@ def test_service_refuses_an_unknown_adapt_naming_the_field(client: Any) -> None:
     with pytest.raises(InvalidInput) as exc:
         service.create(client.app.state.ctx, sut="acc", n=10, adapt="nope")
     assert exc.value.field == "body.adapt"
+
+
+@pytest.mark.slow  # three campaigns of 1,500 draws on a loaded machine
+def test_post_band_step_gives_the_direct_campaign_bit_for_bit(client: Any) -> None:
+    """``{"band_step": true}`` reaches ``evaluate(band_step=True)``: the stored spec and
+    the summary say so, the summary is the direct campaign's bit for bit, and the
+    campaign is not the one without it."""
+    from sampler.campaign import evaluate
+
+    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
+                                          "seed": 6, "band_step": True})
+    assert r.status_code == 202, r.json()
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert st["spec"]["band_step"] is True and st["spec"]["adapt"] == "ce"
+    got = st["summary"]
+    assert got["band_step"] is True
+
+    ctx = client.app.state.ctx
+    model = ctx.model(ctx.resolve_model_id(None))
+    kw: dict[str, Any] = {"n": 1500, "batch_size": 500, "seed": 6, "sut": "acc",
+                          "max_runs": min(service.DEFAULT_MAX_RUNS,
+                                          ctx.settings.catalogue_n_limit)}
+    direct = evaluate(model, ScoredRunner(DV_HIT), band_step=True, **kw)
+    assert got == json.loads(json.dumps(jsonconv.encode(direct.summary())))
+    off = evaluate(model, ScoredRunner(DV_HIT), **kw).summary()
+    assert off["band_step"] is False
+    # the final stage's shares differ (set and band parts 0.2 with the step, 0.1 without)
+    assert off["proposal"] != got["proposal"]
+
+
+def test_post_band_step_with_kernels_is_422_naming_the_field(client: Any) -> None:
+    r = client.post("/evaluations", json={"sut": "acc", "n": 10, "adapt": "kernels",
+                                          "band_step": True})
+    assert r.status_code == 422, r.json()
+    assert r.json()["error"]["field"] == "body.band_step", r.json()
+    assert "adapt 'ce'" in r.json()["error"]["message"]
 
 
 # --------------------------------------------------------------------------- resume

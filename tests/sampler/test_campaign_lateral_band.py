@@ -169,8 +169,8 @@ def test_lateral_part_is_a_density_on_its_band(model: CutInGMM, parts: list[Band
 
 def test_envelope_parts_make_two_bands_once(model: CutInGMM) -> None:
     """``end_margin<c`` (or ``<=``) among the envelopes gives the two lateral band parts
-    on p_y1, memoised; the default envelopes include ``end_margin<0.05``."""
-    assert "end_margin<0.05" in DEFAULT_ENVELOPES
+    on p_y1, memoised; the default envelopes include ``end_margin<0.03``."""
+    assert "end_margin<0.03" in DEFAULT_ENVELOPES
     first = _envelope_parts(model, ["end_margin<0.05"], LANE, None)
     assert [p.name for p in first] == ["band:end_margin<0.05:left",
                                        "band:end_margin<0.05:right"]
