@@ -81,7 +81,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
     p.add_argument("--band-step", action="store_true",
                    help="with --adapt ce: the final stage's band step (each band part of "
                    "the proposal gets its own cross-entropy step, shares move to the "
-                   "band parts); about 4x fewer runs on an ACC at P near 1e-5, 1.7x more "
+                   "band parts); about 4.6x fewer runs on an ACC at P near 1e-5, 2.5x more "
                    "at P near 1e-3 (docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed (0)")
     p.add_argument("--batch-size", type=int, default=None, metavar="B",

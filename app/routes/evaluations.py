@@ -68,8 +68,8 @@ class EvaluationRequest(BaseModel):
     band_step: bool = Field(
         default=False, description="with adapt 'ce': the final stage's band step (each "
         "band part of the proposal gets its own cross-entropy step, and shares move to the "
-        "band parts). Measured about 4 times fewer runs on an ACC at P(collision) near "
-        "1e-5, about 1.7 times more at P near 1e-3 and where the bands only slice a "
+        "band parts). Measured about 4.6 times fewer runs on an ACC at P(collision) near "
+        "1e-5, about 2.5 times more at P near 1e-3 and 1.7 where the bands only slice a "
         "failure set (docs/evaluation.md); the summary reports band_step")
 
 

@@ -39,6 +39,7 @@ from sampler.campaign.proposal import (
     Proposal,
     build_ce_proposal,
     build_proposal,
+    campaign_envelopes,
 )
 from sampler.campaign.reliability import verdict
 from sampler.campaign.runners import Runner
@@ -663,7 +664,8 @@ def next_ce_proposal(result: CampaignResult, *, envelopes: Sequence[str] = DEFAU
     from its chunks as ``evaluate`` builds it (pass the settings the campaign ran with):
     for diagnostics such as ``benchmarks/bench_true_efficiency.py``."""
     prop, _, _ = _ce_proposal(len(result.chunks), result.model, result.region, result.seed,
-                              result.chunks, tuple(envelopes), alpha, rho, ce_min_hits, {},
+                              result.chunks, campaign_envelopes(envelopes, band_step), alpha,
+                              rho, ce_min_hits, {},
                               band_step, tune_shares)
     return prop
 
@@ -771,9 +773,11 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         With ``adapt="ce"``: the final stage gives each band part with fewer than 2 d
         collided runs its own cross-entropy step (``ce:<band>-level``) and moves shares
         to the band parts (set and band parts 0.2, band refits 0.3, kernels 0.1, pilot
-        levels 0.05). Measured better at P near 1e-5 where collision families sit on
-        the bands (``acc k2=0.6``: 624 naive runs saved per SUT run against 168) and
-        worse at P near 1e-3 (``acc`` defaults: 24.7 against 46.0) and where the bands
+        levels 0.05), and with the default ``envelopes`` the slow cutter's set is
+        ``v_cut_min<1.5`` (``BAND_STEP_ENVELOPES``). Measured better at P near 1e-5 where
+        collision families sit on the bands (``acc k2=0.6``: 781 naive runs saved per SUT
+        run, 624 with ``v_cut_min<3``, against 168) and
+        worse at P near 1e-3 (``acc`` defaults: 18.4 against 46.0) and where the bands
         only slice a failure set (a two-half-space stand-in: about 1.7 times the runs);
         docs/evaluation.md, "When to use ``--band-step``". Off by default for that
         reason; the summary's ``band_step`` says whether it ran.
@@ -818,6 +822,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
     planned = int(n) if n is not None else int(max_runs)
     zq = float(norm.ppf(0.5 + confidence / 2))
     pb, cv_b = _p_bounds(model, region)
+    envelopes = campaign_envelopes(envelopes, bool(band_step) and adapt == "ce")
     chunks: list[ChunkResult] = []
     ce_fits: dict[int, tuple[Any, float]] = {}
     done = 0

@@ -271,6 +271,10 @@ def test_post_band_step_gives_the_direct_campaign_bit_for_bit(client: Any) -> No
     assert off["band_step"] is False
     # the final stage's shares differ (set and band parts 0.2 with the step, 0.1 without)
     assert off["proposal"] != got["proposal"]
+    # and the slow cutter's band is the narrower one (BAND_STEP_ENVELOPES)
+    parts = {p["part"] for p in got["proposal"]}
+    assert "band:v_cut_min<1.5" in parts and "band:v_cut_min<3" not in parts, parts
+    assert "band:v_cut_min<3" in {p["part"] for p in off["proposal"]}
 
 
 def test_post_band_step_with_kernels_is_422_naming_the_field(client: Any) -> None:

@@ -222,3 +222,19 @@ def test_bands_with_collided_runs_split_the_refits_share(model: CutInGMM,
     w = np.exp(model.log_density_z(z) - prop.log_q(z))
     se = w.std(ddof=1) / math.sqrt(w.size)
     assert abs(w.mean() - 1.0) <= 4 * se
+
+
+def test_band_step_narrows_only_the_default_slow_cutter_set() -> None:
+    """``campaign_envelopes``: with ``band_step`` the default list's ``v_cut_min<3``
+    becomes ``v_cut_min<1.5`` and nothing else changes; without it, or for a list of the
+    caller's own, the list is kept as given."""
+    from sampler.campaign.proposal import BAND_STEP_ENVELOPES, campaign_envelopes
+
+    assert campaign_envelopes(DEFAULT_ENVELOPES, False) == DEFAULT_ENVELOPES
+    got = campaign_envelopes(list(DEFAULT_ENVELOPES), True)
+    assert got == BAND_STEP_ENVELOPES
+    assert [e for e in got if e not in DEFAULT_ENVELOPES] == ["v_cut_min<1.5"]
+    assert [e for e in DEFAULT_ENVELOPES if e not in got] == ["v_cut_min<3"]
+    assert len(got) == len(DEFAULT_ENVELOPES)
+    own = ("ttc<2", "v_cut_min<3")
+    assert campaign_envelopes(own, True) == own
