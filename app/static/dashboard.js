@@ -1423,7 +1423,27 @@
     }
   }
 
+  // A deep link to a section (/dashboard#view-sut): the browser scrolls to it at once,
+  // then the views above it grow as their data arrives and push it out of sight. Keep
+  // the section at the top while the page settles, until the reader scrolls, clicks or
+  // types (or 60 s have passed).
+  function holdAnchor() {
+    const id = decodeURIComponent(location.hash.slice(1));
+    const target = id ? document.getElementById(id) : null;
+    if (!target || typeof ResizeObserver === "undefined") return;
+    const events = ["wheel", "touchstart", "keydown", "mousedown"];
+    const observer = new ResizeObserver(() => target.scrollIntoView({ block: "start" }));
+    const release = () => {
+      observer.disconnect();
+      for (const ev of events) window.removeEventListener(ev, release);
+    };
+    observer.observe(document.body);
+    for (const ev of events) window.addEventListener(ev, release, { passive: true });
+    setTimeout(release, 60000);
+  }
+
   window.addEventListener("popstate", onPopState);
+  holdAnchor();
   // shared with dashboard_rates.js (sections 5 and 6)
   window.scengen = { api, fmt, esc, table, draw, clearPlot, reportError, centres, COLORS };
   init();

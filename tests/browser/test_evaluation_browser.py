@@ -117,6 +117,14 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
                     if not r.url.startswith(base) and not r.url.startswith("data:") else None)
             page.goto(f"{base}/dashboard#view-sut")
             page.wait_for_selector("#sut-note[data-state=done]", timeout=TIMEOUT_MS)
+            page.wait_for_selector("body[data-ready='1']", timeout=TIMEOUT_MS)
+            page.wait_for_selector("#sut-scatter[data-rendered='1']", timeout=TIMEOUT_MS)
+            page.wait_for_timeout(1500)
+            # the deep link lands on section 7 once the views above it have grown with
+            # their data (below the sticky header: scroll-margin-top 140 px)
+            top = page.evaluate("document.getElementById('view-sut')"
+                                ".getBoundingClientRect().top")
+            assert 0 <= top <= 160, f"#view-sut at {top} px from the top after the deep link"
             # the newest finished evaluation of a SUT other than the careful driver
             assert page.locator("#eval-select").input_value() == ids["acc"]
             table = page.locator("#sut-table").inner_text()
