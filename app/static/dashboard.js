@@ -1428,7 +1428,12 @@
   // the section at the top while the page settles, until the reader scrolls, clicks or
   // types (or 60 s have passed).
   function holdAnchor() {
-    const id = decodeURIComponent(location.hash.slice(1));
+    let id = "";
+    try {
+      id = decodeURIComponent(location.hash.slice(1));
+    } catch (e) {
+      return; // not percent-encoding (#%E0): names no view, and must not stop the page
+    }
     const target = id ? document.getElementById(id) : null;
     if (!target || typeof ResizeObserver === "undefined") return;
     const events = ["wheel", "touchstart", "keydown", "mousedown"];

@@ -94,6 +94,16 @@ def test_header_links_move_within_the_page_without_loading_it_again(
     assert page.evaluate("() => window.__loadedOnce === true"), "Back reloaded the page"
 
 
+def test_a_malformed_or_unknown_fragment_still_loads_the_page(server: Server,
+                                                             page: Page) -> None:
+    """The page reads its #fragment to stay on a linked view; a fragment that is not
+    valid percent-encoding (``#%E0``) or names no view must not stop it from loading
+    (``page`` fails on any console error or uncaught exception)."""
+    for frag in ("%E0", "no-such-view"):
+        page.goto(f"{server.base}/dashboard#{frag}")
+        page.wait_for_selector("body[data-ready='1']", timeout=180_000)
+
+
 # --------------------------------------------------------------------------- view 4
 def test_view4_draws_the_r157_drivers_car(server: Server, real_catalogue: str,
                                           page: Page) -> None:
