@@ -50,6 +50,8 @@ from riskcore import ConcreteScenario
 # the stop rule's default rhw: defined and explained in sampler.campaign.evaluate, kept
 # here under its name for the routes and the tests (the CLI writes it out: app.cli.evaluate)
 from sampler.campaign import DEFAULT_RHW as DEFAULT_RHW
+from sampler.campaign import DEFAULT_ROULETTE
+from sampler.campaign import MAX_ROULETTE as MAX_ROULETTE
 
 if TYPE_CHECKING:
     from concurrent.futures import Executor
@@ -157,13 +159,18 @@ class CampaignSpec:
     #: the final stage's band step (``sampler.campaign.evaluate(band_step=...)``): off by
     #: default, and a stored spec without it ran without it (``from_dict``)
     band_step: bool = False
+    #: weight roulette's factor (``sampler.campaign.evaluate(roulette=...)``; 0: off): a
+    #: new request's default is ``DEFAULT_ROULETTE`` with adapt "ce", and a stored spec
+    #: without it ran without it (``from_dict``)
+    roulette: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return {"sut": self.sut, "sut_params": self.sut_params,
                 "constraints": self.constraints, "n": self.n, "rhw": self.rhw,
                 "max_runs": self.max_runs, "seed": self.seed,
                 "batch_size": self.batch_size, "settings": self.settings,
-                "risk": self.risk, "adapt": self.adapt, "band_step": self.band_step}
+                "risk": self.risk, "adapt": self.adapt, "band_step": self.band_step,
+                **({"roulette": self.roulette} if self.roulette else {})}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
@@ -173,11 +180,20 @@ class CampaignSpec:
                    seed=int(d.get("seed", 0)), batch_size=int(d["batch_size"]),
                    settings=d.get("settings"), risk=bool(d.get("risk", False)),
                    adapt=str(d.get("adapt") or "kernels"),
-                   band_step=bool(d.get("band_step", False)))
+                   band_step=bool(d.get("band_step", False)),
+                   roulette=float(d.get("roulette", 0.0)))
 
     @property
     def planned(self) -> int:
         return int(self.n) if self.n is not None else int(self.max_runs)
+
+
+def default_roulette(adapt: str, roulette: float | None) -> float:
+    """The weight roulette's factor a new campaign runs with: as given, else
+    ``DEFAULT_ROULETTE`` with adapt "ce" and 0 (off) with "kernels"."""
+    if roulette is not None:
+        return float(roulette)
+    return DEFAULT_ROULETTE if adapt == "ce" else 0.0
 
 
 def check_spec(spec: CampaignSpec, limit: int, where: str = "body") -> None:
@@ -207,6 +223,13 @@ def check_spec(spec: CampaignSpec, limit: int, where: str = "body") -> None:
     if spec.band_step and spec.adapt != "ce":
         raise InvalidInput(f"{f('band_step')}: the band step is a stage of adapt 'ce', got "
                            f"adapt {spec.adapt!r}", field=f("band_step"))
+    if not (math.isfinite(spec.roulette) and 0 <= spec.roulette <= MAX_ROULETTE):
+        raise InvalidInput(f"{f('roulette')}: the weight roulette's factor must be in "
+                           f"[0, {MAX_ROULETTE:g}] (0: off), got {spec.roulette}",
+                           field=f("roulette"))
+    if spec.roulette and spec.adapt != "ce":
+        raise InvalidInput(f"{f('roulette')}: weight roulette is a stage of adapt 'ce', got "
+                           f"adapt {spec.adapt!r}", field=f("roulette"))
 
 
 def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | None = None,
@@ -214,13 +237,15 @@ def create(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | Non
            rhw: float = DEFAULT_RHW, max_runs: int | None = None, seed: int = 0,
            batch_size: int | None = None,
            settings: Mapping[str, Any] | None = None, risk: bool = False,
-           adapt: str = "ce", band_step: bool = False) -> EvaluationRow:
+           adapt: str = "ce", band_step: bool = False,
+           roulette: float | None = None) -> EvaluationRow:
     """Validate and store a queued evaluation job; the caller submits it. ``sut`` must be a
     registered name (a request never names a module)."""
     return store(ctx, validate(ctx, sut=sut, sut_params=sut_params, model=model,
                                constraints=constraints, n=n, rhw=rhw, max_runs=max_runs,
                                seed=seed, batch_size=batch_size, settings=settings,
-                               risk=risk, adapt=adapt, band_step=band_step))
+                               risk=risk, adapt=adapt, band_step=band_step,
+                               roulette=roulette))
 
 
 @dataclass(frozen=True)
@@ -237,7 +262,7 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
              rhw: float = DEFAULT_RHW, max_runs: int | None = None, seed: int = 0,
              batch_size: int | None = None, settings: Mapping[str, Any] | None = None,
              risk: bool = False, adapt: str = "ce",
-             band_step: bool = False) -> ValidEvaluation:
+             band_step: bool = False, roulette: float | None = None) -> ValidEvaluation:
     """Every check of ``create`` (``InvalidInput`` naming the field, 404 for an unknown
     model), nothing stored: the route asks for the client's quota only after it, so that a
     bad request is told what is wrong (422), not to wait (429)."""
@@ -248,7 +273,8 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
                                                      ctx.settings.catalogue_n_limit)),
                         seed=int(seed), batch_size=int(batch_size or DEFAULT_BATCH),
                         settings=dict(settings) if settings else None, risk=bool(risk),
-                        adapt=str(adapt), band_step=bool(band_step))
+                        adapt=str(adapt), band_step=bool(band_step),
+                        roulette=default_roulette(adapt, roulette))
     check_spec(spec, ctx.settings.catalogue_n_limit)
     model_id = ctx.resolve_model_id(model)
     fitted = ctx.model(model_id)  # 404 before anything is stored
@@ -380,7 +406,7 @@ def campaign(model: CutInGMM, factory: suts.SutFactory, spec: CampaignSpec, *, r
         model, runner, constraints=spec.constraints or None, n=spec.n, rhw=spec.rhw,
         max_runs=spec.max_runs, seed=spec.seed, batch_size=spec.batch_size,
         progress=progress, on_chunk=on_chunk, stored=list(stored), executor=executor,
-        sut=spec.sut, adapt=spec.adapt, band_step=spec.band_step)
+        sut=spec.sut, adapt=spec.adapt, band_step=spec.band_step, roulette=spec.roulette)
     return result
 
 

@@ -13,6 +13,8 @@ collision probability per cut-in and rate per hour with both intervals (docs/eva
 
 from sampler.campaign.evaluate import (
     DEFAULT_RHW,
+    DEFAULT_ROULETTE,
+    MAX_ROULETTE,
     CampaignResult,
     ChunkResult,
     evaluate,
@@ -36,6 +38,8 @@ from sampler.campaign.sut import SutRunner, SutRuns, sut_runner
 __all__ = [
     "DEFAULT_ENVELOPES",
     "DEFAULT_RHW",
+    "DEFAULT_ROULETTE",
+    "MAX_ROULETTE",
     "MIN_COLLISIONS",
     "MIN_ESS",
     "CampaignResult",

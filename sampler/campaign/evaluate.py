@@ -125,6 +125,10 @@ class ChunkResult:
     z-space; ``weights = exp(log_p - log_q)``; ``simulated`` the rows inside the region
     and the bounds (the others were not run); ``outcome`` name -> (n,) array (``collided``,
     ``impact_speed`` and whatever else the runner gave; rows not run: False / 0 / NaN / "").
+    With weight roulette (``roulette_t > 0``) a row inside the region was run only with
+    probability ``min(1, w / roulette_t)`` (``exp(log_keep)``); ``log_q`` then includes
+    ``log_keep`` (the density of the rows that were run), so ``weights`` are those of the
+    rows run, and ``skipped`` counts the rows inside the region that were not.
     """
 
     index: int
@@ -141,6 +145,12 @@ class ChunkResult:
     #: False for a pilot chunk of an adaptive cross-entropy campaign (its runs shape the
     #: proposal but are left out of the estimate; decided before its draws)
     counted: bool = True
+    #: weight roulette's threshold (0: every row inside the region was run)
+    roulette_t: float = 0.0
+    #: log of each row's probability to be run under the roulette (None without it)
+    log_keep: FloatArray | None = None
+    #: rows inside the region and the bounds the roulette left unrun
+    skipped: int = 0
 
     @property
     def n(self) -> int:
@@ -162,6 +172,9 @@ class ChunkResult:
             "outcome": {k: _enc(v) for k, v in self.outcome.items()},
             "proposal": list(self.proposal),
             "counted": bool(self.counted),
+            **({"roulette_t": float(self.roulette_t), "log_keep": _enc(self.log_keep),
+                "skipped": int(self.skipped)}
+               if self.roulette_t > 0 and self.log_keep is not None else {}),
         }
 
     @classmethod
@@ -177,7 +190,10 @@ class ChunkResult:
                        simulated=_dec(d["simulated"]),
                        outcome={str(k): _dec(v) for k, v in d["outcome"].items()},
                        proposal=list(d.get("proposal", [])),
-                       counted=bool(d.get("counted", True)))
+                       counted=bool(d.get("counted", True)),
+                       roulette_t=float(d.get("roulette_t", 0.0)),
+                       log_keep=_dec(d["log_keep"]) if "log_keep" in d else None,
+                       skipped=int(d.get("skipped", 0)))
         except (KeyError, TypeError, ValueError) as exc:
             raise SamplerError(f"chunk: not a stored campaign chunk ({exc})",
                                field="chunk") from None
@@ -327,6 +343,8 @@ class CampaignResult:
     adapt: str = "kernels"
     #: the final stage's band step (``evaluate(band_step=...)``), as run
     band_step: bool = False
+    #: weight roulette's factor (``evaluate(roulette=...)``; 0: off), as run
+    roulette: float = 0.0
     _summary: dict[str, Any] | None = field(default=None, repr=False)
 
     @property
@@ -447,6 +465,8 @@ class CampaignResult:
             "pilot_runs": self.runs - self.counted_runs,
             "adapt": self.adapt,
             "band_step": self.band_step,
+            "roulette": self.roulette,
+            "skipped_runs": sum(c.skipped for c in self.chunks),
             "proposal": self.chunks[-1].proposal if self.chunks else [],
             "collisions": col.hits,
             "ess": _num(col.ess),
@@ -471,7 +491,8 @@ class CampaignResult:
         """One dict per run: ``run``, ``chunk``, ``seed``, the parameters by name,
         ``weight`` (its weight in P: ``w / P(B)``), ``log_p``, ``log_q``, ``part`` (the
         proposal it came from), ``simulated``, ``counted`` (its chunk is one the estimate
-        uses: :attr:`counted_chunks`) and the outcome fields."""
+        uses: :attr:`counted_chunks`), ``keep_prob`` (with weight roulette: the
+        probability the row had to be run) and the outcome fields."""
         pb, _ = _p_bounds(self.model, self.region)
         used = {c.index for c in self.counted_chunks}
         out: list[dict[str, Any]] = []
@@ -489,6 +510,8 @@ class CampaignResult:
                 rec["part"] = names[k] if 0 <= k < len(names) else k
                 rec["simulated"] = bool(c.simulated[i])
                 rec["counted"] = c.index in used
+                if c.log_keep is not None:
+                    rec["keep_prob"] = float(np.exp(c.log_keep[i]))
                 for name, arr in c.outcome.items():
                     v = arr[i]
                     rec[name] = (bool(v) if arr.dtype == np.bool_ else str(v)
@@ -601,6 +624,12 @@ def _ce_elite(previous: Sequence[ChunkResult], rho: float, min_hits: int
 #: the largest defensive share of the model a campaign takes (the final stage's other
 #: parts take the rest: ``sampler.campaign.proposal.build_ce_proposal``)
 MAX_ALPHA = 0.2
+#: the largest weight-roulette factor ``evaluate()`` takes (a threshold far above
+#: P_hat would leave most runs of the proposal's right places unrun)
+MAX_ROULETTE = 100.0
+#: the weight-roulette factor of a new campaign of the CLI and the API with adapt "ce"
+#: (``evaluate()`` itself runs without unless asked): docs/evaluation.md, "Weight roulette"
+DEFAULT_ROULETTE = 5.0
 #: share of the earlier pilot levels' mixtures in a cross-entropy chunk's proposal
 CE_HISTORY_SHARE = 0.1
 #: ... in the final stage with ``band_step``: its collided runs lead, the pilot levels
@@ -675,15 +704,19 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
                alpha: float, executor: Executor | None, part_size: int,
                min_fit_hits: int, adapt: str = "kernels", rho: float = 0.1,
                ce_min_hits: int = 10, ce_fits: dict[int, tuple[Any, float]] | None = None,
-               band_step: bool = False, tune_shares: bool = False) -> ChunkResult:
+               band_step: bool = False, tune_shares: bool = False,
+               roulette: float = 0.0) -> ChunkResult:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
     counted = True
     proposal: Proposal
+    threshold = 0.0
     if adapt == "ce" and not _unscored(previous):
         proposal, counted, rng = _ce_proposal(k, model, region, seed, previous, envelopes,
                                               alpha, rho, ce_min_hits,
                                               {} if ce_fits is None else ce_fits, band_step,
                                               tune_shares)
+        if counted:
+            threshold = _roulette_threshold(previous, roulette)
     else:
         hits = _hits(previous)
         if hits is not None and hits[0].shape[0] < min_fit_hits:
@@ -699,6 +732,20 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
     params = model.params_matrix(model.from_z(z))
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         inside = np.asarray(region.contains(params), dtype=bool)
+    log_keep: FloatArray | None = None
+    skipped = 0
+    if threshold > 0:
+        # weight roulette: a row whose weight is below the threshold is run with
+        # probability w / threshold and then weighs the threshold (its weight over that
+        # probability): the rows run are an importance sample of q min(1, w / t)
+        u = rng.random(size)
+        with np.errstate(over="ignore"):
+            log_keep = np.minimum(0.0, log_p - log_q - math.log(threshold))
+        keep = u < np.exp(log_keep)
+        skipped = int(np.count_nonzero(inside & ~keep))
+        inside = inside & keep
+        log_q = log_q + log_keep
+        weights = np.exp(log_p - log_q)
     rows = np.flatnonzero(inside)
     outcome: dict[str, NDArray[Any]]
     if rows.size:
@@ -708,7 +755,19 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
         outcome = {"collided": np.zeros(size, dtype=bool), "impact_speed": np.zeros(size)}
     return ChunkResult(index=k, params=params, z=z, seeds=seeds, part=part, log_p=log_p,
                        log_q=log_q, weights=weights, simulated=inside, outcome=outcome,
-                       proposal=proposal.describe(), counted=counted)
+                       proposal=proposal.describe(), counted=counted,
+                       roulette_t=threshold, log_keep=log_keep, skipped=skipped)
+
+
+def _roulette_threshold(previous: Sequence[ChunkResult], kappa: float) -> float:
+    """Weight roulette's threshold for the next final chunk: ``kappa`` times the mean
+    term ``w c`` of the chunks the estimate would use so far (an estimate of
+    P(C and A and B); 0, no roulette, before any collision)."""
+    chunks = _counted(previous)
+    n = sum(c.n for c in chunks)
+    if kappa <= 0 or n == 0:
+        return 0.0
+    return float(kappa) * sum(float(c.weights[c.collided].sum()) for c in chunks) / n
 
 
 def _exposure(model: CutInGMM, exposure: Exposure | Mapping[str, Any] | None
@@ -733,7 +792,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
              min_collisions: int = MIN_COLLISIONS, part_size: int = 1024,
              min_fit_hits: int = 2, adapt: str = "ce", rho: float = 0.1,
              ce_min_hits: int = 20, band_step: bool = False,
-             tune_shares: bool = False) -> CampaignResult:
+             tune_shares: bool = False, roulette: float = 0.0) -> CampaignResult:
     """Run a campaign: importance-sampled cut-ins driven by ``runner`` until the stop rule.
 
     Parameters
@@ -786,6 +845,17 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         collided runs so far, to the shares that minimise the estimated variance of
         the next chunk (``sampler.campaign.proposal.tune_shares``; the model keeps
         ``alpha``, every other part stays within 0.5 - 3 times its fixed share).
+    roulette : float, default 0 (off)
+        With ``adapt="ce"``, **weight roulette** in the final stage: a draw whose weight
+        ``w = p / q`` is below ``t = roulette * P_hat`` (``P_hat`` the estimate of
+        P(C and A and B) from the chunks before, fixed before the chunk is drawn) is run
+        with probability ``w / t`` and, when run, weighs ``t``; the others are drawn but
+        not run (Kahn 1956's Russian roulette). Unbiased for any ``t``; a collision's
+        weight can only rise to ``t``, so the variance per draw grows by at most
+        ``t P(C)``, while the draws the proposal over-samples (``q`` far above
+        ``p / P``) mostly go unrun. Measured at ``acc k2=0.6`` with ``roulette=5``:
+        docs/evaluation.md, "Weight roulette". The summary's ``roulette`` and
+        ``skipped_runs`` say what it did.
     """
     model.check_fitted()
     if n is not None and (isinstance(n, bool) or int(n) < 1):
@@ -807,6 +877,10 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         raise SamplerError(f"adapt: must be 'kernels' or 'ce', got {adapt!r}", field="adapt")
     if not (isinstance(rho, int | float) and 0 < rho < 1):
         raise SamplerError(f"rho: must be a quantile in (0, 1), got {rho!r}", field="rho")
+    if (isinstance(roulette, bool) or not isinstance(roulette, int | float)
+            or not 0 <= roulette <= MAX_ROULETTE):
+        raise SamplerError(f"roulette: must be a number in [0, {MAX_ROULETTE:g}] (0: off), "
+                           f"got {roulette!r}", field="roulette")
     if int(ce_min_hits) < 1:
         raise SamplerError(f"ce_min_hits: must be >= 1, got {ce_min_hits!r}",
                            field="ce_min_hits")
@@ -840,7 +914,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
             chunk = _new_chunk(k, size, model, region, runner, seed, chunks, envelopes,
                                alpha, executor, part_size, min_fit_hits, adapt, float(rho),
                                int(ce_min_hits), ce_fits, bool(band_step),
-                               bool(tune_shares))
+                               bool(tune_shares), float(roulette))
             if on_chunk is not None:
                 on_chunk(chunk)
         chunks.append(chunk)
@@ -867,4 +941,5 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                           bootstrap=bootstrap, confidence=confidence,
                           rhw_target=None if n is not None else float(rhw), alpha=alpha,
                           p_region=p_region, adapt=adapt,
-                          band_step=bool(band_step) and adapt == "ce")
+                          band_step=bool(band_step) and adapt == "ce",
+                          roulette=float(roulette) if adapt == "ce" else 0.0)

@@ -199,7 +199,7 @@ def test_post_adapt_ce_gives_the_direct_campaign_bit_for_bit(client: Any) -> Non
     ctx = client.app.state.ctx
     model = ctx.model(ctx.resolve_model_id(None))
     direct = evaluate(model, ScoredRunner(DV_HIT), n=1500, batch_size=500, seed=5,
-                      sut="acc", adapt="ce",
+                      sut="acc", adapt="ce", roulette=service.DEFAULT_ROULETTE,
                       max_runs=min(service.DEFAULT_MAX_RUNS,
                                    ctx.settings.catalogue_n_limit))
     want = json.loads(json.dumps(jsonconv.encode(direct.summary())))
@@ -265,6 +265,7 @@ def test_post_band_step_gives_the_direct_campaign_bit_for_bit(client: Any) -> No
     kw: dict[str, Any] = {"n": 1500, "batch_size": 500, "seed": 6, "sut": "acc",
                           "max_runs": min(service.DEFAULT_MAX_RUNS,
                                           ctx.settings.catalogue_n_limit)}
+    kw["roulette"] = service.DEFAULT_ROULETTE  # the request's default with adapt ce
     direct = evaluate(model, ScoredRunner(DV_HIT), band_step=True, **kw)
     assert got == json.loads(json.dumps(jsonconv.encode(direct.summary())))
     off = evaluate(model, ScoredRunner(DV_HIT), **kw).summary()
@@ -283,6 +284,90 @@ def test_post_band_step_with_kernels_is_422_naming_the_field(client: Any) -> Non
     assert r.status_code == 422, r.json()
     assert r.json()["error"]["field"] == "body.band_step", r.json()
     assert "adapt 'ce'" in r.json()["error"]["message"]
+
+
+# --------------------------------------------------------------------------- roulette
+def test_a_stored_spec_without_roulette_reads_as_off() -> None:
+    """Specs stored before the weight roulette existed ran without it and resume so."""
+    old = {"sut": "acc", "sut_params": {}, "constraints": [], "n": 100, "rhw": 0.3,
+           "max_runs": 200000, "seed": 1, "batch_size": 50, "settings": None,
+           "risk": False, "adapt": "ce", "band_step": False}
+    spec = service.CampaignSpec.from_dict(old)
+    assert spec.roulette == 0.0 and spec.to_dict() == old
+    on = service.CampaignSpec.from_dict({**old, "roulette": 5.0})
+    assert on.roulette == 5.0
+    assert service.CampaignSpec.from_dict(on.to_dict()) == on
+
+
+def test_roulette_defaults_to_five_with_ce_and_off_with_kernels(tmp_path: Path) -> None:
+    """A new campaign of the service and the CLI runs the roulette (factor 5) with adapt
+    'ce' unless told otherwise; the Python ``evaluate()`` runs without unless asked."""
+    import inspect
+
+    from app.routes.evaluations import EvaluationRequest
+    from sampler.campaign import evaluate
+    from tests.app.test_stop_rule_default import _evaluate_parser, _openapi_request
+
+    assert service.DEFAULT_ROULETTE == 5.0
+    assert service.default_roulette("ce", None) == 5.0
+    assert service.default_roulette("kernels", None) == 0.0
+    assert service.default_roulette("ce", 0) == 0.0
+    assert service.default_roulette("ce", 12.5) == 12.5
+    [flag] = [a for a in _evaluate_parser()._actions if a.dest == "roulette"]
+    assert flag.default is None  # resolved by default_roulette with --adapt
+    assert EvaluationRequest(sut="acc").roulette is None
+    assert _openapi_request(tmp_path)["properties"]["roulette"].get("default") is None
+    assert inspect.signature(evaluate).parameters["roulette"].default == 0.0
+
+
+def test_post_default_runs_the_roulette_and_stores_it(client: Any) -> None:
+    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
+                                          "seed": 3})
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert st["spec"]["roulette"] == 5.0
+    got = st["summary"]
+    assert got["roulette"] == 5.0 and got["skipped_runs"] > 0
+    assert got["sut_runs"] + got["skipped_runs"] <= got["runs"]
+    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
+                                          "seed": 3, "roulette": 0})
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert "roulette" not in st["spec"] and st["summary"]["skipped_runs"] == 0
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    ({"roulette": -1}, "greater than or equal"),
+    ({"roulette": 1000}, "less than or equal"),
+    ({"roulette": "lots"}, "number"),
+    ({"adapt": "kernels", "roulette": 5}, "adapt 'ce'"),
+])
+def test_post_bad_roulette_is_422_naming_the_field(client: Any, body: dict[str, Any],
+                                                   message: str) -> None:
+    before = len(client.get("/evaluations").json()["evaluations"])
+    r = client.post("/evaluations", json={"sut": "acc", "n": 10, **body})
+    assert r.status_code == 422, r.json()
+    err = r.json()["error"]
+    assert err["field"] == "body.roulette", err
+    assert message in err["message"], err
+    assert len(client.get("/evaluations").json()["evaluations"]) == before
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--roulette", "-2"], "[0, 100]"),
+    (["--adapt", "kernels", "--roulette", "5"], "'kernels'"),
+])
+def test_cli_bad_roulette_is_one_line_and_nonzero(
+        store: Path, cli_runner: ScoredRunner, capsys: pytest.CaptureFixture[str],
+        argv: list[str], message: str) -> None:
+    from app.cli import main
+
+    code = main(["evaluate", "-q", "--sut", "acc", "-n", "5", *argv])
+    assert code != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert err.count("--roulette") == 1 and message in err, err
+    assert cli_runner.rows == 0
 
 
 # --------------------------------------------------------------------------- resume
