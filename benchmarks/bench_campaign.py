@@ -277,6 +277,9 @@ def main() -> None:
     ap.add_argument("--roulette", type=float, default=None,
                     help="SUT campaigns with evaluate(..., roulette=K) (default: "
                          "evaluate()'s own)")
+    ap.add_argument("--alpha", type=float, default=None,
+                    help="SUT campaigns with evaluate(..., alpha=A): the model's defensive "
+                         "share (default: evaluate()'s own)")
     ap.add_argument("--tune-shares", action="store_true",
                     help="SUT campaigns with evaluate(..., tune_shares=True)")
     ap.add_argument("--adapt", default="ce", choices=("ce", "kernels"),
@@ -334,6 +337,7 @@ def main() -> None:
                         batch_size=a.sut_batch, adapt=a.adapt, rhw=a.sut_rhw,
                         **({"band_step": True} if a.band_step else {}),
                         **({"roulette": a.roulette} if a.roulette is not None else {}),
+                        **({"alpha": a.alpha} if a.alpha is not None else {}),
                         **({"tune_shares": True} if a.tune_shares else {})) if seeds else []
         if a.save:
             with open(a.save, "w") as fh:

@@ -53,6 +53,7 @@ from datasets.embedded import default_parameter_table
 from riskcore.sut import SimSettings, make_sut
 from sampler import CutInGMM
 from sampler.campaign import evaluate, next_ce_proposal, sut_runner
+from sampler.campaign.evaluate import roulette_threshold
 from sampler.campaign.proposal import DEFAULT_ENVELOPES
 from sampler.model import bootstrap_fit
 from sampler.rates import tno_exposure
@@ -175,7 +176,7 @@ def read_hits(paths: Sequence[str]) -> tuple[FloatArray, int, int]:
 def measure(model: CutInGMM, runner: Any, paths: Sequence[str], seeds: Sequence[int],
             rhw: float, envelopes: Sequence[str], p_ref: float | None,
             max_runs: int = 1_000_000, band_step: bool = False,
-            tune_shares: bool = False) -> None:
+            tune_shares: bool = False, roulette: float = 0.0) -> None:
     z, hits, runs = read_hits(paths)
     if hits != z.shape[0] or not runs:
         raise SystemExit(f"hits files: {z.shape[0]} rows but {hits} collisions recorded "
@@ -189,12 +190,18 @@ def measure(model: CutInGMM, runner: Any, paths: Sequence[str], seeds: Sequence[
         t0 = time.perf_counter()
         res = evaluate(model, runner, seed=s, rhw=rhw, batch_size=500,
                        envelopes=tuple(envelopes), max_runs=max_runs, band_step=band_step,
-                       tune_shares=tune_shares)
+                       tune_shares=tune_shares, roulette=roulette)
         summ = res.summary()
         pb = float(summ["p_bounds"])  # P(B) of the physical cut-ins
         prop = next_ce_proposal(res, envelopes=envelopes, band_step=band_step,
                                 tune_shares=tune_shares)
         log_q = np.asarray(prop.log_q(z), dtype=np.float64)
+        t = roulette_threshold(res.chunks, roulette)
+        if t > 0:
+            # with the roulette a collision run weighs max(w, t): the draws it kept are an
+            # importance sample of q min(1, w / t); the runs it skipped are in sut_runs'
+            # complement, so share_counted below counts them as not run
+            log_q = np.minimum(log_q, log_p - math.log(t))
         eff = efficiency(log_p, log_q, p, p_bounds=pb)
         # naive runs saved per campaign SUT run (its pilot's runs included): the counted
         # draws each save eff["saved"], and the campaign ran sut_runs to make them
@@ -247,6 +254,8 @@ def main() -> None:
                     help="campaigns with evaluate(..., band_step=True)")
     ap.add_argument("--tune-shares", action="store_true",
                     help="campaigns with evaluate(..., tune_shares=True)")
+    ap.add_argument("--roulette", type=float, default=0.0,
+                    help="campaigns with evaluate(..., roulette=K) (default 0: off)")
     a = ap.parse_args()
     params = {kv.split("=")[0]: float(kv.split("=")[1]) for kv in a.sut_param}
     model = _model()
@@ -256,7 +265,7 @@ def main() -> None:
     else:
         measure(model, runner, a.hits, _seeds(a.seeds), a.rhw,
                 (*DEFAULT_ENVELOPES, *a.extra_envelope), a.ref, a.max_runs, a.band_step,
-                a.tune_shares)
+                a.tune_shares, a.roulette)
 
 
 if __name__ == "__main__":

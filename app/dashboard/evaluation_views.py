@@ -60,7 +60,7 @@ def _figures(summary: dict[str, Any] | None) -> dict[str, Any] | None:
     if not summary:
         return None
     keys = ("p_collision", "rate_per_hour", "p_violation", "runs", "sut_runs", "pilot_runs",
-            "collisions", "ess", "acceleration", "stop_reason")
+            "skipped_runs", "collisions", "ess", "acceleration", "stop_reason")
     out = {k: summary.get(k) for k in keys}
     out["unreliable"] = reliability(summary.get("collisions"), summary.get("ess"))
     # every warning of the rule (the page shows only the flag above)

@@ -43,14 +43,17 @@
     return "[" + sci(ci[0]) + ", " + sci(ci[1]) + "]";
   }
 
-  // how many draws were cut-ins the SUT drove: the others (outside the physical bounds or
+  // how many draws were cut-ins the SUT drove: the weight roulette left some unrun (they
+  // count through the weights of those run), the others (outside the physical bounds or
   // the region) count as no collision
   function countCell(f) {
     const pilot = f.pilot_runs ? "; the estimate counts the " + (f.runs - f.pilot_runs) +
       " draws after the " + f.pilot_runs + " pilot draws" : "";
+    const skipped = f.skipped_runs ? f.skipped_runs + " over-sampled draws left unrun by " +
+      "the weight roulette (the runs kept weigh for them); " : "";
     return f.collisions + " collisions in " + f.runs + " draws (" + f.sut_runs +
-      " simulated cut-ins; the rest fall outside the physical bounds or the region and " +
-      "count as no collision" + pilot + ")";
+      " simulated cut-ins; " + skipped + "the rest fall outside the physical bounds or " +
+      "the region and count as no collision" + pilot + ")";
   }
 
   // without any collision there is no interval, only the 95 % upper bound (for the rate

@@ -716,7 +716,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
                                               {} if ce_fits is None else ce_fits, band_step,
                                               tune_shares)
         if counted:
-            threshold = _roulette_threshold(previous, roulette)
+            threshold = roulette_threshold(previous, roulette)
     else:
         hits = _hits(previous)
         if hits is not None and hits[0].shape[0] < min_fit_hits:
@@ -759,7 +759,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
                        roulette_t=threshold, log_keep=log_keep, skipped=skipped)
 
 
-def _roulette_threshold(previous: Sequence[ChunkResult], kappa: float) -> float:
+def roulette_threshold(previous: Sequence[ChunkResult], kappa: float) -> float:
     """Weight roulette's threshold for the next final chunk: ``kappa`` times the mean
     term ``w c`` of the chunks the estimate would use so far (an estimate of
     P(C and A and B); 0, no roulette, before any collision)."""

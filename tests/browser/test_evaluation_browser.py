@@ -147,6 +147,12 @@ def test_the_system_under_test_section(served: tuple[str, dict[str, str]]) -> No
             # the draws and the simulated cut-ins among them, from the summary
             assert (f"{fig['collisions']} collisions in {fig['runs']} draws "
                     f"({fig['sut_runs']} simulated cut-ins;") in table
+            # the draws the weight roulette left unrun, when it left any
+            if fig["skipped_runs"]:
+                assert (f"; {fig['skipped_runs']} over-sampled draws left unrun by the "
+                        "weight roulette") in table
+            else:
+                assert "weight roulette" not in table
             # too few collisions or a tiny ESS: the warning replaces the speed-up, greyed
             acc_rows = page.locator("#sut-table tr", has_text="acc · ")
             if fig["unreliable"]:
