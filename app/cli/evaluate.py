@@ -87,7 +87,7 @@ def register(subparsers: argparse._SubParsersAction[Any]) -> None:
                    help="with --adapt ce: weight roulette's factor (default 5; 0: off): "
                    "in the final stage a draw whose weight is below K times the estimate "
                    "so far is run only with probability weight/threshold (unbiased; "
-                   "about 1.4x fewer SUT runs at P near 1e-5, docs/evaluation.md)")
+                   "about 1.3x fewer SUT runs at P near 1e-5 and 1e-3, docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed (0)")
     p.add_argument("--batch-size", type=int, default=None, metavar="B",
                    help="draws per chunk (2000)")

@@ -76,7 +76,7 @@ class EvaluationRequest(BaseModel):
         "roulette's factor K (0: off; default 5 with adapt 'ce', 0 with 'kernels'). In the "
         "final stage a draw whose weight p/q is below K times the estimate so far is run "
         "with probability weight / threshold and then weighs the threshold: unbiased, and "
-        "the draws the proposal over-samples mostly go unrun (measured about 1.4 times "
+        "the draws the proposal over-samples mostly go unrun (measured about 1.3 times "
         "fewer SUT runs at P(collision) near 1e-5, docs/evaluation.md, 'Weight "
         "roulette'). The summary reports roulette and skipped_runs")
 
