@@ -280,6 +280,10 @@ def main() -> None:
     ap.add_argument("--alpha", type=float, default=None,
                     help="SUT campaigns with evaluate(..., alpha=A): the model's defensive "
                          "share (default: evaluate()'s own)")
+    ap.add_argument("--final-alpha", type=float, default=None,
+                    help="SUT campaigns with evaluate(..., final_alpha=A): the model's share "
+                         "in the final stage only (the CLI and the API run 0.05 with the "
+                         "roulette on; default: evaluate()'s own, alpha)")
     ap.add_argument("--tune-shares", action="store_true",
                     help="SUT campaigns with evaluate(..., tune_shares=True)")
     ap.add_argument("--adapt", default="ce", choices=("ce", "kernels"),
@@ -338,6 +342,8 @@ def main() -> None:
                         **({"band_step": True} if a.band_step else {}),
                         **({"roulette": a.roulette} if a.roulette is not None else {}),
                         **({"alpha": a.alpha} if a.alpha is not None else {}),
+                        **({"final_alpha": a.final_alpha} if a.final_alpha is not None
+                           else {}),
                         **({"tune_shares": True} if a.tune_shares else {})) if seeds else []
         if a.save:
             with open(a.save, "w") as fh:

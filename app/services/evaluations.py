@@ -50,7 +50,7 @@ from riskcore import ConcreteScenario
 # the stop rule's default rhw: defined and explained in sampler.campaign.evaluate, kept
 # here under its name for the routes and the tests (the CLI writes it out: app.cli.evaluate)
 from sampler.campaign import DEFAULT_RHW as DEFAULT_RHW
-from sampler.campaign import DEFAULT_ROULETTE
+from sampler.campaign import DEFAULT_ROULETTE, ROULETTE_FINAL_ALPHA
 from sampler.campaign import MAX_ROULETTE as MAX_ROULETTE
 
 if TYPE_CHECKING:
@@ -163,6 +163,11 @@ class CampaignSpec:
     #: new request's default is ``DEFAULT_ROULETTE`` with adapt "ce", and a stored spec
     #: without it ran without it (``from_dict``)
     roulette: float = 0.0
+    #: the model's defensive share in the final stage
+    #: (``sampler.campaign.evaluate(final_alpha=...)``; None: the pilot's 0.15): a new
+    #: request with the roulette on runs ``ROULETTE_FINAL_ALPHA``, and a stored spec
+    #: without it ran with None (``from_dict``)
+    final_alpha: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"sut": self.sut, "sut_params": self.sut_params,
@@ -170,7 +175,9 @@ class CampaignSpec:
                 "max_runs": self.max_runs, "seed": self.seed,
                 "batch_size": self.batch_size, "settings": self.settings,
                 "risk": self.risk, "adapt": self.adapt, "band_step": self.band_step,
-                **({"roulette": self.roulette} if self.roulette else {})}
+                **({"roulette": self.roulette} if self.roulette else {}),
+                **({"final_alpha": self.final_alpha} if self.final_alpha is not None
+                   else {})}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
@@ -181,7 +188,9 @@ class CampaignSpec:
                    settings=d.get("settings"), risk=bool(d.get("risk", False)),
                    adapt=str(d.get("adapt") or "kernels"),
                    band_step=bool(d.get("band_step", False)),
-                   roulette=float(d.get("roulette", 0.0)))
+                   roulette=float(d.get("roulette", 0.0)),
+                   final_alpha=None if d.get("final_alpha") is None
+                   else float(d["final_alpha"]))
 
     @property
     def planned(self) -> int:
@@ -194,6 +203,13 @@ def default_roulette(adapt: str, roulette: float | None) -> float:
     if roulette is not None:
         return float(roulette)
     return DEFAULT_ROULETTE if adapt == "ce" else 0.0
+
+
+def default_final_alpha(roulette: float) -> float | None:
+    """The model's final-stage share a new campaign runs with: ``ROULETTE_FINAL_ALPHA``
+    with the weight roulette on (its runs are the ones the roulette cannot leave out),
+    None (the pilot's share) without."""
+    return ROULETTE_FINAL_ALPHA if roulette > 0 else None
 
 
 def check_spec(spec: CampaignSpec, limit: int, where: str = "body") -> None:
@@ -274,7 +290,8 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
                         seed=int(seed), batch_size=int(batch_size or DEFAULT_BATCH),
                         settings=dict(settings) if settings else None, risk=bool(risk),
                         adapt=str(adapt), band_step=bool(band_step),
-                        roulette=default_roulette(adapt, roulette))
+                        roulette=default_roulette(adapt, roulette),
+                        final_alpha=default_final_alpha(default_roulette(adapt, roulette)))
     check_spec(spec, ctx.settings.catalogue_n_limit)
     model_id = ctx.resolve_model_id(model)
     fitted = ctx.model(model_id)  # 404 before anything is stored
@@ -406,7 +423,8 @@ def campaign(model: CutInGMM, factory: suts.SutFactory, spec: CampaignSpec, *, r
         model, runner, constraints=spec.constraints or None, n=spec.n, rhw=spec.rhw,
         max_runs=spec.max_runs, seed=spec.seed, batch_size=spec.batch_size,
         progress=progress, on_chunk=on_chunk, stored=list(stored), executor=executor,
-        sut=spec.sut, adapt=spec.adapt, band_step=spec.band_step, roulette=spec.roulette)
+        sut=spec.sut, adapt=spec.adapt, band_step=spec.band_step, roulette=spec.roulette,
+        final_alpha=spec.final_alpha)
     return result
 
 

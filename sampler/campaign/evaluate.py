@@ -339,6 +339,9 @@ class CampaignResult:
     confidence: float = 0.95
     rhw_target: float | None = DEFAULT_RHW
     alpha: float = 0.15
+    #: the model's share in the final stage of an adaptive cross-entropy campaign
+    #: (``evaluate(final_alpha=...)``; None: ``alpha``), as run
+    final_alpha: float | None = None
     p_region: Any = None  # PRegion of the user's region (None without constraints)
     adapt: str = "kernels"
     #: the final stage's band step (``evaluate(band_step=...)``), as run
@@ -359,6 +362,17 @@ class CampaignResult:
     @property
     def counted_runs(self) -> int:
         return sum(c.n for c in self.counted_chunks)
+
+    @property
+    def bound_alpha(self) -> float:
+        """The model's smallest share in the chunks the estimate uses (every counted draw's
+        ``q >= bound_alpha p``: the no-collision bound's factor): ``final_alpha`` once a
+        cross-entropy campaign counts its final stage, else ``alpha``."""
+        final = [c for c in self.chunks if c.counted]
+        if (self.final_alpha is not None and self.adapt == "ce" and final
+                and len(final) < len(self.chunks)):
+            return min(self.alpha, self.final_alpha)
+        return self.alpha
 
     @property
     def sut_runs(self) -> int:
@@ -415,7 +429,8 @@ class CampaignResult:
                 model_ci = [_num(lo), _num(hi)]
             upper = None
             if est.hits == 0 and self.counted_runs > 0:  # a probability: at most 1
-                upper = min(RULE_OF_THREE / (self.alpha * self.counted_runs * pb) / pa, 1.0)
+                upper = min(RULE_OF_THREE / (self.bound_alpha * self.counted_runs * pb) / pa,
+                            1.0)
             out = {"estimate": _num(p), "ci": _lognormal_ci(p, cv, zq), "model_ci": model_ci,
                    "se": _num(p * cv) if p > 0 else _num(est.se / pa),
                    "rhw": _num(zq * cv) if p > 0 else None,
@@ -444,7 +459,8 @@ class CampaignResult:
                     "ci": _lognormal_ci(lam * p_joint, cv_joint, zq),
                     "model_ci": None,
                     "upper_bound": None if col.hits else _num(min(
-                        RULE_OF_THREE / (self.alpha * self.counted_runs * pb), 1.0) * lam)
+                        RULE_OF_THREE / (self.bound_alpha * self.counted_runs * pb), 1.0)
+                        * lam)
                     if self.counted_runs else None}
                 if reps_col is not None and p_joint > 0:
                     r = reps_col * counts / amount
@@ -466,6 +482,8 @@ class CampaignResult:
             "adapt": self.adapt,
             "band_step": self.band_step,
             "roulette": self.roulette,
+            "alpha": self.alpha,
+            "final_alpha": self.final_alpha if self.adapt == "ce" else None,
             "skipped_runs": sum(c.skipped for c in self.chunks),
             "proposal": self.chunks[-1].proposal if self.chunks else [],
             "collisions": col.hits,
@@ -630,6 +648,10 @@ MAX_ROULETTE = 100.0
 #: the weight-roulette factor of a new campaign of the CLI and the API with adapt "ce"
 #: (``evaluate()`` itself runs without unless asked): docs/evaluation.md, "Weight roulette"
 DEFAULT_ROULETTE = 5.0
+#: the model's final-stage share of a new campaign of the CLI and the API that runs the
+#: weight roulette (``evaluate(final_alpha=...)``): docs/evaluation.md, "A smaller
+#: defensive share with the roulette"
+ROULETTE_FINAL_ALPHA = 0.05
 #: share of the earlier pilot levels' mixtures in a cross-entropy chunk's proposal
 CE_HISTORY_SHARE = 0.1
 #: ... in the final stage with ``band_step``: its collided runs lead, the pilot levels
@@ -642,7 +664,8 @@ CE_INFLATE = 1.2
 def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
                  previous: Sequence[ChunkResult], envelopes: Sequence[str], alpha: float,
                  rho: float, ce_min_hits: int, fits: dict[int, tuple[Any, float]],
-                 band_step: bool = False, tune_shares: bool = False
+                 band_step: bool = False, tune_shares: bool = False,
+                 final_alpha: float | None = None
                  ) -> tuple[Proposal, bool, np.random.Generator]:
     """Chunk k's cross-entropy proposal from the chunks before it, and whether it counts.
 
@@ -651,7 +674,8 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
     levels (``fits``: chunk index -> (its fitted mixture or None, its level), filled here;
     a chunk replayed from storage is refitted from the chunks before it with its own
     generator, which gives the same mixture bit for bit). The generator is returned as
-    the fit left it: the chunk's draws continue it."""
+    the fit left it: the chunk's draws continue it. The model's share is ``alpha`` in
+    the pilot and ``final_alpha`` (None: ``alpha``) in the final stage."""
     def build(j: int, history: list[Any]
               ) -> tuple[Proposal, bool, float, np.random.Generator]:
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(j)]))
@@ -664,7 +688,8 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
                       "kernel_share": BAND_STEP_KERNEL_SHARE}
         prop = build_ce_proposal(model, region=region, lane_width=region.lane_width,
                                  elite=elite, level=level, rng=rng, envelopes=envelopes,
-                                 alpha=alpha, history=history, inflate=CE_INFLATE,
+                                 alpha=final_alpha if counted and final_alpha is not None
+                                 else alpha, history=history, inflate=CE_INFLATE,
                                  tune=tune_shares, **shares)
         return prop, counted, level, rng
 
@@ -688,14 +713,15 @@ def _ce_proposal(k: int, model: CutInGMM, region: Region, seed: int,
 
 def next_ce_proposal(result: CampaignResult, *, envelopes: Sequence[str] = DEFAULT_ENVELOPES,
                      alpha: float = 0.15, rho: float = 0.1, ce_min_hits: int = 20,
-                     band_step: bool = False, tune_shares: bool = False) -> Proposal:
+                     band_step: bool = False, tune_shares: bool = False,
+                     final_alpha: float | None = None) -> Proposal:
     """The proposal the next chunk of a cross-entropy campaign would draw from, rebuilt
     from its chunks as ``evaluate`` builds it (pass the settings the campaign ran with):
     for diagnostics such as ``benchmarks/bench_true_efficiency.py``."""
     prop, _, _ = _ce_proposal(len(result.chunks), result.model, result.region, result.seed,
                               result.chunks, campaign_envelopes(envelopes, band_step), alpha,
                               rho, ce_min_hits, {},
-                              band_step, tune_shares)
+                              band_step, tune_shares, final_alpha)
     return prop
 
 
@@ -705,7 +731,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
                min_fit_hits: int, adapt: str = "kernels", rho: float = 0.1,
                ce_min_hits: int = 10, ce_fits: dict[int, tuple[Any, float]] | None = None,
                band_step: bool = False, tune_shares: bool = False,
-               roulette: float = 0.0) -> ChunkResult:
+               roulette: float = 0.0, final_alpha: float | None = None) -> ChunkResult:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k)]))
     counted = True
     proposal: Proposal
@@ -714,7 +740,7 @@ def _new_chunk(k: int, size: int, model: CutInGMM, region: Region, runner: Runne
         proposal, counted, rng = _ce_proposal(k, model, region, seed, previous, envelopes,
                                               alpha, rho, ce_min_hits,
                                               {} if ce_fits is None else ce_fits, band_step,
-                                              tune_shares)
+                                              tune_shares, final_alpha)
         if counted:
             threshold = roulette_threshold(previous, roulette)
     else:
@@ -792,7 +818,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
              min_collisions: int = MIN_COLLISIONS, part_size: int = 1024,
              min_fit_hits: int = 2, adapt: str = "ce", rho: float = 0.1,
              ce_min_hits: int = 20, band_step: bool = False,
-             tune_shares: bool = False, roulette: float = 0.0) -> CampaignResult:
+             tune_shares: bool = False, roulette: float = 0.0,
+             final_alpha: float | None = None) -> CampaignResult:
     """Run a campaign: importance-sampled cut-ins driven by ``runner`` until the stop rule.
 
     Parameters
@@ -856,6 +883,14 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         ``p / P``) mostly go unrun. Measured at ``acc k2=0.6`` with ``roulette=5``:
         docs/evaluation.md, "Weight roulette". The summary's ``roulette`` and
         ``skipped_runs`` say what it did.
+    final_alpha : float, optional (default: ``alpha``)
+        With ``adapt="ce"``: the model's defensive share in the final stage only (the
+        pilot keeps ``alpha``, so a campaign that never meets a collision keeps the
+        no-collision bound of ``alpha``). Every final-stage weight stays below
+        ``1 / final_alpha``. With the roulette the model's draws are the runs it cannot
+        leave out (their weights are large), so a smaller share there saves runs: the CLI
+        and the API run ``ROULETTE_FINAL_ALPHA`` (0.05) with the roulette on;
+        docs/evaluation.md, "A smaller defensive share with the roulette".
     """
     model.check_fitted()
     if n is not None and (isinstance(n, bool) or int(n) < 1):
@@ -877,6 +912,12 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         raise SamplerError(f"adapt: must be 'kernels' or 'ce', got {adapt!r}", field="adapt")
     if not (isinstance(rho, int | float) and 0 < rho < 1):
         raise SamplerError(f"rho: must be a quantile in (0, 1), got {rho!r}", field="rho")
+    if final_alpha is not None and (isinstance(final_alpha, bool)
+                                    or not isinstance(final_alpha, int | float)
+                                    or not 0 < final_alpha <= MAX_ALPHA):
+        raise SamplerError(f"final_alpha: the model's defensive share in the final stage must "
+                           f"be in (0, {MAX_ALPHA:g}], got {final_alpha!r}",
+                           field="final_alpha")
     if (isinstance(roulette, bool) or not isinstance(roulette, int | float)
             or not 0 <= roulette <= MAX_ROULETTE):
         raise SamplerError(f"roulette: must be a number in [0, {MAX_ROULETTE:g}] (0: off), "
@@ -914,7 +955,8 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
             chunk = _new_chunk(k, size, model, region, runner, seed, chunks, envelopes,
                                alpha, executor, part_size, min_fit_hits, adapt, float(rho),
                                int(ce_min_hits), ce_fits, bool(band_step),
-                               bool(tune_shares), float(roulette))
+                               bool(tune_shares), float(roulette),
+                               None if final_alpha is None else float(final_alpha))
             if on_chunk is not None:
                 on_chunk(chunk)
         chunks.append(chunk)
@@ -940,6 +982,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
                           seed=seed, sut=sut or getattr(runner, "name", None), exposure=exp,
                           bootstrap=bootstrap, confidence=confidence,
                           rhw_target=None if n is not None else float(rhw), alpha=alpha,
+                          final_alpha=None if final_alpha is None else float(final_alpha),
                           p_region=p_region, adapt=adapt,
                           band_step=bool(band_step) and adapt == "ce",
                           roulette=float(roulette) if adapt == "ce" else 0.0)

@@ -99,7 +99,7 @@ BAND_KERNEL_INFLATE = 1.3
 #: a band with too few collided runs: its own cross-entropy step on this many of its
 #: lowest-score runs, once the band part drew ``BAND_LEVEL_MIN_DRAWN`` rows
 BAND_LEVEL_ELITE = 30
-BAND_LEVEL_MIN_DRAWN = 300
+BAND_LEVEL_MIN_DRAWN = 150
 
 
 class MixturePart(Protocol):

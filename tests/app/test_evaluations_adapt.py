@@ -200,6 +200,7 @@ def test_post_adapt_ce_gives_the_direct_campaign_bit_for_bit(client: Any) -> Non
     model = ctx.model(ctx.resolve_model_id(None))
     direct = evaluate(model, ScoredRunner(DV_HIT), n=1500, batch_size=500, seed=5,
                       sut="acc", adapt="ce", roulette=service.DEFAULT_ROULETTE,
+                      final_alpha=service.ROULETTE_FINAL_ALPHA,
                       max_runs=min(service.DEFAULT_MAX_RUNS,
                                    ctx.settings.catalogue_n_limit))
     want = json.loads(json.dumps(jsonconv.encode(direct.summary())))
@@ -266,6 +267,7 @@ def test_post_band_step_gives_the_direct_campaign_bit_for_bit(client: Any) -> No
                           "max_runs": min(service.DEFAULT_MAX_RUNS,
                                           ctx.settings.catalogue_n_limit)}
     kw["roulette"] = service.DEFAULT_ROULETTE  # the request's default with adapt ce
+    kw["final_alpha"] = service.ROULETTE_FINAL_ALPHA  # and the model's share with it
     direct = evaluate(model, ScoredRunner(DV_HIT), band_step=True, **kw)
     assert got == json.loads(json.dumps(jsonconv.encode(direct.summary())))
     off = evaluate(model, ScoredRunner(DV_HIT), **kw).summary()
@@ -415,3 +417,50 @@ def test_old_and_ce_specs_resume_to_the_uninterrupted_result(
                 assert sb["pilot_runs"] == 500
     finally:
         ctx.close()
+
+
+# --------------------------------------------------------------------------- final alpha
+def test_a_stored_spec_without_final_alpha_keeps_the_pilot_share() -> None:
+    """Specs stored before the final stage had its own model share ran with the pilot's
+    (None) and resume so; a spec with it round-trips."""
+    old = {"sut": "acc", "sut_params": {}, "constraints": [], "n": 100, "rhw": 0.3,
+           "max_runs": 200000, "seed": 1, "batch_size": 50, "settings": None,
+           "risk": False, "adapt": "ce", "band_step": False, "roulette": 5.0}
+    spec = service.CampaignSpec.from_dict(old)
+    assert spec.final_alpha is None and spec.to_dict() == old
+    new = service.CampaignSpec.from_dict({**old, "final_alpha": 0.05})
+    assert new.final_alpha == 0.05 and new.to_dict()["final_alpha"] == 0.05
+    assert service.CampaignSpec.from_dict(new.to_dict()) == new
+
+
+def test_final_alpha_follows_the_roulette() -> None:
+    """The CLI and the API run the model's final-stage share 0.05 with the roulette on and
+    the pilot's share (None) with it off; ``evaluate()`` keeps ``alpha`` unless asked."""
+    import inspect
+
+    from sampler.campaign import evaluate
+
+    assert service.ROULETTE_FINAL_ALPHA == 0.05
+    assert service.default_final_alpha(5.0) == 0.05
+    assert service.default_final_alpha(0.5) == 0.05
+    assert service.default_final_alpha(0.0) is None
+    assert inspect.signature(evaluate).parameters["final_alpha"].default is None
+
+
+def test_post_stores_the_final_alpha_and_reports_it(client: Any) -> None:
+    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
+                                          "seed": 3})
+    st = _done(client, r.json()["id"])
+    assert st["status"] == "done", st["error"]
+    assert st["spec"]["final_alpha"] == 0.05
+    got = st["summary"]
+    assert got["alpha"] == 0.15 and got["final_alpha"] == 0.05
+    # the last chunk is a final-stage chunk: its model share is the final one
+    [model_share] = [p["share"] for p in got["proposal"] if p["part"] == "model"]
+    assert model_share == pytest.approx(0.05, rel=1e-9)
+    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
+                                          "seed": 3, "roulette": 0})
+    st = _done(client, r.json()["id"])
+    assert "final_alpha" not in st["spec"] and st["summary"]["final_alpha"] is None
+    [model_share] = [p["share"] for p in st["summary"]["proposal"] if p["part"] == "model"]
+    assert model_share == pytest.approx(0.15, rel=1e-9)
