@@ -331,11 +331,22 @@ def test_post_default_runs_the_roulette_and_stores_it(client: Any) -> None:
     got = st["summary"]
     assert got["roulette"] == 5.0 and got["skipped_runs"] > 0
     assert got["sut_runs"] + got["skipped_runs"] <= got["runs"]
+    # with it the final stage's model share: stored, reported, and in the last proposal
+    assert st["spec"]["final_alpha"] == 0.05
+    assert got["alpha"] == 0.15 and got["final_alpha"] == 0.05
+    assert _model_share(got["proposal"]) == pytest.approx(0.05, rel=1e-9)
     r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
                                           "seed": 3, "roulette": 0})
     st = _done(client, r.json()["id"])
     assert st["status"] == "done", st["error"]
     assert "roulette" not in st["spec"] and st["summary"]["skipped_runs"] == 0
+    assert "final_alpha" not in st["spec"] and st["summary"]["final_alpha"] is None
+    assert _model_share(st["summary"]["proposal"]) == pytest.approx(0.15, rel=1e-9)
+
+
+def _model_share(proposal: list[dict[str, Any]]) -> float:
+    [share] = [float(p["share"]) for p in proposal if p["part"] == "model"]
+    return share
 
 
 @pytest.mark.parametrize(("body", "message"), [
@@ -445,22 +456,3 @@ def test_final_alpha_follows_the_roulette() -> None:
     assert service.default_final_alpha(0.5) == 0.05
     assert service.default_final_alpha(0.0) is None
     assert inspect.signature(evaluate).parameters["final_alpha"].default is None
-
-
-def test_post_stores_the_final_alpha_and_reports_it(client: Any) -> None:
-    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
-                                          "seed": 3})
-    st = _done(client, r.json()["id"])
-    assert st["status"] == "done", st["error"]
-    assert st["spec"]["final_alpha"] == 0.05
-    got = st["summary"]
-    assert got["alpha"] == 0.15 and got["final_alpha"] == 0.05
-    # the last chunk is a final-stage chunk: its model share is the final one
-    [model_share] = [p["share"] for p in got["proposal"] if p["part"] == "model"]
-    assert model_share == pytest.approx(0.05, rel=1e-9)
-    r = client.post("/evaluations", json={"sut": "acc", "n": 1500, "batch_size": 500,
-                                          "seed": 3, "roulette": 0})
-    st = _done(client, r.json()["id"])
-    assert "final_alpha" not in st["spec"] and st["summary"]["final_alpha"] is None
-    [model_share] = [p["share"] for p in st["summary"]["proposal"] if p["part"] == "model"]
-    assert model_share == pytest.approx(0.15, rel=1e-9)
