@@ -650,7 +650,7 @@ MAX_ROULETTE = 100.0
 DEFAULT_ROULETTE = 5.0
 #: the model's final-stage share of a new campaign of the CLI and the API that runs the
 #: weight roulette (``evaluate(final_alpha=...)``): docs/evaluation.md, "A smaller
-#: defensive share with the roulette"
+#: defensive share in the final stage"
 ROULETTE_FINAL_ALPHA = 0.05
 #: share of the earlier pilot levels' mixtures in a cross-entropy chunk's proposal
 CE_HISTORY_SHARE = 0.1
@@ -890,7 +890,7 @@ def evaluate(model: CutInGMM, runner: Runner, *, constraints: Iterable[Any] | Re
         ``1 / final_alpha``. With the roulette the model's draws are the runs it cannot
         leave out (their weights are large), so a smaller share there saves runs: the CLI
         and the API run ``ROULETTE_FINAL_ALPHA`` (0.05) with the roulette on;
-        docs/evaluation.md, "A smaller defensive share with the roulette".
+        docs/evaluation.md, "A smaller defensive share in the final stage".
     """
     model.check_fitted()
     if n is not None and (isinstance(n, bool) or int(n) < 1):
