@@ -168,6 +168,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     entry = suts.resolve(args.sut, allow_import=True, field="--sut")
     factory = suts.make_factory(entry, _pairs(args.sut_params, "--sut-param"),
                                 field="--sut-param")
+    roulette = service.default_roulette(args.adapt, args.roulette)
     spec = service.CampaignSpec(
         sut=entry.name, sut_params=dict(factory.params), constraints=args.constraints or [],
         n=args.n, rhw=DEFAULT_RHW if args.rhw is None else float(args.rhw),
@@ -177,9 +178,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         batch_size=service.DEFAULT_BATCH if args.batch_size is None else args.batch_size,
         settings=_pairs(args.settings, "--setting") or None, risk=bool(args.risk),
         adapt=args.adapt, band_step=bool(args.band_step),
-        roulette=service.default_roulette(args.adapt, args.roulette),
-        final_alpha=service.default_final_alpha(
-            service.default_roulette(args.adapt, args.roulette)))
+        roulette=roulette, final_alpha=service.default_final_alpha(roulette))
     service.check_spec(spec, limit=10**9, where="")
     service.check_settings(spec.settings, "--setting")
     runner = service.runner_for(None, factory, spec.settings, spec.risk)

@@ -283,6 +283,7 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
     model), nothing stored: the route asks for the client's quota only after it, so that a
     bad request is told what is wrong (422), not to wait (429)."""
     entry = suts.resolve(sut, allow_import=False, field="body.sut")
+    roulette_k = default_roulette(adapt, roulette)
     spec = CampaignSpec(sut=entry.name, sut_params=dict(sut_params or {}),
                         constraints=list(constraints), n=n, rhw=float(rhw),
                         max_runs=int(max_runs or min(DEFAULT_MAX_RUNS,
@@ -290,8 +291,7 @@ def validate(ctx: ServiceContext, *, sut: str, sut_params: Mapping[str, Any] | N
                         seed=int(seed), batch_size=int(batch_size or DEFAULT_BATCH),
                         settings=dict(settings) if settings else None, risk=bool(risk),
                         adapt=str(adapt), band_step=bool(band_step),
-                        roulette=default_roulette(adapt, roulette),
-                        final_alpha=default_final_alpha(default_roulette(adapt, roulette)))
+                        roulette=roulette_k, final_alpha=default_final_alpha(roulette_k))
     check_spec(spec, ctx.settings.catalogue_n_limit)
     model_id = ctx.resolve_model_id(model)
     fitted = ctx.model(model_id)  # 404 before anything is stored

@@ -368,9 +368,9 @@ class CampaignResult:
         """The model's smallest share in the chunks the estimate uses (every counted draw's
         ``q >= bound_alpha p``: the no-collision bound's factor): ``final_alpha`` once a
         cross-entropy campaign counts its final stage, else ``alpha``."""
-        final = [c for c in self.chunks if c.counted]
-        if (self.final_alpha is not None and self.adapt == "ce" and final
-                and len(final) < len(self.chunks)):
+        counted = [c.counted for c in self.chunks]
+        if (self.final_alpha is not None and self.adapt == "ce" and any(counted)
+                and not all(counted)):
             return min(self.alpha, self.final_alpha)
         return self.alpha
 
